@@ -1,0 +1,119 @@
+#include "core/bezier.h"
+
+namespace tessera {
+
+Vec3 evalPatch(const BezierPatch& patch, float u, float v) {
+    float bu[4], bv[4];
+    bernstein3(u, bu);
+    bernstein3(v, bv);
+    Vec3 r;
+    for (int j = 0; j < 4; ++j) {
+        Vec3 row = patch.cp[j * 4] * bu[0] + patch.cp[j * 4 + 1] * bu[1] + patch.cp[j * 4 + 2] * bu[2] +
+                   patch.cp[j * 4 + 3] * bu[3];
+        r += row * bv[j];
+    }
+    return r;
+}
+
+SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
+    float bu[4], bv[4], du[4], dv[4];
+    bernstein3(u, bu);
+    bernstein3(v, bv);
+    bernstein3Deriv(u, du);
+    bernstein3Deriv(v, dv);
+    SurfacePoint s;
+    for (int j = 0; j < 4; ++j) {
+        const Vec3* row = &patch.cp[j * 4];
+        Vec3 cu = row[0] * bu[0] + row[1] * bu[1] + row[2] * bu[2] + row[3] * bu[3];
+        Vec3 cdu = row[0] * du[0] + row[1] * du[1] + row[2] * du[2] + row[3] * du[3];
+        s.p += cu * bv[j];
+        s.dpdv += cu * dv[j];
+        s.dpdu += cdu * bv[j];
+    }
+    return s;
+}
+
+Vec3 patchNormal(const BezierPatch& patch, float u, float v) {
+    SurfacePoint s = evalPatchDeriv(patch, u, v);
+    Vec3 n = cross(s.dpdu, s.dpdv);
+    float scale = dot(s.dpdu, s.dpdu) + dot(s.dpdv, s.dpdv);
+    // A collapsed edge makes one derivative (near) zero. Step towards the domain centre; the normal
+    // converges to the pole's tangent-plane normal as the step shrinks.
+    for (float step = 1e-3f; dot(n, n) <= 1e-12f * scale * scale && step < 0.2f; step *= 4.f) {
+        float uu = u + (u < 0.5f ? step : -step);
+        float vv = v + (v < 0.5f ? step : -step);
+        SurfacePoint t = evalPatchDeriv(patch, uu, vv);
+        n = cross(t.dpdu, t.dpdv);
+    }
+    return n;
+}
+
+void splitCurve(const Vec3 c[4], float t, Vec3 left[4], Vec3 right[4]) {
+    Vec3 p01 = lerp(c[0], c[1], t), p12 = lerp(c[1], c[2], t), p23 = lerp(c[2], c[3], t);
+    Vec3 p012 = lerp(p01, p12, t), p123 = lerp(p12, p23, t);
+    Vec3 mid = lerp(p012, p123, t);
+    left[0] = c[0];
+    left[1] = p01;
+    left[2] = p012;
+    left[3] = mid;
+    right[0] = mid;
+    right[1] = p123;
+    right[2] = p23;
+    right[3] = c[3];
+}
+
+void splitPatchU(const BezierPatch& p, float t, BezierPatch& lo, BezierPatch& hi) {
+    for (int j = 0; j < 4; ++j) splitCurve(&p.cp[j * 4], t, &lo.cp[j * 4], &hi.cp[j * 4]);
+}
+
+void splitPatchV(const BezierPatch& p, float t, BezierPatch& lo, BezierPatch& hi) {
+    for (int i = 0; i < 4; ++i) {
+        Vec3 col[4] = {p.cp[i], p.cp[4 + i], p.cp[8 + i], p.cp[12 + i]}, a[4], b[4];
+        splitCurve(col, t, a, b);
+        for (int j = 0; j < 4; ++j) {
+            lo.cp[j * 4 + i] = a[j];
+            hi.cp[j * 4 + i] = b[j];
+        }
+    }
+}
+
+BezierPatch subPatch(const BezierPatch& p, float u0, float u1, float v0, float v1) {
+    BezierPatch a = p, lo, hi;
+    // Cut at u1 (keep the low part), then at u0 relative to the remaining [0,u1] (keep the high part).
+    if (u1 < 1.f) {
+        splitPatchU(a, u1, lo, hi);
+        a = lo;
+    }
+    if (u0 > 0.f && u1 > 0.f) {
+        splitPatchU(a, u0 / u1, lo, hi);
+        a = hi;
+    }
+    if (v1 < 1.f) {
+        splitPatchV(a, v1, lo, hi);
+        a = lo;
+    }
+    if (v0 > 0.f && v1 > 0.f) {
+        splitPatchV(a, v0 / v1, lo, hi);
+        a = hi;
+    }
+    return a;
+}
+
+Bounds3 hullBounds(const BezierPatch& p) {
+    Bounds3 b;
+    for (const Vec3& c : p.cp) b.extend(c);
+    return b;
+}
+
+void patchEdge(const BezierPatch& p, int e, Vec3 out[4]) {
+    for (int k = 0; k < 4; ++k) {
+        switch (e) {
+            case 0: out[k] = p.cp[k]; break;
+            case 1: out[k] = p.cp[k * 4 + 3]; break;
+            case 2: out[k] = p.cp[12 + k]; break;
+            default: out[k] = p.cp[k * 4]; break;
+        }
+    }
+}
+
+}  // namespace tessera

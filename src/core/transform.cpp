@@ -1,0 +1,149 @@
+#include "core/transform.h"
+
+#include <cmath>
+#include <numbers>
+
+namespace tessera {
+
+Mat4 Mat4::translate(double x, double y, double z) {
+    Mat4 r;
+    r.m[0][3] = x;
+    r.m[1][3] = y;
+    r.m[2][3] = z;
+    return r;
+}
+
+Mat4 Mat4::scale(double x, double y, double z) {
+    Mat4 r;
+    r.m[0][0] = x;
+    r.m[1][1] = y;
+    r.m[2][2] = z;
+    return r;
+}
+
+Mat4 Mat4::rotate(double degrees, double ax, double ay, double az) {
+    Mat4 r;
+    double len = std::sqrt(ax * ax + ay * ay + az * az);
+    if (len == 0) return r;
+    ax /= len;
+    ay /= len;
+    az /= len;
+    double a = degrees * std::numbers::pi / 180.0;
+    double c = std::cos(a), s = std::sin(a), t = 1 - c;
+    // Rodrigues' rotation formula, column-vector form.
+    r.m[0][0] = t * ax * ax + c;
+    r.m[0][1] = t * ax * ay - s * az;
+    r.m[0][2] = t * ax * az + s * ay;
+    r.m[1][0] = t * ax * ay + s * az;
+    r.m[1][1] = t * ay * ay + c;
+    r.m[1][2] = t * ay * az - s * ax;
+    r.m[2][0] = t * ax * az - s * ay;
+    r.m[2][1] = t * ay * az + s * ax;
+    r.m[2][2] = t * az * az + c;
+    return r;
+}
+
+Mat4 Mat4::fromRib(const double v[16]) {
+    Mat4 r;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) r.m[j][i] = v[i * 4 + j];
+    return r;
+}
+
+Mat4 Mat4::operator*(const Mat4& b) const {
+    Mat4 r;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+            double s = 0;
+            for (int k = 0; k < 4; ++k) s += m[i][k] * b.m[k][j];
+            r.m[i][j] = s;
+        }
+    return r;
+}
+
+double Mat4::det3() const {
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+           m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
+double Mat4::determinant() const {
+    // Laplace expansion along the first row.
+    auto minor3 = [&](int c0, int c1, int c2) {
+        return m[1][c0] * (m[2][c1] * m[3][c2] - m[2][c2] * m[3][c1]) -
+               m[1][c1] * (m[2][c0] * m[3][c2] - m[2][c2] * m[3][c0]) +
+               m[1][c2] * (m[2][c0] * m[3][c1] - m[2][c1] * m[3][c0]);
+    };
+    return m[0][0] * minor3(1, 2, 3) - m[0][1] * minor3(0, 2, 3) + m[0][2] * minor3(0, 1, 3) -
+           m[0][3] * minor3(0, 1, 2);
+}
+
+Mat4 Mat4::inverse() const {
+    // Cofactor expansion (the classic MESA gluInvertMatrix layout), in double.
+    double a[16], o[16];
+    for (int i = 0; i < 16; ++i) a[i] = m[i / 4][i % 4];
+    o[0] = a[5] * a[10] * a[15] - a[5] * a[11] * a[14] - a[9] * a[6] * a[15] + a[9] * a[7] * a[14] +
+           a[13] * a[6] * a[11] - a[13] * a[7] * a[10];
+    o[4] = -a[4] * a[10] * a[15] + a[4] * a[11] * a[14] + a[8] * a[6] * a[15] - a[8] * a[7] * a[14] -
+           a[12] * a[6] * a[11] + a[12] * a[7] * a[10];
+    o[8] = a[4] * a[9] * a[15] - a[4] * a[11] * a[13] - a[8] * a[5] * a[15] + a[8] * a[7] * a[13] +
+           a[12] * a[5] * a[11] - a[12] * a[7] * a[9];
+    o[12] = -a[4] * a[9] * a[14] + a[4] * a[10] * a[13] + a[8] * a[5] * a[14] - a[8] * a[6] * a[13] -
+            a[12] * a[5] * a[10] + a[12] * a[6] * a[9];
+    o[1] = -a[1] * a[10] * a[15] + a[1] * a[11] * a[14] + a[9] * a[2] * a[15] - a[9] * a[3] * a[14] -
+           a[13] * a[2] * a[11] + a[13] * a[3] * a[10];
+    o[5] = a[0] * a[10] * a[15] - a[0] * a[11] * a[14] - a[8] * a[2] * a[15] + a[8] * a[3] * a[14] +
+           a[12] * a[2] * a[11] - a[12] * a[3] * a[10];
+    o[9] = -a[0] * a[9] * a[15] + a[0] * a[11] * a[13] + a[8] * a[1] * a[15] - a[8] * a[3] * a[13] -
+           a[12] * a[1] * a[11] + a[12] * a[3] * a[9];
+    o[13] = a[0] * a[9] * a[14] - a[0] * a[10] * a[13] - a[8] * a[1] * a[14] + a[8] * a[2] * a[13] +
+            a[12] * a[1] * a[10] - a[12] * a[2] * a[9];
+    o[2] = a[1] * a[6] * a[15] - a[1] * a[7] * a[14] - a[5] * a[2] * a[15] + a[5] * a[3] * a[14] +
+           a[13] * a[2] * a[7] - a[13] * a[3] * a[6];
+    o[6] = -a[0] * a[6] * a[15] + a[0] * a[7] * a[14] + a[4] * a[2] * a[15] - a[4] * a[3] * a[14] -
+           a[12] * a[2] * a[7] + a[12] * a[3] * a[6];
+    o[10] = a[0] * a[5] * a[15] - a[0] * a[7] * a[13] - a[4] * a[1] * a[15] + a[4] * a[3] * a[13] +
+            a[12] * a[1] * a[7] - a[12] * a[3] * a[5];
+    o[14] = -a[0] * a[5] * a[14] + a[0] * a[6] * a[13] + a[4] * a[1] * a[14] - a[4] * a[2] * a[13] -
+            a[12] * a[1] * a[6] + a[12] * a[2] * a[5];
+    o[3] = -a[1] * a[6] * a[11] + a[1] * a[7] * a[10] + a[5] * a[2] * a[11] - a[5] * a[3] * a[10] -
+           a[9] * a[2] * a[7] + a[9] * a[3] * a[6];
+    o[7] = a[0] * a[6] * a[11] - a[0] * a[7] * a[10] - a[4] * a[2] * a[11] + a[4] * a[3] * a[10] +
+           a[8] * a[2] * a[7] - a[8] * a[3] * a[6];
+    o[11] = -a[0] * a[5] * a[11] + a[0] * a[7] * a[9] + a[4] * a[1] * a[11] - a[4] * a[3] * a[9] -
+            a[8] * a[1] * a[7] + a[8] * a[3] * a[5];
+    o[15] = a[0] * a[5] * a[10] - a[0] * a[6] * a[9] - a[4] * a[1] * a[10] + a[4] * a[2] * a[9] +
+            a[8] * a[1] * a[6] - a[8] * a[2] * a[5];
+    double det = a[0] * o[0] + a[1] * o[4] + a[2] * o[8] + a[3] * o[12];
+    Mat4 r;
+    if (det == 0) return r;
+    for (int i = 0; i < 16; ++i) r.m[i / 4][i % 4] = o[i] / det;
+    return r;
+}
+
+Vec3 Mat4::point(Vec3 p) const {
+    double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
+    double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
+    double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
+    double w = m[3][0] * p.x + m[3][1] * p.y + m[3][2] * p.z + m[3][3];
+    if (w != 1 && w != 0) {
+        x /= w;
+        y /= w;
+        z /= w;
+    }
+    return {float(x), float(y), float(z)};
+}
+
+Vec3 Mat4::vector(Vec3 v) const {
+    return {float(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z),
+            float(m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z),
+            float(m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z)};
+}
+
+Vec3 Mat4::normalWithInverse(const Mat4& inv, Vec3 n) {
+    return {float(inv.m[0][0] * n.x + inv.m[1][0] * n.y + inv.m[2][0] * n.z),
+            float(inv.m[0][1] * n.x + inv.m[1][1] * n.y + inv.m[2][1] * n.z),
+            float(inv.m[0][2] * n.x + inv.m[1][2] * n.y + inv.m[2][2] * n.z)};
+}
+
+}  // namespace tessera

@@ -1,0 +1,65 @@
+#include "scene/scene.h"
+
+#include <cmath>
+
+namespace tessera {
+
+Bounds3 Scene::worldBounds() const {
+    Bounds3 b;
+    for (const BezierPatch& p : patches) b.extend(hullBounds(p));
+    return b;
+}
+
+void frameSceneDefault(Scene& scene, int width, int height) {
+    Bounds3 b = scene.worldBounds();
+    if (b.empty()) b = Bounds3{{-1, -1, -1}, {1, 1, 1}};
+    Vec3 c = b.center();
+    float radius = 0.5f * length(b.diagonal());
+    if (!(radius > 0)) radius = 1;
+    Camera& cam = scene.camera;
+    cam.width = width;
+    cam.height = height;
+    cam.fovDegrees = 30.f;
+    // Look at the centre from the (+x, -y, +z) octant (z is up, as in the teapot data).
+    Vec3 dir = normalize(Vec3{-0.55f, 0.75f, -0.38f});  // viewing direction
+    float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 1.05f;
+    Vec3 eye = c - dir * dist;
+    Vec3 up{0, 0, 1};
+    Vec3 zc = dir;                          // camera +z: into the screen
+    Vec3 xc = normalize(cross(up, zc));     // left-handed camera: x right
+    Vec3 yc = cross(zc, xc);
+    Mat4 m;
+    const Vec3 axes[3] = {xc, yc, zc};
+    for (int r = 0; r < 3; ++r) {
+        m.m[r][0] = axes[r].x;
+        m.m[r][1] = axes[r].y;
+        m.m[r][2] = axes[r].z;
+        m.m[r][3] = -dot(axes[r], eye);
+    }
+    cam.cameraFromWorld = m;
+    cam.nearClip = dist * 1e-3f;
+    cam.farClip = dist * 100.f;
+    scene.image.srgbOutput = true;
+    scene.lights.clear();
+    scene.lights.push_back({LightType::Ambient, {0.08f, 0.08f, 0.08f}, {}, {}});
+    scene.lights.push_back({LightType::Distant, {0.9f, 0.88f, 0.85f}, eye + xc * dist * -0.6f + yc * dist * 0.8f, c});
+    scene.lights.push_back({LightType::Distant, {0.25f, 0.27f, 0.3f}, eye + xc * dist, c});
+}
+
+}  // namespace tessera
+
+namespace tessera {
+Material defaultMaterial(MaterialType type) {
+    Material m;
+    m.type = type;
+    switch (type) {
+        case MaterialType::Matte: m.Ka = 1, m.Kd = 1; break;
+        case MaterialType::Plastic: m.Ka = 1, m.Kd = 0.5f, m.Ks = 0.5f, m.roughness = 0.1f; break;
+        case MaterialType::Metal: m.Ka = 1, m.Ks = 1, m.roughness = 0.1f; break;
+        case MaterialType::Constant: break;
+        case MaterialType::Mirror: m.Kr = 1; m.Ka = 0, m.Kd = 0; break;
+        case MaterialType::Glass: m.Kr = 1, m.Kt = 1, m.eta = 1.5f; m.Ka = 0, m.Kd = 0; break;
+    }
+    return m;
+}
+}  // namespace tessera

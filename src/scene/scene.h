@@ -1,0 +1,76 @@
+// The scene both engines render: camera, image options, lights, materials and bicubic Bezier patches
+// in world space. Filled by the readers in src/io; read-only for the engines.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/bezier.h"
+#include "scene/camera.h"
+
+namespace tessera {
+
+enum class FilterType { Box, Triangle, Gaussian, CatmullRom };
+
+struct ImageOptions {
+    int pixelSamplesX = 2, pixelSamplesY = 2;  // RI default PixelSamples 2 2
+    FilterType filter = FilterType::Gaussian;  // RI default gaussian 2 x 2
+    float filterWidthX = 2.f, filterWidthY = 2.f;
+    float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
+    bool srgbOutput = false;                         // used for scenes without a RIB (.bpt)
+    std::string displayName;                         // RIB Display name ("" if none)
+};
+
+enum class LightType { Ambient, Distant, Point };
+
+struct Light {
+    LightType type = LightType::Distant;
+    Color color{1, 1, 1};  // intensity * lightcolor
+    Vec3 from{0, 0, 0};    // world space (point lights, distant lights)
+    Vec3 to{0, 0, 1};      // world space (distant lights shine from -> to)
+};
+
+enum class MaterialType { Matte, Plastic, Metal, Constant, Mirror, Glass };
+
+// Parameters of the RI standard surface shaders (RI spec 3.2, appendix A), plus mirror and glass.
+struct Material {
+    MaterialType type = MaterialType::Matte;
+    Color Cs{1, 1, 1};  // Color
+    Color Os{1, 1, 1};  // Opacity (only opaque is rendered for now)
+    float Ka = 1.f, Kd = 1.f, Ks = 0.5f, roughness = 0.1f;
+    Color specularColor{1, 1, 1};
+    float Kr = 1.f, Kt = 1.f, eta = 1.5f;
+};
+
+// Per-primitive attributes the renderers need.
+struct PatchAttributes {
+    uint32_t material = 0;
+    uint32_t object = 0;        // object id (one per RIB primitive call / .bpt file)
+    float shadingRate = 1.f;    // pixels of area per micropolygon
+    bool twoSided = true;       // Sides 2
+    bool flipNormal = false;    // orientation disagrees with dPdu x dPdv
+};
+
+struct Scene {
+    Camera camera;
+    ImageOptions image;
+    std::vector<Light> lights;
+    std::vector<Material> materials;
+    std::vector<BezierPatch> patches;           // world space
+    std::vector<PatchAttributes> attributes;    // one per patch
+    uint32_t objectCount = 0;
+    std::string sourcePath;
+
+    Bounds3 worldBounds() const;
+};
+
+// For inputs without a camera (.bpt): frame the bounding box from a default viewpoint and add a
+// default key/fill light so that any patch file renders something sensible.
+void frameSceneDefault(Scene& scene, int width, int height);
+
+}  // namespace tessera
+
+namespace tessera {
+// Defaults of the RI standard shaders (RI spec 3.2, appendix A) for a material type.
+Material defaultMaterial(MaterialType type);
+}  // namespace tessera

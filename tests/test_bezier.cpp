@@ -1,0 +1,116 @@
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "core/basis.h"
+#include "core/bezier.h"
+
+using namespace tessera;
+
+namespace {
+BezierPatch randomPatch(std::mt19937& rng) {
+    std::uniform_real_distribution<float> d(-2.f, 2.f);
+    BezierPatch p;
+    for (auto& c : p.cp) c = {d(rng), d(rng), d(rng)};
+    return p;
+}
+float dist(Vec3 a, Vec3 b) { return length(a - b); }
+}  // namespace
+
+TEST(Bezier, FlatBilinearPatchIsExact) {
+    // A flat square with evenly spaced control points is the identity map (linear precision).
+    BezierPatch p;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 4; ++u) p.at(u, v) = {u / 3.f, v / 3.f, 0.f};
+    for (float u : {0.f, 0.25f, 0.7f, 1.f})
+        for (float v : {0.f, 0.5f, 0.9f}) {
+            SurfacePoint s = evalPatchDeriv(p, u, v);
+            EXPECT_NEAR(s.p.x, u, 1e-6);
+            EXPECT_NEAR(s.p.y, v, 1e-6);
+            EXPECT_NEAR(s.dpdu.x, 1, 1e-5);
+            EXPECT_NEAR(s.dpdv.y, 1, 1e-5);
+            EXPECT_NEAR(s.dpdu.y, 0, 1e-5);
+        }
+}
+
+TEST(Bezier, SplitMatchesEvaluation) {
+    std::mt19937 rng(1);
+    for (int trial = 0; trial < 50; ++trial) {
+        BezierPatch p = randomPatch(rng);
+        float t = std::uniform_real_distribution<float>(0.1f, 0.9f)(rng);
+        BezierPatch lo, hi;
+        splitPatchU(p, t, lo, hi);
+        for (float u : {0.f, 0.3f, 1.f})
+            for (float v : {0.f, 0.6f, 1.f}) {
+                EXPECT_LT(dist(evalPatch(lo, u, v), evalPatch(p, u * t, v)), 1e-5f);
+                EXPECT_LT(dist(evalPatch(hi, u, v), evalPatch(p, t + u * (1 - t), v)), 1e-5f);
+            }
+        splitPatchV(p, t, lo, hi);
+        for (float u : {0.f, 0.3f, 1.f})
+            for (float v : {0.f, 0.6f, 1.f}) {
+                EXPECT_LT(dist(evalPatch(lo, u, v), evalPatch(p, u, v * t)), 1e-5f);
+                EXPECT_LT(dist(evalPatch(hi, u, v), evalPatch(p, u, t + v * (1 - t))), 1e-5f);
+            }
+        BezierPatch s = subPatch(p, 0.2f, 0.7f, 0.4f, 0.9f);
+        for (float u : {0.f, 0.5f, 1.f})
+            for (float v : {0.f, 0.25f, 1.f})
+                EXPECT_LT(dist(evalPatch(s, u, v), evalPatch(p, 0.2f + 0.5f * u, 0.4f + 0.5f * v)), 2e-5f);
+    }
+}
+
+TEST(Bezier, DerivativesMatchFiniteDifferences) {
+    std::mt19937 rng(2);
+    const float h = 1e-3f;
+    for (int trial = 0; trial < 50; ++trial) {
+        BezierPatch p = randomPatch(rng);
+        float u = std::uniform_real_distribution<float>(0.05f, 0.95f)(rng);
+        float v = std::uniform_real_distribution<float>(0.05f, 0.95f)(rng);
+        SurfacePoint s = evalPatchDeriv(p, u, v);
+        Vec3 fu = (evalPatch(p, u + h, v) - evalPatch(p, u - h, v)) / (2 * h);
+        Vec3 fv = (evalPatch(p, u, v + h) - evalPatch(p, u, v - h)) / (2 * h);
+        EXPECT_LT(dist(s.dpdu, fu), 5e-3f * (1 + length(fu)));
+        EXPECT_LT(dist(s.dpdv, fv), 5e-3f * (1 + length(fv)));
+    }
+}
+
+TEST(Bezier, CollapsedEdgeHasFiniteNormal) {
+    // A patch whose v=0 edge collapses to a point (like the teapot's lid pole).
+    BezierPatch p;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 4; ++u) {
+            float r = v / 3.f, a = u / 3.f * 1.5f;
+            p.at(u, v) = {r * std::cos(a), r * std::sin(a), 1.f - r * r};
+        }
+    Vec3 n = normalize(patchNormal(p, 0.5f, 0.f));
+    EXPECT_TRUE(isFinite(n));
+    EXPECT_GT(std::abs(n.z), 0.9f);  // the pole's tangent plane is horizontal
+}
+
+TEST(Basis, ConversionsReproduceTheCurve) {
+    // Any basis converted to Bezier must evaluate to T * M * G.
+    std::mt19937 rng(3);
+    for (const char* name : {"bezier", "b-spline", "catmull-rom", "hermite", "power"}) {
+        Basis b = *basisByName(name);
+        Vec3 g[16];
+        std::uniform_real_distribution<float> d(-1.f, 1.f);
+        for (auto& c : g) c = {d(rng), d(rng), d(rng)};
+        BezierPatch bez = toBezier(g, b, b);
+        for (float u : {0.f, 0.3f, 1.f})
+            for (float v : {0.f, 0.8f}) {
+                double tu[4] = {u * u * u, u * u, u, 1}, tv[4] = {v * v * v, v * v, v, 1};
+                double wu[4] = {0, 0, 0, 0}, wv[4] = {0, 0, 0, 0};
+                for (int i = 0; i < 4; ++i)
+                    for (int k = 0; k < 4; ++k) {
+                        wu[i] += tu[k] * b.m[k][i];
+                        wv[i] += tv[k] * b.m[k][i];
+                    }
+                Vec3 ref;
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 4; ++i) ref += g[j * 4 + i] * float(wu[i] * wv[j]);
+                EXPECT_LT(dist(evalPatch(bez, u, v), ref), 1e-4f) << name;
+            }
+        // Round trip: a Bezier patch converted with the Bezier basis is unchanged.
+        BezierPatch same = toBezier(bez.cp, bezierBasis(), bezierBasis());
+        for (int k = 0; k < 16; ++k) EXPECT_LT(dist(same.cp[k], bez.cp[k]), 1e-5f);
+    }
+}
