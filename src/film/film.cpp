@@ -1,0 +1,79 @@
+#include "film/film.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera {
+
+void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
+    region = reg;
+    nx = nx_;
+    ny = ny_;
+    spp = nx * ny;
+    size_t pixels = size_t(reg.width()) * reg.height();
+    size_t n = pixels * spp;
+    sx.resize(n);
+    sy.resize(n);
+    z.assign(n, farZ);
+    r.assign(n, 0.f);
+    g.assign(n, 0.f);
+    b.assign(n, 0.f);
+    a.assign(n, 0.f);
+    pixelHit.assign(pixels, 0);
+    size_t i = 0;
+    for (int py = reg.y0; py < reg.y1; ++py)
+        for (int px = reg.x0; px < reg.x1; ++px)
+            for (int s = 0; s < spp; ++s, ++i) {
+                Vec2 p = samplePosition(px, py, s, nx, ny, seed);
+                sx[i] = int32_t(std::lround(p.x * kSubpixelScale));
+                sy[i] = int32_t(std::lround(p.y * kSubpixelScale));
+            }
+}
+
+void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
+    const int rx = filter.radiusX(), ry = filter.radiusY();
+    const int tw = tile.region.width();
+    const int spp = tile.spp;
+    const float inv = 1.f / kSubpixelScale;
+    for (int py = target.y0; py < target.y1; ++py) {
+        for (int px = target.x0; px < target.x1; ++px) {
+            int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
+            int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
+            // Background pixels (no covered sample in reach) stay transparent black: skip the filter.
+            bool any = false;
+            for (int qy = qy0; qy <= qy1 && !any; ++qy)
+                for (int qx = qx0; qx <= qx1; ++qx)
+                    if (tile.pixelHit[size_t(qy - tile.region.y0) * tw + (qx - tile.region.x0)]) {
+                        any = true;
+                        break;
+                    }
+            float* o = out.pixel(px, py);
+            if (!any) {
+                o[0] = o[1] = o[2] = o[3] = 0.f;
+                continue;
+            }
+            const float cx = px + 0.5f, cy = py + 0.5f;
+            float sr = 0, sg = 0, sb = 0, sa = 0, sw = 0;
+            for (int qy = qy0; qy <= qy1; ++qy)
+                for (int qx = qx0; qx <= qx1; ++qx) {
+                    size_t base = (size_t(qy - tile.region.y0) * tw + (qx - tile.region.x0)) * spp;
+                    for (int s = 0; s < spp; ++s) {
+                        size_t i = base + s;
+                        float w = filter.weightX(tile.sx[i] * inv - cx) * filter.weightY(tile.sy[i] * inv - cy);
+                        sr += w * tile.r[i];
+                        sg += w * tile.g[i];
+                        sb += w * tile.b[i];
+                        sa += w * tile.a[i];
+                        sw += w;
+                    }
+                }
+            float k = sw != 0.f ? 1.f / sw : 0.f;
+            o[0] = sr * k;
+            o[1] = sg * k;
+            o[2] = sb * k;
+            o[3] = std::clamp(sa * k, 0.f, 1.f);
+        }
+    }
+}
+
+}  // namespace tessera

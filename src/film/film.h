@@ -1,0 +1,61 @@
+// The film shared by both engines: stratified jittered sample positions, a per-bucket sample tile
+// (position, depth, premultiplied colour and coverage per subpixel sample) and reconstruction of
+// pixels from samples with the pixel filter.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "core/random.h"
+#include "core/vec.h"
+#include "film/filter.h"
+
+namespace tessera {
+
+// Final image: linear, premultiplied RGBA, row-major, top row first.
+struct Image {
+    int width = 0, height = 0;
+    std::vector<float> rgba;
+    Image() = default;
+    Image(int w, int h) : width(w), height(h), rgba(size_t(w) * h * 4, 0.f) {}
+    float* pixel(int x, int y) { return &rgba[(size_t(y) * width + x) * 4]; }
+    const float* pixel(int x, int y) const { return &rgba[(size_t(y) * width + x) * 4]; }
+};
+
+// Sub-pixel fixed point used by the rasterizer: positions snap to 1/256 pixel so that edge functions are
+// exact integers and shared micropolygon edges never leave gaps (the GPU rasterization convention).
+constexpr int kSubpixelBits = 8;
+constexpr float kSubpixelScale = float(1 << kSubpixelBits);
+
+// Stratified jittered sample s (0 .. nx*ny-1) of pixel (px,py): stratum (s % nx, s / nx) of the pixel,
+// jittered by a hash of (pixel, sample, seed). Returned in raster coordinates.
+inline Vec2 samplePosition(int px, int py, int s, int nx, int ny, uint32_t seed) {
+    uint32_t h = hashCombine(hashCombine(uint32_t(px) * 73856093u ^ uint32_t(py) * 19349663u, uint32_t(s)), seed);
+    float jx = hashToUnit(h), jy = hashToUnit(hash32(h));
+    return {float(px) + (float(s % nx) + jx) / float(nx), float(py) + (float(s / nx) + jy) / float(ny)};
+}
+
+struct Rect {
+    int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // half-open [x0,x1) x [y0,y1)
+    int width() const { return x1 - x0; }
+    int height() const { return y1 - y0; }
+};
+
+// Samples of a rectangle of pixels (a bucket plus the filter margin), structure of arrays.
+// Sample index = (pixel row within tile * tile width + pixel column) * spp + s.
+struct SampleTile {
+    Rect region;
+    int nx = 1, ny = 1, spp = 1;
+    std::vector<int32_t> sx, sy;  // fixed-point raster positions
+    std::vector<float> z, r, g, b, a;
+    std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
+
+    // (Re)initialise for a region without reallocating when the size fits.
+    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ);
+    size_t sampleCount() const { return sx.size(); }
+};
+
+// Filter the tile's samples into the pixels of `out` inside `target` (which must lie inside the tile's
+// region shrunk by the filter radius, or touch the image border).
+void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out);
+
+}  // namespace tessera

@@ -1,0 +1,156 @@
+#include "io/image_io.h"
+
+#include <ImfArray.h>
+#include <ImfRgbaFile.h>
+#include <png.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <stdexcept>
+
+namespace tessera {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string extensionOf(const std::string& path) {
+    std::string e = fs::path(path).extension().string();
+    std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return e;
+}
+
+// A temporary path beside the target, unique per process.
+std::string tempPathFor(const std::string& path) {
+    fs::path p(path);
+    return (p.parent_path() / ("." + p.filename().string() + ".tmp" + std::to_string(getpid()))).string();
+}
+
+// Runs `write(tmp)` then renames tmp over `path`; removes tmp on any failure.
+template <class F>
+void writeAtomically(const std::string& path, F&& write) {
+    std::string tmp = tempPathFor(path);
+    try {
+        write(tmp);
+        std::error_code ec;
+        fs::rename(tmp, path, ec);
+        if (ec) throw std::runtime_error(path + ": cannot write: " + ec.message());
+    } catch (...) {
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        throw;
+    }
+}
+
+float encode(float c, const OutputEncoding& enc) {
+    if (!(c > 0.f)) return 0.f;  // also maps NaN to 0
+    if (enc.srgb) return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.f / 2.4f) - 0.055f;
+    c *= enc.gain;
+    return enc.gamma == 1.f ? c : std::pow(c, 1.f / enc.gamma);
+}
+
+uint8_t quantize(float v) {
+    return uint8_t(std::clamp(std::lround(v * 255.f), 0L, 255L));
+}
+
+}  // namespace
+
+bool isSupportedImageExtension(const std::string& path) {
+    std::string e = extensionOf(path);
+    return e == ".png" || e == ".exr";
+}
+
+void writeImage(const std::string& path, const Image& image, const OutputEncoding& enc) {
+    std::string e = extensionOf(path);
+    if (e == ".png") return writePng(path, image, enc);
+    if (e == ".exr") return writeExr(path, image);
+    throw std::runtime_error(path + ": unsupported output format '" + e + "' (use .png or .exr)");
+}
+
+void writePng(const std::string& path, const Image& image, const OutputEncoding& enc) {
+    // Straight alpha: un-premultiply, then apply the exposure / transfer curve to the colour.
+    std::vector<uint8_t> bytes(size_t(image.width) * image.height * 4);
+    for (size_t i = 0; i < size_t(image.width) * image.height; ++i) {
+        const float* p = &image.rgba[i * 4];
+        float a = std::clamp(p[3], 0.f, 1.f);
+        float k = a > 0.f ? 1.f / a : 0.f;
+        for (int c = 0; c < 3; ++c) bytes[i * 4 + c] = quantize(encode(p[c] * k, enc));
+        bytes[i * 4 + 3] = quantize(a);
+    }
+    writeAtomically(path, [&](const std::string& tmp) {
+        FILE* f = std::fopen(tmp.c_str(), "wb");
+        if (!f) throw std::runtime_error(path + ": cannot open for writing");
+        std::unique_ptr<FILE, int (*)(FILE*)> guard(f, &std::fclose);
+        png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+        png_infop info = png ? png_create_info_struct(png) : nullptr;
+        if (!png || !info) throw std::runtime_error(path + ": libpng initialisation failed");
+        if (setjmp(png_jmpbuf(png))) {
+            png_destroy_write_struct(&png, &info);
+            throw std::runtime_error(path + ": PNG write failed");
+        }
+        png_init_io(png, f);
+        png_set_IHDR(png, info, image.width, image.height, 8, PNG_COLOR_TYPE_RGBA, PNG_INTERLACE_NONE,
+                     PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+        if (enc.srgb) png_set_sRGB(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
+        png_write_info(png, info);
+        for (int y = 0; y < image.height; ++y) png_write_row(png, &bytes[size_t(y) * image.width * 4]);
+        png_write_end(png, nullptr);
+        png_destroy_write_struct(&png, &info);
+        if (std::fflush(f) != 0) throw std::runtime_error(path + ": write failed");
+    });
+}
+
+void writeExr(const std::string& path, const Image& image) {
+    writeAtomically(path, [&](const std::string& tmp) {
+        try {
+            Imf::Array2D<Imf::Rgba> px(image.height, image.width);
+            for (int y = 0; y < image.height; ++y)
+                for (int x = 0; x < image.width; ++x) {
+                    const float* p = image.pixel(x, y);
+                    px[y][x] = Imf::Rgba(p[0], p[1], p[2], p[3]);
+                }
+            Imf::RgbaOutputFile file(tmp.c_str(), image.width, image.height, Imf::WRITE_RGBA);
+            file.setFrameBuffer(&px[0][0], 1, image.width);
+            file.writePixels(image.height);
+        } catch (const std::exception& e) {
+            throw std::runtime_error(path + ": EXR write failed: " + e.what());
+        }
+    });
+}
+
+Image readPng(const std::string& path) {
+    png_image img{};
+    img.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&img, path.c_str())) throw std::runtime_error(path + ": not a PNG");
+    img.format = PNG_FORMAT_RGBA;
+    std::vector<uint8_t> buf(PNG_IMAGE_SIZE(img));
+    if (!png_image_finish_read(&img, nullptr, buf.data(), 0, nullptr))
+        throw std::runtime_error(path + ": PNG read failed");
+    Image out(int(img.width), int(img.height));
+    for (size_t i = 0; i < buf.size(); ++i) out.rgba[i] = buf[i] / 255.f;
+    return out;
+}
+
+Image readExr(const std::string& path) {
+    Imf::RgbaInputFile file(path.c_str());
+    Imath::Box2i dw = file.dataWindow();
+    int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    Imf::Array2D<Imf::Rgba> px(h, w);
+    file.setFrameBuffer(&px[0][0] - dw.min.x - dw.min.y * w, 1, w);
+    file.readPixels(dw.min.y, dw.max.y);
+    Image out(w, h);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            float* p = out.pixel(x, y);
+            p[0] = px[y][x].r;
+            p[1] = px[y][x].g;
+            p[2] = px[y][x].b;
+            p[3] = px[y][x].a;
+        }
+    return out;
+}
+
+}  // namespace tessera

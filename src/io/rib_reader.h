@@ -1,0 +1,17 @@
+// Reader for the subset of the RenderMan Interface Bytestream (RI spec 3.2) that describes bicubic
+// and bilinear patch scenes: camera and image options, transforms, attributes, the standard light
+// and surface shaders, Patch and PatchMesh in any basis, Declare and ReadArchive.
+#pragma once
+#include <string>
+
+#include "io/diagnostics.h"
+#include "scene/scene.h"
+
+namespace tessera {
+
+// Reads the RIB file at `path` (plain or gzipped) into `scene`. Throws InputError for malformed input
+// or a file without patches; unsupported requests and parameters are reported once each to `warn`.
+// Object ids: each Patch / PatchMesh request is one object (scene.objectCount counts them).
+void readRib(const std::string& path, Scene& scene, const WarningSink& warn);
+
+}  // namespace tessera

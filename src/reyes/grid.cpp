@@ -1,0 +1,88 @@
+#include "reyes/grid.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera {
+namespace {
+
+int32_t toFixed(float v) {
+    // Clamp far-off vertices so that edge functions cannot overflow 64 bits.
+    constexpr float kLimit = float(1 << 20) * kSubpixelScale;
+    float f = std::clamp(v * kSubpixelScale, -kLimit, kLimit);
+    return int32_t(std::lround(f));
+}
+
+// Index of the edge vertex that grid vertex i (of n) snaps to, for an edge of `segments` segments:
+// round(i * segments / n), in integers so both neighbours compute the same thing.
+int snapIndex(int i, int n, int segments) { return (2 * i * segments + n) / (2 * n); }
+
+}  // namespace
+
+void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
+    const BezierPatch& patch = view.patches[piece.patch];
+    const PieceEdge* e = piece.edge;
+    const int nu = std::max({e[0].segments(), e[2].segments(), 1});
+    const int nv = std::max({e[1].segments(), e[3].segments(), 1});
+    grid.nu = nu;
+    grid.nv = nv;
+    grid.twoSided = shade.twoSided;
+    const int count = (nu + 1) * (nv + 1);
+    grid.X.resize(count);
+    grid.Y.resize(count);
+    grid.Z.resize(count);
+    grid.R.resize(count);
+    grid.G.resize(count);
+    grid.B.resize(count);
+    grid.front.resize(count);
+
+    for (int j = 0; j <= nv; ++j) {
+        for (int i = 0; i <= nu; ++i) {
+            // Which edge (if any) owns this vertex: boundary-curve edges win at corners, so a corner on a
+            // patch boundary is evaluated exactly as the neighbouring patch evaluates it.
+            const PieceEdge* owner = nullptr;
+            int k = 0;
+            auto consider = [&](const PieceEdge& edge, int idx, int n) {
+                if (owner && !(owner->boundary < 0 && edge.boundary >= 0)) return;
+                owner = &edge;
+                k = edge.latticeAt(snapIndex(idx, n, edge.segments()));
+            };
+            if (j == 0) consider(e[0], i, nu);
+            if (j == nv) consider(e[2], i, nu);
+            if (i == 0) consider(e[3], j, nv);
+            if (i == nu) consider(e[1], j, nv);
+
+            Vec2 uv;
+            if (owner) {
+                uv = latticeUV(*owner, k);
+            } else {
+                // Interior: bilinear map of the piece's (u,v) quad.
+                float s = float(i) / nu, t = float(j) / nv;
+                Vec2 a = piece.uv[0], b = piece.uv[1], c = piece.uv[2], d = piece.uv[3];
+                uv.x = (1 - t) * ((1 - s) * a.x + s * b.x) + t * ((1 - s) * d.x + s * c.x);
+                uv.y = (1 - t) * ((1 - s) * a.y + s * b.y) + t * ((1 - s) * d.y + s * c.y);
+            }
+            SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
+            Vec3 P = owner ? latticePosition(patch, *owner, k) : sp.p;
+            Vec3 N = cross(sp.dpdu, sp.dpdv);
+            float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);
+            if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(patch, uv.x, uv.y);
+            N = normalize(N);
+            if (shade.flipNormal) N = -N;
+
+            const int v = j * (nu + 1) + i;
+            Vec3 I = normalize(P);  // the eye is at the camera-space origin
+            Color C = shadeLocal(*shade.material, P, N, I, shade.lights);
+            Vec3 r = view.projector.toRaster(P);
+            grid.X[v] = toFixed(r.x);
+            grid.Y[v] = toFixed(r.y);
+            grid.Z[v] = P.z;
+            grid.R[v] = C.x;
+            grid.G[v] = C.y;
+            grid.B[v] = C.z;
+            grid.front[v] = dot(N, P) < 0.f;
+        }
+    }
+}
+
+}  // namespace tessera

@@ -1,0 +1,9 @@
+// The Reyes engine: bound, split, dice, shade, sample, filter; buckets in parallel with oneTBB.
+#pragma once
+#include "render/render.h"
+
+namespace tessera {
+
+RenderResult renderReyes(const Scene& scene, const RenderSettings& settings);
+
+}  // namespace tessera

@@ -1,0 +1,219 @@
+#include "reyes/split.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera {
+namespace {
+
+constexpr int32_t kMaxEdgeRate = 1 << 20;  // cap for edges that reach towards the eye plane
+constexpr int kMaxSplitDepth = 40;
+constexpr int kRateSamples = 8;
+
+bool lexLess(Vec3 p, Vec3 q) {
+    if (p.x != q.x) return p.x < q.x;
+    if (p.y != q.y) return p.y < q.y;
+    return p.z < q.z;
+}
+
+// Raster position used only to measure lengths; points behind the near plane are pulled onto it.
+Vec3 rasterForLength(const Projector& proj, Vec3 p) {
+    p.z = std::max(p.z, proj.nearClip);
+    return proj.toRaster(p);
+}
+
+int32_t rateFromLength(float pixels, float side) {
+    float t = std::ceil(pixels / side);
+    if (!(t >= 1.f)) return 1;
+    return t > float(kMaxEdgeRate) ? kMaxEdgeRate : int32_t(t);
+}
+
+// Segment count of a source edge from its projected polyline length.
+template <class PointAt>
+int32_t measureRate(const ReyesView& view, float side, PointAt&& pointAt) {
+    float len = 0;
+    Vec3 prev = rasterForLength(view.projector, pointAt(0.f));
+    for (int i = 1; i <= kRateSamples; ++i) {
+        Vec3 cur = rasterForLength(view.projector, pointAt(float(i) / kRateSamples));
+        float dx = cur.x - prev.x, dy = cur.y - prev.y;
+        len += std::sqrt(dx * dx + dy * dy);
+        prev = cur;
+    }
+    return rateFromLength(len, side);
+}
+
+PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, float side) {
+    PieceEdge edge;
+    Vec3 cp[4];
+    canonicalBoundary(patch, e, cp, edge.a, edge.b);
+    edge.boundary = int8_t(e);
+    edge.total = measureRate(view, side, [&](float t) { return evalCurve(cp, t); });
+    edge.k0 = 0;
+    edge.k1 = edge.total;
+    // The piece walks every edge in increasing parameter; reversed if the canonical start is the far end.
+    static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
+    edge.reversed = !(edge.a.x == kStart[e].x && edge.a.y == kStart[e].y);
+    return edge;
+}
+
+// A new interior source edge from (u,v) point p to q, walked p -> q by the piece that owns it.
+PieceEdge interiorEdge(const ReyesView& view, const BezierPatch& patch, Vec2 p, Vec2 q, float side) {
+    PieceEdge edge;
+    bool swap = (q.x < p.x) || (q.x == p.x && q.y < p.y);
+    edge.a = swap ? q : p;
+    edge.b = swap ? p : q;
+    edge.reversed = swap;
+    edge.boundary = -1;
+    edge.total = measureRate(view, side, [&](float t) {
+        Vec2 uv{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t};
+        return evalPatch(patch, uv.x, uv.y);
+    });
+    edge.k0 = 0;
+    edge.k1 = edge.total;
+    return edge;
+}
+
+// Cut edge e at its lattice midpoint: `first` runs from the piece's start to the cut, `second` onwards.
+void cutEdge(const PieceEdge& e, int& cutK, PieceEdge& first, PieceEdge& second) {
+    int half = e.segments() / 2;
+    cutK = e.reversed ? e.k1 - half : e.k0 + half;
+    first = second = e;
+    if (!e.reversed) {
+        first.k1 = cutK;
+        second.k0 = cutK;
+    } else {
+        first.k0 = cutK;
+        second.k1 = cutK;
+    }
+}
+
+enum class Verdict { Cull, Split, SplitNear, Dice };
+
+Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) {
+    float u0 = std::min(std::min(piece.uv[0].x, piece.uv[1].x), std::min(piece.uv[2].x, piece.uv[3].x));
+    float u1 = std::max(std::max(piece.uv[0].x, piece.uv[1].x), std::max(piece.uv[2].x, piece.uv[3].x));
+    float v0 = std::min(std::min(piece.uv[0].y, piece.uv[1].y), std::min(piece.uv[2].y, piece.uv[3].y));
+    float v1 = std::max(std::max(piece.uv[0].y, piece.uv[1].y), std::max(piece.uv[2].y, piece.uv[3].y));
+    // The quad lies inside its (u,v) bounding rectangle, whose control hull bounds the surface.
+    BezierPatch hull = (u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f) ? patch : subPatch(patch, u0, u1, v0, v1);
+    Bounds3 b = hullBounds(hull);
+    const Projector& pr = view.projector;
+    if (!(b.hi.z >= pr.nearClip) || !(b.lo.z <= pr.farClip)) return Verdict::Cull;
+    bool straddles = b.lo.z < pr.nearClip;
+    if (!straddles) {
+        float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
+        for (const Vec3& c : hull.cp) {
+            Vec3 r = pr.toRaster(c);
+            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x);
+            y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+        }
+        if (x1 < view.cullX0 || x0 > view.cullX1 || y1 < view.cullY0 || y0 > view.cullY1) return Verdict::Cull;
+        piece.x0 = x0, piece.y0 = y0, piece.x1 = x1, piece.y1 = y1;
+    }
+    int maxSeg = 0;
+    for (const PieceEdge& e : piece.edge) maxSeg = std::max(maxSeg, e.segments());
+    if (straddles) return Verdict::SplitNear;
+    if (maxSeg > view.maxGridEdge) return Verdict::Split;
+    return Verdict::Dice;
+}
+
+struct SplitJob {
+    Piece piece;
+    int depth;
+};
+
+}  // namespace
+
+void canonicalBoundary(const BezierPatch& patch, int e, Vec3 cp[4], Vec2& a, Vec2& b) {
+    static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
+    static const Vec2 kEnd[4] = {{1, 0}, {1, 1}, {1, 1}, {0, 1}};
+    Vec3 c[4];
+    patchEdge(patch, e, c);
+    bool reverse = lexLess(c[3], c[0]) || (c[3] == c[0] && lexLess(c[2], c[1]));
+    for (int i = 0; i < 4; ++i) cp[i] = reverse ? c[3 - i] : c[i];
+    a = reverse ? kEnd[e] : kStart[e];
+    b = reverse ? kStart[e] : kEnd[e];
+}
+
+Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k) {
+    if (e.boundary >= 0) {
+        Vec3 cp[4];
+        Vec2 a, b;
+        canonicalBoundary(patch, e.boundary, cp, a, b);
+        return evalCurve(cp, float(k) / float(e.total));
+    }
+    Vec2 uv = latticeUV(e, k);
+    return evalPatch(patch, uv.x, uv.y);
+}
+
+void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vector<Piece>& out,
+                SplitCounters& counters) {
+    const BezierPatch& patch = view.patches[patchIndex];
+    counters.patchCulled = false;
+    for (const Vec3& c : patch.cp)
+        if (!isFinite(c)) {
+            counters.patchCulled = true;
+            ++counters.culled;
+            return;
+        }
+    Piece root;
+    root.patch = patchIndex;
+    root.uv[0] = {0, 0}, root.uv[1] = {1, 0}, root.uv[2] = {1, 1}, root.uv[3] = {0, 1};
+    for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side);
+
+    size_t before = out.size();
+    std::vector<SplitJob> stack;
+    stack.push_back({root, 0});
+    while (!stack.empty()) {
+        SplitJob job = stack.back();
+        stack.pop_back();
+        Piece& p = job.piece;
+        Verdict v = classify(view, patch, p);
+        if (v == Verdict::Cull) {
+            ++counters.culled;
+            continue;
+        }
+        // Split across u (cutting e0 and e2) when those edges carry more segments, else across v.
+        int su = std::max(p.edge[0].segments(), p.edge[2].segments());
+        int sv = std::max(p.edge[1].segments(), p.edge[3].segments());
+        if (v != Verdict::Dice && (job.depth >= kMaxSplitDepth || std::max(su, sv) <= 1)) {
+            // No further progress possible. A piece still crossing the eye plane is dropped (the RI
+            // "eye split" rule); an oversized one is diced as it is.
+            if (v == Verdict::SplitNear) {
+                ++counters.culled;
+                continue;
+            }
+            v = Verdict::Dice;
+        }
+        if (v == Verdict::Dice) {
+            out.push_back(p);
+            continue;
+        }
+        ++counters.splits;
+        Piece lo = p, hi = p;
+        if (su >= sv) {
+            int k0, k2;
+            cutEdge(p.edge[0], k0, lo.edge[0], hi.edge[0]);
+            cutEdge(p.edge[2], k2, lo.edge[2], hi.edge[2]);
+            Vec2 m0 = latticeUV(p.edge[0], k0), m2 = latticeUV(p.edge[2], k2);
+            PieceEdge mid = interiorEdge(view, patch, m0, m2, side);
+            lo.uv[1] = m0, lo.uv[2] = m2, lo.edge[1] = mid;
+            hi.uv[0] = m0, hi.uv[3] = m2, hi.edge[3] = mid;
+        } else {
+            int k3, k1;
+            cutEdge(p.edge[3], k3, lo.edge[3], hi.edge[3]);
+            cutEdge(p.edge[1], k1, lo.edge[1], hi.edge[1]);
+            Vec2 m3 = latticeUV(p.edge[3], k3), m1 = latticeUV(p.edge[1], k1);
+            PieceEdge mid = interiorEdge(view, patch, m3, m1, side);
+            lo.uv[3] = m3, lo.uv[2] = m1, lo.edge[2] = mid;
+            hi.uv[0] = m3, hi.uv[1] = m1, hi.edge[0] = mid;
+        }
+        // Push hi first so pieces come out in a fixed (depth-first, low-first) order.
+        stack.push_back({hi, job.depth + 1});
+        stack.push_back({lo, job.depth + 1});
+    }
+    counters.pieces += out.size() - before;
+    counters.patchCulled = out.size() == before;
+}
+
+}  // namespace tessera

@@ -1,0 +1,77 @@
+// Reyes bound / split: turns each patch into "pieces" small enough to dice into one grid.
+//
+// Crack prevention (DiagSplit, Fisher et al., "DiagSplit: Parallel, Crack-free, Adaptive Tessellation for
+// Micropolygon Rendering", SIGGRAPH Asia 2009): every piece edge lies on an integer lattice of a *source
+// edge*, either a boundary curve of the patch or a split line inside it. A source edge's segment count T is
+// computed once, from that edge alone (its projected length / micropolygon size), in a canonical direction
+// that both patches sharing it agree on. Splitting cuts an edge at a lattice point and hands each half its
+// sub-interval, so every vertex ever placed on an edge is one of the T+1 lattice points, evaluated from the
+// edge's own data. Neighbours that split or dice differently therefore always meet at identical vertices.
+// Splits that cut the two opposite edges at different fractions give non-isoparametric (diagonal) pieces,
+// so a piece is a quadrilateral in (u,v), evaluated through the original patch.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "core/bezier.h"
+#include "scene/camera.h"
+
+namespace tessera {
+
+// One edge of a piece: the sub-interval [k0,k1] of a source edge's lattice 0..total.
+struct PieceEdge {
+    Vec2 a, b;          // canonical endpoints of the source edge, in the patch's (u,v) domain
+    int32_t total = 1;  // T: segments of the whole source edge
+    int32_t k0 = 0, k1 = 1;
+    int8_t boundary = -1;   // 0..3: source is that patch boundary curve (see patchEdge); -1: interior line
+    bool reversed = false;  // the piece walks this edge from k1 down to k0
+    int segments() const { return k1 - k0; }
+    int startK() const { return reversed ? k1 : k0; }
+    int endK() const { return reversed ? k0 : k1; }
+    // Lattice index of the s-th vertex from the piece's start corner.
+    int latticeAt(int s) const { return reversed ? k1 - s : k0 + s; }
+};
+
+// A diceable region of one patch: corners c00, c10, c11, c01 in (u,v) and edges
+// e0: c00->c10, e1: c10->c11, e2: c01->c11, e3: c00->c01.
+struct Piece {
+    uint32_t patch = 0;
+    Vec2 uv[4];
+    PieceEdge edge[4];
+    float x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // raster bound of the control hull
+};
+
+// Everything split and dice need, read-only during a render. Patches are in camera space.
+struct ReyesView {
+    const BezierPatch* patches = nullptr;
+    Projector projector;
+    float micropolygonSide = 1.f;  // sqrt(shading rate), pixels
+    float cullX0, cullY0, cullX1, cullY1;  // raster window that can still reach a pixel (image + filter)
+    int maxGridEdge = 16;
+    explicit ReyesView(const Camera& cam) : projector(cam) {}
+};
+
+struct SplitCounters {
+    uint64_t splits = 0, culled = 0, pieces = 0;
+    bool patchCulled = false;  // the whole patch produced no piece
+};
+
+// Boundary curve `e` of `patch` in canonical order, with its canonical (u,v) endpoints.
+// Canonical: the endpoint with the lexicographically smaller position first, so two patches sharing the
+// edge (in either direction) evaluate the same points.
+void canonicalBoundary(const BezierPatch& patch, int e, Vec3 cp[4], Vec2& a, Vec2& b);
+
+inline Vec2 latticeUV(const PieceEdge& e, int k) {
+    float w = float(k) / float(e.total);
+    // a*(1-w) + b*w is exact at both ends (w = 0, 1), so corners are bit-identical across pieces.
+    return {e.a.x * (1.f - w) + e.b.x * w, e.a.y * (1.f - w) + e.b.y * w};
+}
+
+// Position of lattice point k of an edge: from the boundary curve's control points or the patch.
+Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k);
+
+// Split and cull one patch into diceable pieces, appended to `out`.
+void splitPatch(const ReyesView& view, uint32_t patchIndex, float micropolygonSide, std::vector<Piece>& out,
+                SplitCounters& counters);
+
+}  // namespace tessera
