@@ -23,18 +23,14 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
     size_t i = 0;
     for (int py = reg.y0; py < reg.y1; ++py)
         for (int px = reg.x0; px < reg.x1; ++px)
-            for (int s = 0; s < spp; ++s, ++i) {
-                Vec2 p = samplePosition(px, py, s, nx, ny, seed);
-                sx[i] = int32_t(std::lround(p.x * kSubpixelScale));
-                sy[i] = int32_t(std::lround(p.y * kSubpixelScale));
-            }
+            for (int s = 0; s < spp; ++s, ++i) samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
 }
 
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int tw = tile.region.width();
     const int spp = tile.spp;
-    const float inv = 1.f / kSubpixelScale;
+    static_assert(kSubpixelBits == 8, "filter tables assume 1/256 pixel offsets");
     for (int py = target.y0; py < target.y1; ++py) {
         for (int px = target.x0; px < target.x1; ++px) {
             int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
@@ -52,14 +48,15 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
                 o[0] = o[1] = o[2] = o[3] = 0.f;
                 continue;
             }
-            const float cx = px + 0.5f, cy = py + 0.5f;
+            const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+            const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
             float sr = 0, sg = 0, sb = 0, sa = 0, sw = 0;
             for (int qy = qy0; qy <= qy1; ++qy)
                 for (int qx = qx0; qx <= qx1; ++qx) {
                     size_t base = (size_t(qy - tile.region.y0) * tw + (qx - tile.region.x0)) * spp;
                     for (int s = 0; s < spp; ++s) {
                         size_t i = base + s;
-                        float w = filter.weightX(tile.sx[i] * inv - cx) * filter.weightY(tile.sy[i] * inv - cy);
+                        float w = filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy);
                         sr += w * tile.r[i];
                         sg += w * tile.g[i];
                         sb += w * tile.b[i];

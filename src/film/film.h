@@ -27,11 +27,18 @@ constexpr int kSubpixelBits = 8;
 constexpr float kSubpixelScale = float(1 << kSubpixelBits);
 
 // Stratified jittered sample s (0 .. nx*ny-1) of pixel (px,py): stratum (s % nx, s / nx) of the pixel,
-// jittered by a hash of (pixel, sample, seed). Returned in raster coordinates.
-inline Vec2 samplePosition(int px, int py, int s, int nx, int ny, uint32_t seed) {
+// jittered by a hash of (pixel, sample, seed). Positions lie on the 1/256-pixel fixed-point lattice that
+// the rasterizer uses, so both engines see exactly the same sample positions.
+inline void samplePositionFixed(int px, int py, int s, int nx, int ny, uint32_t seed, int32_t& x, int32_t& y) {
     uint32_t h = hashCombine(hashCombine(uint32_t(px) * 73856093u ^ uint32_t(py) * 19349663u, uint32_t(s)), seed);
-    float jx = hashToUnit(h), jy = hashToUnit(hash32(h));
-    return {float(px) + (float(s % nx) + jx) / float(nx), float(py) + (float(s / nx) + jy) / float(ny)};
+    const int32_t jx = int32_t(h & 0xff), jy = int32_t((h >> 8) & 0xff);
+    x = (px << kSubpixelBits) + ((s % nx) * 256 + jx) / nx;
+    y = (py << kSubpixelBits) + ((s / nx) * 256 + jy) / ny;
+}
+inline Vec2 samplePosition(int px, int py, int s, int nx, int ny, uint32_t seed) {
+    int32_t x, y;
+    samplePositionFixed(px, py, s, nx, ny, seed, x, y);
+    return {float(x) / kSubpixelScale, float(y) / kSubpixelScale};
 }
 
 struct Rect {

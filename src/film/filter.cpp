@@ -35,6 +35,14 @@ PixelFilter makeFilter(const ImageOptions& opts) {
     f.type = opts.filter;
     f.widthX = std::max(opts.filterWidthX, 1e-3f);
     f.widthY = std::max(opts.filterWidthY, 1e-3f);
+    // Offsets reach at most (radius + 1) pixels from a pixel centre.
+    auto build = [&](std::vector<float>& table, int& bias, int radius, float width) {
+        bias = (radius + 1) * 256;
+        table.resize(2 * bias + 1);
+        for (int k = -bias; k <= bias; ++k) table[k + bias] = PixelFilter::weight1D(f.type, float(k) / 256.f, width);
+    };
+    build(f.tableX, f.tableBiasX, f.radiusX(), f.widthX);
+    build(f.tableY, f.tableBiasY, f.radiusY(), f.widthY);
     return f;
 }
 

@@ -1,0 +1,650 @@
+#include <gtest/gtest.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "core/basis.h"
+#include "io/rib_lexer.h"
+#include "io/scene_loader.h"
+
+using namespace tessera;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A fresh directory per test so parallel test processes never share files.
+fs::path testDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    fs::path d = fs::temp_directory_path() / ("tessera_rib_" + std::to_string(::getpid())) /
+                 (std::string(info->test_suite_name()) + "." + info->name());
+    fs::create_directories(d);
+    return d;
+}
+
+std::string writeFile(const fs::path& path, const std::string& text) {
+    fs::create_directories(path.parent_path());
+    std::ofstream(path, std::ios::binary) << text;
+    return path.string();
+}
+
+std::string writeRib(const std::string& text, const std::string& name = "scene.rib") {
+    return writeFile(testDir() / name, text);
+}
+
+const char* kUnitSquare = "Patch \"bilinear\" \"P\" [0 0 0  1 0 0  0 1 0  1 1 0]\n";
+
+// Options, then a world holding `body` and one unit square patch.
+std::string scene(const std::string& options, const std::string& body) {
+    return options + "\nWorldBegin\n" + body + "\n" + kUnitSquare + "WorldEnd\n";
+}
+
+struct Loaded {
+    Scene scene;
+    std::vector<std::string> warnings;
+};
+
+Loaded load(const std::string& text) {
+    Loaded l;
+    std::string path = writeRib(text);
+    l.scene = loadScene(path, [&](const std::string& w) { l.warnings.push_back(w); });
+    return l;
+}
+
+// The error text of loading `path`, or "" if it loads.
+std::string errorOfFile(const std::string& path) {
+    try {
+        loadScene(path, [](const std::string&) {});
+    } catch (const InputError& e) {
+        return e.what();
+    }
+    return "";
+}
+
+// Asserts that loading `text` fails with "<file>:<line>: error:" and returns the message.
+std::string expectError(const std::string& text, int line) {
+    std::string path = writeRib(text);
+    std::string msg = errorOfFile(path);
+    std::string prefix = path + ":" + std::to_string(line) + ": error:";
+    EXPECT_EQ(msg.rfind(prefix, 0), 0u) << "expected prefix '" << prefix << "', got '" << msg << "'";
+    return msg;
+}
+
+bool contains(const std::string& s, const std::string& part) {
+    return s.find(part) != std::string::npos;
+}
+
+void expectVec(Vec3 a, Vec3 b, float eps = 1e-5f) {
+    EXPECT_NEAR(a.x, b.x, eps);
+    EXPECT_NEAR(a.y, b.y, eps);
+    EXPECT_NEAR(a.z, b.z, eps);
+}
+
+int countWarnings(const std::vector<std::string>& ws, const std::string& part) {
+    int n = 0;
+    for (const auto& w : ws) {
+        size_t at = w.find(": warning: ");  // match the message only, not the (test-named) path
+        n += at != std::string::npos && contains(w.substr(at), part);
+    }
+    return n;
+}
+
+// Removes this process' temporary files after the last test.
+class TempCleanup : public ::testing::Environment {
+  public:
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(fs::temp_directory_path() / ("tessera_rib_" + std::to_string(::getpid())), ec);
+    }
+};
+[[maybe_unused]] ::testing::Environment* const kTempCleanup =
+    ::testing::AddGlobalTestEnvironment(new TempCleanup);
+
+}  // namespace
+
+// ---- lexer ----------------------------------------------------------------------------------
+
+TEST(RibLexer, TokensAndLines) {
+    RibLexer lex("Format 640 .5 -2e-1 +3 # comment\n\"a\\\"b\\n\" [ 1\n 2 ] -x", "f");
+    std::vector<Token> t;
+    while (lex.peek().type != TokenType::End) t.push_back(lex.next());
+    ASSERT_EQ(t.size(), 11u);
+    EXPECT_EQ(t[0].type, TokenType::Request);
+    EXPECT_EQ(t[0].text, "Format");
+    EXPECT_EQ(t[1].number, 640);
+    EXPECT_EQ(t[2].number, 0.5);
+    EXPECT_DOUBLE_EQ(t[3].number, -0.2);
+    EXPECT_EQ(t[4].number, 3);
+    EXPECT_EQ(t[5].type, TokenType::String);
+    EXPECT_EQ(t[5].text, "a\"b\n");
+    EXPECT_EQ(t[5].line, 2);
+    EXPECT_EQ(t[6].type, TokenType::ArrayBegin);
+    EXPECT_EQ(t[8].line, 3);
+    EXPECT_EQ(t[9].type, TokenType::ArrayEnd);
+    EXPECT_EQ(t[10].type, TokenType::Other);
+    EXPECT_EQ(t[10].text, "-x");
+}
+
+// ---- options ---------------------------------------------------------------------------------
+
+TEST(RibOptions, FormatAndSampling) {
+    Loaded l = load(scene(
+        "Format 320 200 2\nPixelSamples 3 4\nPixelFilter \"box\" 1 1.5\nExposure 1.5 2.2\nClipping 0.5 500",
+        ""));
+    EXPECT_EQ(l.scene.camera.width, 320);
+    EXPECT_EQ(l.scene.camera.height, 200);
+    EXPECT_EQ(l.scene.camera.pixelAspect, 2.f);
+    EXPECT_EQ(l.scene.image.pixelSamplesX, 3);
+    EXPECT_EQ(l.scene.image.pixelSamplesY, 4);
+    EXPECT_EQ(l.scene.image.filter, FilterType::Box);
+    EXPECT_EQ(l.scene.image.filterWidthY, 1.5f);
+    EXPECT_EQ(l.scene.image.exposureGain, 1.5f);
+    EXPECT_EQ(l.scene.image.exposureGamma, 2.2f);
+    EXPECT_EQ(l.scene.camera.nearClip, 0.5f);
+    EXPECT_EQ(l.scene.camera.farClip, 500.f);
+}
+
+TEST(RibOptions, ProjectionScreenWindowAspectDisplay) {
+    Loaded l =
+        load(scene("Projection \"perspective\" \"fov\" 37.5\nScreenWindow -2 2 -1 1\nFrameAspectRatio 2\n"
+                   "Display \"out/image.tif\" \"file\" \"rgba\" \"string compression\" \"lzw\"",
+                   ""));
+    EXPECT_TRUE(l.scene.camera.perspective);
+    EXPECT_EQ(l.scene.camera.fovDegrees, 37.5f);
+    EXPECT_TRUE(l.scene.camera.hasScreenWindow);
+    EXPECT_EQ(l.scene.camera.screenWindow[0], -2.f);
+    EXPECT_EQ(l.scene.camera.screenWindow[3], 1.f);
+    EXPECT_EQ(l.scene.camera.frameAspect, 2.f);
+    EXPECT_EQ(l.scene.image.displayName, "out/image.tif");
+    // The only warning: the scene has no lights.
+    EXPECT_EQ(l.warnings.size(), 1u);
+    EXPECT_EQ(countWarnings(l.warnings, "no light sources"), 1);
+
+    Loaded o = load(scene("Projection \"orthographic\"", ""));
+    EXPECT_FALSE(o.scene.camera.perspective);
+}
+
+TEST(RibOptions, PixelFilterNames) {
+    EXPECT_EQ(load(scene("PixelFilter \"triangle\" 2 2", "")).scene.image.filter, FilterType::Triangle);
+    EXPECT_EQ(load(scene("PixelFilter \"catmull-rom\" 3 3", "")).scene.image.filter, FilterType::CatmullRom);
+    Loaded l = load(scene("PixelFilter \"box\" 1 1\nPixelFilter \"sinc\" 4 4", ""));
+    EXPECT_EQ(l.scene.image.filter, FilterType::Box);  // unsupported filter keeps the previous one
+    EXPECT_EQ(countWarnings(l.warnings, "sinc"), 1);
+}
+
+TEST(RibOptions, OptionAndVersionWarnings) {
+    Loaded l =
+        load(scene("version 3.03\nOption \"searchpath\" \"shader\" [\"../shaders:&\"]\n"
+                   "Option \"limits\" \"eyesplits\" 3\nOption \"limits\" \"bucketsize\" [16 16]",
+                   ""));
+    EXPECT_EQ(countWarnings(l.warnings, "limits"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "searchpath"), 0);
+    EXPECT_EQ(countWarnings(l.warnings, "version"), 0);
+}
+
+TEST(RibOptions, OnlyFirstFrameIsLoaded) {
+    std::string frame =
+        "FrameBegin 1\nFormat 100 100 1\nWorldBegin\n" + std::string(kUnitSquare) + "WorldEnd\nFrameEnd\n";
+    std::string second = "FrameBegin 2\nFormat 50 50 1\nWorldBegin\n" + std::string(kUnitSquare) +
+                         kUnitSquare + "WorldEnd\nFrameEnd\n";
+    Loaded l = load(frame + second);
+    EXPECT_EQ(l.scene.camera.width, 100);
+    EXPECT_EQ(l.scene.patches.size(), 1u);
+    EXPECT_EQ(countWarnings(l.warnings, "frame"), 1);
+}
+
+// ---- transformations -------------------------------------------------------------------------
+
+TEST(RibTransforms, CameraTransformAtWorldBegin) {
+    Loaded l = load(scene("Translate 0 0 5\nRotate 90 0 1 0", ""));
+    const Mat4& c = l.scene.camera.cameraFromWorld;
+    Mat4 expect = Mat4::translate(0, 0, 5) * Mat4::rotate(90, 0, 1, 0);
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) EXPECT_NEAR(c.m[i][j], expect.m[i][j], 1e-12);
+    // The world CTM starts at identity: the patch is stored unchanged.
+    expectVec(l.scene.patches[0].at(3, 3), {1, 1, 0});
+}
+
+TEST(RibTransforms, TranslateRotateScaleConcatenate) {
+    // CTM = T * R * S: points are scaled first, then rotated, then translated.
+    Loaded l = load(scene("", "Translate 10 0 0\nRotate 90 0 0 1\nScale 2 2 2"));
+    expectVec(l.scene.patches[0].at(3, 0), {10, 2, 0});  // (1,0,0) -> (2,0,0) -> (0,2,0) -> (10,2,0)
+    expectVec(l.scene.patches[0].at(0, 3), {8, 0, 0});   // (0,1,0) -> (0,2,0) -> (-2,0,0) -> (8,0,0)
+}
+
+TEST(RibTransforms, ConcatTransformAndTransform) {
+    // RIB matrices are row-vector: the translation is in elements 12..14.
+    Loaded l = load(scene("", "Translate 1 0 0\nConcatTransform [2 0 0 0  0 2 0 0  0 0 2 0  0 0 3 1]"));
+    expectVec(l.scene.patches[0].at(3, 3), {3, 2, 3});
+    // Transform replaces the CTM (inside the world: relative to world space).
+    Loaded t = load(scene("", "Translate 100 0 0\nTransform [1 0 0 0  0 1 0 0  0 0 1 0  0 0 7 1]"));
+    expectVec(t.scene.patches[0].at(0, 0), {0, 0, 7});
+    Loaded id = load(scene("", "Translate 100 0 0\nIdentity"));
+    expectVec(id.scene.patches[0].at(0, 0), {0, 0, 0});
+}
+
+TEST(RibTransforms, TransformAndAttributeBlocksRestore) {
+    Loaded l = load(scene("", std::string("TransformBegin\nTranslate 5 0 0\n") + kUnitSquare +
+                                  "TransformEnd\nAttributeBegin\nTranslate 0 5 0\nSides 1\n" + kUnitSquare +
+                                  "AttributeEnd\n"));
+    ASSERT_EQ(l.scene.patches.size(), 3u);
+    expectVec(l.scene.patches[0].at(0, 0), {5, 0, 0});
+    expectVec(l.scene.patches[1].at(0, 0), {0, 5, 0});
+    expectVec(l.scene.patches[2].at(0, 0), {0, 0, 0});
+    EXPECT_FALSE(l.scene.attributes[1].twoSided);
+    EXPECT_TRUE(l.scene.attributes[2].twoSided);  // AttributeEnd restored Sides 2
+}
+
+TEST(RibTransforms, CoordinateSystems) {
+    Loaded l =
+        load(scene("", "Translate 3 0 0\nCoordinateSystem \"lamp\"\nIdentity\nCoordSysTransform \"lamp\""));
+    expectVec(l.scene.patches[0].at(0, 0), {3, 0, 0});
+}
+
+// ---- attributes --------------------------------------------------------------------------------
+
+TEST(RibAttributes, ShadingRateSidesAndObjectIds) {
+    Loaded l = load(scene("ShadingRate 4", std::string(kUnitSquare) + "ShadingRate 0.25\nSides 1\n"));
+    ASSERT_EQ(l.scene.attributes.size(), 2u);
+    EXPECT_EQ(l.scene.attributes[0].shadingRate, 4.f);
+    EXPECT_EQ(l.scene.attributes[1].shadingRate, 0.25f);
+    EXPECT_TRUE(l.scene.attributes[0].twoSided);
+    EXPECT_FALSE(l.scene.attributes[1].twoSided);
+    // One object id per primitive request.
+    EXPECT_EQ(l.scene.attributes[0].object, 0u);
+    EXPECT_EQ(l.scene.attributes[1].object, 1u);
+    EXPECT_EQ(l.scene.objectCount, 2u);
+}
+
+TEST(RibAttributes, OrientationAndHandedness) {
+    std::string p = kUnitSquare;
+    Loaded l =
+        load(scene("", p + "Orientation \"rh\"\n" + p + "ReverseOrientation\n" + p +
+                           "Orientation \"outside\"\nScale 1 1 -1\n" + p + "Orientation \"inside\"\n"));
+    ASSERT_EQ(l.scene.attributes.size(), 5u);
+    EXPECT_FALSE(l.scene.attributes[0].flipNormal);  // default "outside" == "lh"
+    EXPECT_TRUE(l.scene.attributes[1].flipNormal);   // "rh"
+    EXPECT_FALSE(l.scene.attributes[2].flipNormal);  // reversed back to "lh"
+    EXPECT_TRUE(l.scene.attributes[3].flipNormal);   // mirrored CTM
+    EXPECT_FALSE(l.scene.attributes[4].flipNormal);  // "inside" and mirrored
+}
+
+TEST(RibAttributes, SurfaceColorAndMaterials) {
+    Loaded l =
+        load(scene("", std::string("Color [1 0.5 0.25]\n"
+                                   "Surface \"plastic\" \"Ka\" 0.1 \"Kd\" 0.2 \"Ks\" 0.9 \"roughness\" 0.05 "
+                                   "\"specularcolor\" [1 0 0]\n") +
+                           kUnitSquare + kUnitSquare + "Surface \"metal\"\nColor 0 1 0\n" + kUnitSquare));
+    ASSERT_EQ(l.scene.patches.size(), 4u);
+    // Plastic (used twice) and green metal (the last two patches): one entry per distinct material.
+    ASSERT_EQ(l.scene.materials.size(), 2u);
+    EXPECT_EQ(l.scene.attributes[0].material, l.scene.attributes[1].material);
+    const Material& m = l.scene.materials[l.scene.attributes[0].material];
+    EXPECT_EQ(m.type, MaterialType::Plastic);
+    expectVec(m.Cs, {1, 0.5f, 0.25f});
+    EXPECT_FLOAT_EQ(m.Ka, 0.1f);
+    EXPECT_FLOAT_EQ(m.Kd, 0.2f);
+    EXPECT_FLOAT_EQ(m.Ks, 0.9f);
+    EXPECT_FLOAT_EQ(m.roughness, 0.05f);
+    expectVec(m.specularColor, {1, 0, 0});
+    const Material& g = l.scene.materials[l.scene.attributes[2].material];
+    EXPECT_EQ(g.type, MaterialType::Metal);
+    expectVec(g.Cs, {0, 1, 0});
+    EXPECT_EQ(g.Ks, defaultMaterial(MaterialType::Metal).Ks);
+}
+
+TEST(RibAttributes, MirrorGlassAndInlineDeclarations) {
+    Loaded l = load(scene("", "Surface \"glass\" \"uniform float eta\" 1.33 \"float Kt\" [0.5]"));
+    const Material& m = l.scene.materials[l.scene.attributes[0].material];
+    EXPECT_EQ(m.type, MaterialType::Glass);
+    EXPECT_FLOAT_EQ(m.eta, 1.33f);
+    EXPECT_FLOAT_EQ(m.Kt, 0.5f);
+    Loaded r = load(scene("", "Surface \"mirror\" \"Kr\" 0.8"));
+    EXPECT_EQ(r.scene.materials[0].type, MaterialType::Mirror);
+    EXPECT_FLOAT_EQ(r.scene.materials[0].Kr, 0.8f);
+}
+
+TEST(RibAttributes, UnknownSurfaceKeepsPreviousWithOneWarning) {
+    Loaded l = load(scene("", "Surface \"metal\"\nSurface \"wood2\" \"txtscale\" [0.1]\nSurface \"wood2\""));
+    EXPECT_EQ(l.scene.materials[l.scene.attributes[0].material].type, MaterialType::Metal);
+    EXPECT_EQ(countWarnings(l.warnings, "wood2"), 1);
+}
+
+TEST(RibAttributes, OpacityAndIdentifier) {
+    Loaded l = load(scene("", "Opacity [0.5 0.5 0.5]\nAttribute \"identifier\" \"name\" [\"teapot\"]"));
+    EXPECT_EQ(countWarnings(l.warnings, "Opacity"), 1);
+    expectVec(l.scene.materials[0].Os, {0.5f, 0.5f, 0.5f});
+    Loaded o = load(scene("", "Opacity 1 1 1\nAttribute \"displacementbound\" \"sphere\" [2]"));
+    EXPECT_EQ(countWarnings(o.warnings, "Opacity"), 0);
+    EXPECT_EQ(countWarnings(o.warnings, "displacementbound"), 1);
+}
+
+TEST(RibAttributes, DeclareGivesParameterSizes) {
+    // A declared (unused) color parameter must have 3 values.
+    Loaded l = load(scene("Declare \"tint\" \"uniform color\"", "Surface \"matte\" \"tint\" [1 0 0]"));
+    EXPECT_EQ(countWarnings(l.warnings, "tint"), 1);  // accepted but not supported
+    std::string msg =
+        expectError(scene("Declare \"tint\" \"uniform color\"", "Surface \"matte\" \"tint\" [1 0]"), 3);
+    EXPECT_TRUE(contains(msg, "tint")) << msg;
+}
+
+// ---- lights --------------------------------------------------------------------------------------
+
+TEST(RibLights, StandardLightsInWorldSpace) {
+    Loaded l = load(scene("LightSource \"pointlight\" 9 \"intensity\" 5",
+                          "LightSource \"ambientlight\" 1 \"intensity\" 0.5 \"lightcolor\" [1 0.5 0]\n"
+                          "Translate 0 0 10\n"
+                          "LightSource \"distantlight\" 2 \"from\" [0 1 0] \"to\" [0 0 0]\n"
+                          "LightSource \"pointlight\" \"key\" \"intensity\" 20 \"from\" [1 2 3]\n"
+                          "LightSource \"distantlight\" 3"));
+    ASSERT_EQ(l.scene.lights.size(), 4u);  // the one before WorldBegin is ignored
+    EXPECT_EQ(countWarnings(l.warnings, "before WorldBegin"), 1);
+    EXPECT_EQ(l.scene.lights[0].type, LightType::Ambient);
+    expectVec(l.scene.lights[0].color, {0.5f, 0.25f, 0});
+    EXPECT_EQ(l.scene.lights[1].type, LightType::Distant);
+    expectVec(l.scene.lights[1].from, {0, 1, 10});
+    expectVec(l.scene.lights[1].to, {0, 0, 10});
+    EXPECT_EQ(l.scene.lights[2].type, LightType::Point);
+    expectVec(l.scene.lights[2].from, {1, 2, 13});
+    expectVec(l.scene.lights[2].color, {20, 20, 20});
+    // distantlight defaults: from (0,0,0) to (0,0,1), intensity 1, white.
+    expectVec(l.scene.lights[3].from, {0, 0, 10});
+    expectVec(l.scene.lights[3].to, {0, 0, 11});
+    expectVec(l.scene.lights[3].color, {1, 1, 1});
+}
+
+TEST(RibLights, UnsupportedLightAndIlluminateWarn) {
+    Loaded l = load(scene("", "LightSource \"spotlight\" 1\nIlluminate 1 0\nIlluminate 1 1"));
+    EXPECT_TRUE(l.scene.lights.empty());
+    EXPECT_EQ(countWarnings(l.warnings, "spotlight"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "Illuminate"), 1);
+}
+
+// ---- geometry -------------------------------------------------------------------------------------
+
+TEST(RibGeometry, BilinearPatchIsExact) {
+    Loaded l = load(scene("", "Patch \"bilinear\" \"P\" [0 0 0  2 0 1  0 3 -1  4 5 6]"));
+    ASSERT_EQ(l.scene.patches.size(), 2u);
+    const BezierPatch& p = l.scene.patches[0];
+    Vec3 c[4] = {{0, 0, 0}, {2, 0, 1}, {0, 3, -1}, {4, 5, 6}};
+    for (float u : {0.f, 0.3f, 0.5f, 1.f})
+        for (float v : {0.f, 0.25f, 0.8f, 1.f}) {
+            Vec3 expect = lerp(lerp(c[0], c[1], u), lerp(c[2], c[3], u), v);
+            expectVec(evalPatch(p, u, v), expect, 1e-5f);
+        }
+}
+
+TEST(RibGeometry, BicubicPatchRowMajor) {
+    std::string pts;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 4; ++u)
+            pts += std::to_string(u) + " " + std::to_string(v) + " " + std::to_string(u * v) + " ";
+    Loaded l = load(scene("", "Patch \"bicubic\" \"P\" [" + pts + "]"));
+    expectVec(l.scene.patches[0].at(2, 1), {2, 1, 2});
+    expectVec(l.scene.patches[0].at(1, 3), {1, 3, 3});
+}
+
+TEST(RibGeometry, PwWithUnitWeightAccepted) {
+    Loaded l = load(scene("", "Patch \"bilinear\" \"Pw\" [0 0 0 1  1 0 0 1  0 1 0 1  1 1 0 1]"));
+    ASSERT_EQ(l.scene.patches.size(), 2u);
+    expectVec(l.scene.patches[0].at(3, 3), {1, 1, 0});
+    std::string msg =
+        expectError(scene("", "Patch \"bilinear\" \"Pw\" [0 0 0 1  1 0 0 2  0 1 0 1  1 1 0 1]"), 3);
+    EXPECT_TRUE(contains(msg, "rational patches are not supported")) << msg;
+}
+
+TEST(RibGeometry, PzIsWarnedAndSkipped) {
+    Loaded l = load(scene("", "Patch \"bilinear\" \"Pz\" [0 1 2 3]"));
+    EXPECT_EQ(l.scene.patches.size(), 1u);
+    EXPECT_EQ(countWarnings(l.warnings, "Pz"), 1);
+}
+
+TEST(RibGeometry, BSplinePatchMeshEvaluatesToTheSpline) {
+    // A 5 x 4 b-spline mesh (step 1): 2 x 1 patches. Compare with the uniform cubic B-spline.
+    std::vector<Vec3> g;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 5; ++u) g.push_back({float(u), float(v), float((u * 7 + v * 3) % 5) * 0.5f});
+    std::string pts;
+    for (Vec3 p : g) pts += std::to_string(p.x) + " " + std::to_string(p.y) + " " + std::to_string(p.z) + " ";
+    Loaded l = load(scene("",
+                          "Basis \"b-spline\" 1 \"b-spline\" 1\nPatchMesh \"bicubic\" 5 \"nonperiodic\" 4 "
+                          "\"nonperiodic\" \"P\" [" +
+                              pts + "]"));
+    ASSERT_EQ(l.scene.patches.size(), 3u);
+    auto bspline = [](float t, float w[4]) {
+        float s = 1 - t;
+        w[0] = s * s * s / 6;
+        w[1] = (3 * t * t * t - 6 * t * t + 4) / 6;
+        w[2] = (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6;
+        w[3] = t * t * t / 6;
+    };
+    for (int patch = 0; patch < 2; ++patch)
+        for (float u : {0.f, 0.4f, 1.f})
+            for (float v : {0.f, 0.7f, 1.f}) {
+                float wu[4], wv[4];
+                bspline(u, wu);
+                bspline(v, wv);
+                Vec3 expect;
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 4; ++i) expect += g[j * 5 + patch + i] * (wu[i] * wv[j]);
+                expectVec(evalPatch(l.scene.patches[patch], u, v), expect, 1e-4f);
+            }
+}
+
+TEST(RibGeometry, BasisArrayMatchesNamedBasis) {
+    // RiBSplineBasis as written in a RIB file (row by row) must equal the named "b-spline".
+    std::string pts;
+    for (int k = 0; k < 16; ++k)
+        pts += std::to_string(k % 4) + " " + std::to_string(k / 4) + " " + std::to_string(k % 3) + " ";
+    std::string m =
+        "[-0.16666667 0.5 -0.5 0.16666667  0.5 -1 0.5 0  -0.5 0 0.5 0  0.16666667 0.66666667 0.16666667 0]";
+    Loaded named =
+        load(scene("", "Basis \"b-spline\" 1 \"b-spline\" 1\nPatch \"bicubic\" \"P\" [" + pts + "]"));
+    Loaded array = load(scene("", "Basis " + m + " 1 " + m + " 1\nPatch \"bicubic\" \"P\" [" + pts + "]"));
+    for (int k = 0; k < 16; ++k) expectVec(named.scene.patches[0].cp[k], array.scene.patches[0].cp[k], 1e-5f);
+}
+
+TEST(RibGeometry, PatchMeshCountsAndWrapping) {
+    // Bilinear 3 x 2 nonperiodic: 2 patches; periodic in u: 3 patches, the last wraps to column 0.
+    std::string pts = "[0 0 0  1 0 0  2 0 0  0 1 0  1 1 0  2 1 0]";
+    Loaded np = load(scene("", "PatchMesh \"bilinear\" 3 \"nonperiodic\" 2 \"nonperiodic\" \"P\" " + pts));
+    EXPECT_EQ(np.scene.patches.size(), 3u);
+    Loaded per = load(scene("", "PatchMesh \"bilinear\" 3 \"periodic\" 2 \"nonperiodic\" \"P\" " + pts));
+    ASSERT_EQ(per.scene.patches.size(), 4u);
+    expectVec(per.scene.patches[2].at(0, 0), {2, 0, 0});
+    expectVec(per.scene.patches[2].at(3, 0), {0, 0, 0});
+    // Bicubic Bezier (step 3): 7 nonperiodic points give 2 patches; 6 periodic give 2.
+    std::string row7, row6;
+    for (int i = 0; i < 7; ++i) row7 += std::to_string(i) + " 0 0 ";
+    for (int i = 0; i < 6; ++i) row6 += std::to_string(i) + " 0 0 ";
+    std::string p7, p6;
+    for (int v = 0; v < 4; ++v) p7 += row7, p6 += row6;
+    EXPECT_EQ(load(scene("", "PatchMesh \"bicubic\" 7 \"nonperiodic\" 4 \"nonperiodic\" \"P\" [" + p7 + "]"))
+                  .scene.patches.size(),
+              3u);
+    EXPECT_EQ(load(scene("", "PatchMesh \"bicubic\" 6 \"periodic\" 4 \"nonperiodic\" \"P\" [" + p6 + "]"))
+                  .scene.patches.size(),
+              3u);
+}
+
+TEST(RibGeometry, PatchMeshInvalidCountsAreErrors) {
+    std::string msg =
+        expectError(scene("", "PatchMesh \"bicubic\" 5 \"nonperiodic\" 4 \"nonperiodic\" \"P\" [0 0 0]"), 3);
+    EXPECT_TRUE(contains(msg, "4 + k * 3")) << msg;
+    msg = expectError(
+        scene("", "PatchMesh \"bilinear\" 2 \"nonperiodic\" 2 \"nonperiodic\" \"P\" [0 0 0 1 0 0 0 1 0]"), 3);
+    EXPECT_TRUE(contains(msg, "needs 12 values")) << msg;
+}
+
+TEST(RibGeometry, PeriodicTestFromAqsis) {
+    std::string path =
+        std::string(TESSERA_SHARED_DATA) + "/rib/aqsis-regression/RIBs/Primitives/periodic_test.rib";
+    std::vector<std::string> warnings;
+    Scene s = loadScene(path, [&](const std::string& w) { warnings.push_back(w); });
+    // Two bilinear meshes (4 periodic x 2 and 2 x 4 periodic: 4 patches each) and two bicubic
+    // Bezier meshes (12 periodic x 4 and 4 x 12 periodic, step 3: 4 patches each).
+    EXPECT_EQ(s.patches.size(), 16u);
+    EXPECT_EQ(s.objectCount, 4u);
+    int bicubicPatches = 0;
+    for (const PatchAttributes& a : s.attributes) bicubicPatches += a.object >= 2;
+    EXPECT_EQ(bicubicPatches, 8);
+    EXPECT_EQ(s.camera.width, 200);
+    EXPECT_EQ(s.lights.size(), 3u);
+    EXPECT_EQ(s.attributes[0].shadingRate, 2.f);
+    EXPECT_EQ(countWarnings(warnings, "limits"), 1);
+}
+
+TEST(RibGeometry, GeometryOutsideWorldIsAnError) {
+    std::string msg = expectError(std::string("Format 10 10 1\n") + kUnitSquare, 2);
+    EXPECT_TRUE(contains(msg, "outside WorldBegin")) << msg;
+}
+
+// ---- whole files ---------------------------------------------------------------------------------
+
+TEST(RibFiles, UtahTeapotRib) {
+    std::string path = std::string(TESSERA_SHARED_DATA) + "/rib/ribtools/uteapot.rib";
+    std::vector<std::string> warnings;
+    Scene s = loadScene(path, [&](const std::string& w) { warnings.push_back(w); });
+    EXPECT_EQ(s.patches.size(), 32u);
+    EXPECT_EQ(s.lights.size(), 4u);
+    EXPECT_EQ(s.camera.width, 640);
+    EXPECT_EQ(s.camera.height, 400);
+    EXPECT_EQ(s.camera.fovDegrees, 25.f);
+    EXPECT_EQ(s.image.displayName, "uteapot.tif");
+    EXPECT_EQ(countWarnings(warnings, "'set'"), 1);
+    EXPECT_EQ(countWarnings(warnings, "wood2"), 1);
+    // The stray `set -x` is reported at line 1.
+    EXPECT_EQ(warnings[0].rfind(path + ":1: warning:", 0), 0u) << warnings[0];
+    // "wood2" is unsupported, so the plastic surface before it stays in effect.
+    EXPECT_EQ(s.materials[s.attributes[0].material].type, MaterialType::Plastic);
+    Bounds3 b = s.worldBounds();
+    expectVec(b.lo, {-120, -80, 0}, 1e-3f);
+    expectVec(b.hi, {141, 80, 120}, 1e-3f);
+}
+
+TEST(RibFiles, ReadArchiveRelativePaths) {
+    fs::path d = testDir();
+    writeFile(d / "parts" / "square.rib", "ReadArchive \"deeper/moved.rib\"\n");
+    writeFile(d / "parts" / "deeper" / "moved.rib", std::string("Translate 0 0 4\n") + kUnitSquare);
+    std::string top = writeFile(d / "top.rib", "WorldBegin\nReadArchive \"parts/square.rib\"\nWorldEnd\n");
+    Scene s = loadScene(top, {});
+    ASSERT_EQ(s.patches.size(), 1u);
+    expectVec(s.patches[0].at(0, 0), {0, 0, 4});
+}
+
+TEST(RibFiles, ErrorInsideArchiveNamesTheArchive) {
+    fs::path d = testDir();
+    std::string inc = writeFile(d / "inc" / "bad.rib", "Translate 1 2\n\nTranslate 1 2 3 4\n");
+    std::string top = writeFile(d / "top.rib", "WorldBegin\nReadArchive \"inc/bad.rib\"\nWorldEnd\n");
+    std::string msg = errorOfFile(top);
+    std::string expectFile = (d / "inc" / "bad.rib").string();
+    EXPECT_EQ(msg.rfind(expectFile + ":1: error:", 0), 0u) << msg;
+}
+
+TEST(RibFiles, RecursiveArchiveIsAnError) {
+    fs::path d = testDir();
+    std::string loop = writeFile(d / "loop.rib", "# includes itself\nReadArchive \"loop.rib\"\n");
+    std::string top = writeFile(d / "top.rib", "WorldBegin\nReadArchive \"loop.rib\"\nWorldEnd\n");
+    std::string msg = errorOfFile(top);
+    EXPECT_TRUE(contains(msg, "nested more than")) << msg;
+    EXPECT_EQ(msg.rfind(loop + ":2: error:", 0), 0u) << msg;
+}
+
+TEST(RibFiles, GzippedRib) {
+    std::string text = scene("Format 123 45 1", "");
+    std::string path = (testDir() / "scene.rib.gz").string();
+    gzFile f = gzopen(path.c_str(), "wb");
+    ASSERT_NE(f, nullptr);
+    ASSERT_EQ(gzwrite(f, text.data(), unsigned(text.size())), int(text.size()));
+    gzclose(f);
+    Scene s = loadScene(path, {});
+    EXPECT_EQ(s.camera.width, 123);
+    EXPECT_EQ(s.patches.size(), 1u);
+}
+
+TEST(RibFiles, UnknownRequestsWarnOncePerName) {
+    Loaded l =
+        load(scene("set -x\nHider \"hidden\"\nHider \"hidden\"", "Sphere 1 -1 1 360\nSphere 2 -2 2 360"));
+    EXPECT_EQ(countWarnings(l.warnings, "'Hider'"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "'Sphere'"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "'set'"), 1);
+    EXPECT_EQ(l.scene.patches.size(), 1u);
+}
+
+// ---- errors: each reports "<file>:<line>: error:" ------------------------------------------------
+
+TEST(RibErrors, UnknownToken) {
+    std::string msg = expectError("Format 10 10 1\n\n@@@\n", 3);
+    EXPECT_TRUE(contains(msg, "@@@")) << msg;
+    expectError(scene("", "Translate 1 2 3 }"), 3);
+}
+
+TEST(RibErrors, WrongArraySize) {
+    std::string msg = expectError(scene("", "Patch \"bicubic\" \"P\" [0 0 0 1 1 1]"), 3);
+    EXPECT_TRUE(contains(msg, "48")) << msg;
+    expectError(scene("", "Color [1 0]"), 3);
+    expectError(scene("", "Surface \"plastic\"\n  \"specularcolor\" [1 0 0 0]"), 4);
+}
+
+TEST(RibErrors, MissingParameterValue) {
+    std::string msg = expectError(scene("", "Surface \"plastic\" \"Kd\"\n"), 3);
+    EXPECT_TRUE(contains(msg, "missing value for parameter \"Kd\"")) << msg;
+}
+
+TEST(RibErrors, UnterminatedString) {
+    std::string msg = expectError("Format 10 10 1\nDisplay \"out.tif\" \"file\" \"rgb\nWorldBegin\n", 2);
+    EXPECT_TRUE(contains(msg, "unterminated string")) << msg;
+    expectError("WorldBegin\n\nSurface \"matte", 3);
+}
+
+TEST(RibErrors, UnbalancedEnds) {
+    std::string msg = expectError(scene("", "AttributeEnd"), 3);
+    EXPECT_TRUE(contains(msg, "AttributeEnd")) << msg;
+    expectError(scene("", "TransformBegin\nAttributeEnd"), 4);
+    expectError("WorldEnd\n", 1);
+}
+
+TEST(RibErrors, EndOfFileInsideBlock) {
+    std::string msg = expectError(std::string("WorldBegin\nAttributeBegin\n") + kUnitSquare + "\n# end\n", 5);
+    EXPECT_TRUE(contains(msg, "AttributeBegin")) << msg;
+    expectError("WorldBegin\nPatch \"bilinear\" \"P\" [0 0 0 1 0 0\n0 1 0 1 1 0", 3);  // inside an array
+}
+
+TEST(RibErrors, NaNNumber) {
+    std::string msg = expectError(scene("", "Translate 1 nan 0"), 3);
+    EXPECT_TRUE(contains(msg, "nan")) << msg;
+    expectError(scene("Format 10 10 1\nScreenWindow -1 1 -inf 1", ""), 2);
+    expectError(scene("", "Scale 1e999 1 1"), 3);
+}
+
+TEST(RibErrors, MissingReadArchiveFile) {
+    std::string msg = expectError("WorldBegin\n\nReadArchive \"no/such/file.rib\"\nWorldEnd\n", 3);
+    EXPECT_TRUE(contains(msg, "file.rib")) << msg;
+}
+
+TEST(RibErrors, EmptyFile) {
+    std::string msg = expectError("", 1);
+    EXPECT_TRUE(contains(msg, "empty")) << msg;
+    msg = expectError("# only a comment\nFormat 10 10 1\n", 2);
+    EXPECT_TRUE(contains(msg, "no geometry")) << msg;
+}
+
+TEST(RibErrors, MissingFile) {
+    std::string path = (testDir() / "missing.rib").string();
+    std::string msg = errorOfFile(path);
+    EXPECT_EQ(msg.rfind(path + ": error:", 0), 0u) << msg;
+}
+
+TEST(RibErrors, WrongArgumentTypesAndCounts) {
+    expectError(scene("Format 10 \"ten\" 1", ""), 1);
+    expectError(scene("", "Translate 1 2"), 3);
+    expectError(scene("", "Sides 3"), 3);
+    expectError(scene("", "Basis \"bezier\" 3 \"nurbs\" 3"), 3);
+    expectError(scene("", "Orientation \"up\""), 3);
+    expectError(scene("", "Surface \"plastic\" \"Kd\" \"high\""), 3);
+    expectError(scene("", "Surface \"plastic\" 0.5"), 3);
+    expectError(scene("", "Patch \"biquadratic\" \"P\" [0 0 0]"), 3);
+}

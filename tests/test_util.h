@@ -1,0 +1,84 @@
+// Helpers shared by the tests: small hand-made scenes with known answers.
+#pragma once
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "render/render.h"
+#include "scene/scene.h"
+
+namespace tessera::test {
+
+// A scene whose world space is camera space: the eye at the origin looking down +z, +y up.
+inline Scene cameraSpaceScene(int width, int height, float fovDegrees) {
+    Scene s;
+    s.camera.width = width;
+    s.camera.height = height;
+    s.camera.fovDegrees = fovDegrees;
+    s.camera.nearClip = 0.01f;
+    s.camera.farClip = 1000.f;
+    s.materials.push_back(defaultMaterial(MaterialType::Matte));
+    s.lights.push_back({LightType::Ambient, {0.2f, 0.2f, 0.2f}, {}, {}});
+    s.lights.push_back({LightType::Distant, {1, 1, 1}, {0, 0, 0}, {0.3f, -0.4f, 1.f}});
+    s.image.filter = FilterType::Box;
+    s.image.filterWidthX = s.image.filterWidthY = 1.f;
+    return s;
+}
+
+inline void addPatch(Scene& s, const BezierPatch& p, uint32_t object = 0) {
+    s.patches.push_back(p);
+    PatchAttributes a;
+    a.object = object;
+    s.attributes.push_back(a);
+    s.objectCount = std::max(s.objectCount, object + 1);
+}
+
+// A flat square in the plane z = depth, centred on the view axis, side `side`.
+inline BezierPatch flatSquare(float side, float depth, float cx = 0, float cy = 0) {
+    BezierPatch p;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 4; ++u)
+            p.at(u, v) = {cx + side * (u / 3.f - 0.5f), cy + side * (v / 3.f - 0.5f), depth};
+    return p;
+}
+
+// A closed sphere-like surface of 8 bicubic patches (one per octant, collapsed edges at the poles).
+// Shared edges are bit-identical, as in real models whose patches share control points.
+inline std::vector<BezierPatch> octantSphere(float radius, Vec3 centre) {
+    const float k = 0.5522847f;  // cubic Bezier quarter-circle constant
+    const float cx[4] = {1, 1, k, 0}, cy[4] = {0, k, 1, 1};  // quarter circle in (x,y)
+    const float pr[4] = {1, 1, k, 0}, pz[4] = {0, k, 1, 1};  // profile: radius and height
+    std::vector<BezierPatch> out;
+    for (int hemi = 0; hemi < 2; ++hemi)
+        for (int q = 0; q < 4; ++q) {
+            BezierPatch p;
+            for (int v = 0; v < 4; ++v)
+                for (int u = 0; u < 4; ++u) {
+                    // Rotate the quadrant by q * 90 degrees with exact swaps and negations.
+                    float x = cx[u], y = cy[u];
+                    for (int r = 0; r < q; ++r) {
+                        float t = x;
+                        x = -y;
+                        y = t;
+                    }
+                    float z = hemi == 0 ? pz[v] : -pz[v];
+                    // Keep the normal orientation consistent: mirror u for the lower hemisphere.
+                    int uu = hemi == 0 ? u : 3 - u;
+                    p.at(uu, v) = {centre.x + radius * pr[v] * x, centre.y + radius * pr[v] * y,
+                                   centre.z + radius * z};
+                }
+            out.push_back(p);
+        }
+    return out;
+}
+
+inline float alphaAt(const Image& img, int x, int y) { return img.pixel(x, y)[3]; }
+
+inline double alphaSum(const Image& img) {
+    double s = 0;
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) s += img.pixel(x, y)[3];
+    return s;
+}
+
+}  // namespace tessera::test
