@@ -30,7 +30,9 @@ constexpr float kSubpixelScale = float(1 << kSubpixelBits);
 // jittered by a hash of (pixel, sample, seed). Positions lie on the 1/256-pixel fixed-point lattice that
 // the rasterizer uses, so both engines see exactly the same sample positions.
 inline void samplePositionFixed(int px, int py, int s, int nx, int ny, uint32_t seed, int32_t& x, int32_t& y) {
-    uint32_t h = hashCombine(hashCombine(uint32_t(px) * 73856093u ^ uint32_t(py) * 19349663u, uint32_t(s)), seed);
+    // One hash per (pixel, sample): cheap enough to recompute per bucket, no tables to share.
+    const uint32_t h = hash32((uint32_t(px) * 73856093u) ^ (uint32_t(py) * 19349663u) ^ (uint32_t(s) * 83492791u) ^
+                              (seed * 2654435761u));
     const int32_t jx = int32_t(h & 0xff), jy = int32_t((h >> 8) & 0xff);
     x = (px << kSubpixelBits) + ((s % nx) * 256 + jx) / nx;
     y = (py << kSubpixelBits) + ((s / nx) * 256 + jy) / ny;

@@ -1,0 +1,103 @@
+// Catmull-Clark subdivision surfaces (E. Catmull, J. Clark, "Recursively generated B-spline surfaces on
+// arbitrary topological meshes", CAD 10(6), 1978) converted to bicubic Bezier patches.
+//
+// Method (docs/inputs.md has the user-facing summary):
+//  1. Unless every face is already regular, the whole mesh is refined by `refineSteps` Catmull-Clark steps
+//     (default 1). One step makes every face a quad and leaves at most one original extraordinary vertex
+//     per face. The refinement is uniform so that all patches meet edge to edge: T-junctions would break
+//     the Reyes engine's crack-free guarantee, which needs shared edges with identical control points.
+//  2. Regular faces (a quad whose four vertices are interior, smooth, of valence 4 and surrounded by quads)
+//     become the exact bicubic B-spline patch of their 16-point neighbourhood, converted to Bezier form
+//     with toBezier(bsplineBasis()).
+//  3. Every other face gets the approximation of Loop & Schaefer, "Approximating Catmull-Clark subdivision
+//     surfaces with bicubic patches", ACM TOG 27(1), 2008 (ACC-1 geometry patch): corners at the limit
+//     positions, interior points from the (n v + 2 e_i + 2 e_i+1 + f_i) / (n + 5) masks, edge points the
+//     average of the two interior points beside the edge. Extension used here: at a smooth extraordinary
+//     vertex the edge points are projected into the exact limit tangent plane (Halstead et al. 1993
+//     tangent masks), so all patches around the vertex share its normal. For a regular vertex these
+//     rules reproduce the B-spline patch exactly.
+//  4. Every boundary curve (corner, 2 edge points, corner) is computed ONCE per mesh edge and copied into
+//     both patches that share it, so shared control points are bit-identical (watertight).
+//
+// Sharp features: boundary edges (RIB "interpolateboundary", OBJ default) and "crease" edges are
+// infinitely sharp: edge points are midpoints, crease vertices use (a + 6v + b) / 8, corners stay put; their
+// limit curves are uniform cubic B-splines with interpolated corners, which the patches reproduce exactly.
+// Semi-sharp (finite) sharpness is treated as infinitely sharp and reported in the warnings.
+#pragma once
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/bezier.h"
+
+namespace tessera {
+
+// How the mesh boundary is treated (RIB SubdivisionMesh tag "interpolateboundary").
+enum class BoundaryMode {
+    None,             // no tag: faces touching the boundary only shape the surface (RenderMan semantics)
+    EdgesAndCorners,  // boundary edges are sharp creases; vertices with a single face are sharp corners
+    EdgesOnly,        // boundary edges are sharp creases; corners stay smooth along the boundary curve
+};
+
+struct SubdivCrease {
+    int v0 = 0, v1 = 0;  // an edge of the mesh (either direction)
+    float sharpness = 10.f;
+};
+struct SubdivCorner {
+    int vertex = 0;
+    float sharpness = 10.f;
+};
+
+// A polygonal control mesh: face f has faceSizes[f] vertices, listed counter-clockwise (seen from outside)
+// in faceVerts, 0-based.
+struct SubdivMesh {
+    std::vector<Vec3> points;
+    std::vector<int> faceSizes;
+    std::vector<int> faceVerts;
+    BoundaryMode boundary = BoundaryMode::EdgesAndCorners;
+    std::vector<SubdivCrease> creases;
+    std::vector<SubdivCorner> corners;
+    std::vector<int> holes;  // faces that are not rendered (they still shape their neighbours)
+};
+
+// Malformed topology: index out of range, face with fewer than 3 or repeated vertices, an edge shared by
+// more than two faces or twice in the same direction, a vertex joining separate fans of faces.
+// `face` is the offending input face (-1 if none) so readers can report its line.
+class SubdivError : public std::invalid_argument {
+  public:
+    SubdivError(const std::string& message, int face = -1) : std::invalid_argument(message), face_(face) {}
+    int face() const { return face_; }
+
+  private:
+    int face_;
+};
+
+struct SubdivOptions {
+    int refineSteps = -1;  // -1: 0 if every face is regular, else 1. At most 4.
+};
+
+struct SubdivResult {
+    std::vector<BezierPatch> patches;
+    std::vector<uint32_t> patchFace;  // face of the refined mesh (refineMesh() numbering) of each patch
+    std::vector<uint8_t> patchExact;  // 1: exact B-spline patch, 0: approximation
+    int level = 0;                    // refinement steps applied
+    size_t exactCount = 0, approxCount = 0;
+    std::vector<std::string> warnings;  // e.g. semi-sharp creases treated as sharp
+};
+
+// Converts the mesh; throws SubdivError for malformed topology.
+SubdivResult subdivToBezier(const SubdivMesh& mesh, const SubdivOptions& options = {});
+
+// One Catmull-Clark step with the sharp rules above. Numbering of the result: the old vertices keep their
+// indices (as vertex points), then one edge point per edge, then one face point per face. Face f with k
+// vertices becomes k quads in order, child c = (vertex point of v_c, edge point of (v_c, v_c+1), face
+// point of f, edge point of (v_c-1, v_c)). Creases, corners and holes are carried to the children; in
+// BoundaryMode::None the faces touching the boundary are first marked as holes.
+SubdivMesh refineMesh(const SubdivMesh& mesh);
+
+// Exact limit positions of the vertices of an all-quad mesh: smooth vertices by the Catmull-Clark limit
+// mask (n^2 v + 4 sum e_j + sum f_j) / (n (n + 5)), crease vertices (a + 4v + b) / 6, corners v.
+std::vector<Vec3> limitPositions(const SubdivMesh& mesh);
+
+}  // namespace tessera

@@ -1,0 +1,45 @@
+// Bottom level of the ray tracer's two-level hierarchy: under every patch a complete binary tree of
+// subpatch bounding boxes made by alternating u/v de Casteljau splits at 1/2 (level k splits u when k is
+// even, v when k is odd). Only the boxes are kept, as one flat array per patch with implicit indexing:
+// node i has children 2i+1 (low half) and 2i+2 (high half); leaves are nodes 2^D-1 .. 2^(D+1)-2.
+// A leaf that a ray hits gives Newton's initial guess: the centre of the leaf's (u,v) rectangle.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/bezier.h"
+
+namespace tessera {
+
+struct SubpatchForest {
+    int depth = 6;
+    uint32_t nodesPerPatch = 127;     // 2^(depth+1) - 1
+    std::vector<Bounds3> boxes;       // patchCount * nodesPerPatch, enlarged for robustness
+    std::vector<uint8_t> backfacing;  // optional, one per node: every point faces away from the eye at 0
+    std::vector<Vec2> leafCentre;     // per leaf (shared by all patches): centre of its (u,v) rectangle
+
+    const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
+    const uint8_t* backfaceBits(uint32_t patch) const {
+        return backfacing.empty() ? nullptr : backfacing.data() + size_t(patch) * nodesPerPatch;
+    }
+    uint32_t firstLeaf() const { return (1u << depth) - 1; }
+    size_t memoryBytes() const {
+        return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2);
+    }
+};
+
+// Parameter rectangle of leaf `leaf` (0 .. 2^depth-1) of a tree of the given depth.
+void subpatchLeafRect(int depth, uint32_t leaf, float& u0, float& u1, float& v0, float& v1);
+
+// Box of the control hull grown by a relative and absolute margin, so that rays through shared patch
+// edges hit the boxes on both sides despite rounding.
+Bounds3 enlargedHull(const BezierPatch& p);
+
+// Build the trees of all patches (parallel over patches). With `backfaceFromOrigin`, also mark nodes
+// whose subpatch faces away from the origin everywhere (conservative: Bernstein bound of the normal;
+// `flip[i]` reverses patch i's orientation).
+void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& forest,
+                         bool backfaceFromOrigin = false, std::span<const uint8_t> flip = {});
+
+}  // namespace tessera
