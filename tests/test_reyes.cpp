@@ -6,6 +6,7 @@
 #include <numbers>
 
 #include "io/scene_loader.h"
+#include "scene/weld.h"
 #include "test_util.h"
 
 using namespace tessera;
@@ -206,4 +207,55 @@ TEST(ReyesDeterminism, SameImageForAnyThreadCount) {
     RenderResult a = renderWith(s, 1), b = renderWith(s, 2);
     ASSERT_EQ(a.image.rgba.size(), b.image.rgba.size());
     EXPECT_TRUE(a.image.rgba == b.image.rgba);
+}
+
+TEST(ReyesWatertight, EdgesSharedOnlyUpToRoundingAreWelded) {
+    // Perturb every patch independently by ~1e-6 relative, as a basis conversion's rounding would: shared
+    // edges are then equal only approximately. The weld pass must restore watertightness.
+    Scene s = loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    Scene body = s;
+    body.patches.clear();
+    body.attributes.clear();
+    uint32_t state = 12345;
+    auto noise = [&] {
+        state = state * 1664525u + 1013904223u;
+        return (float(state >> 8) / 16777216.f - 0.5f) * 6e-6f;
+    };
+    for (int i : {4, 5, 6, 7, 28, 29, 30, 31}) {
+        BezierPatch p = s.patches[i];
+        for (Vec3& c : p.cp) c += Vec3{noise(), noise(), noise()};
+        body.patches.push_back(p);
+        body.attributes.push_back(s.attributes[i]);
+    }
+    body.camera.width = 320;
+    body.camera.height = 240;
+    body.image.filter = FilterType::Box;
+    body.image.filterWidthX = body.image.filterWidthY = 1;
+    for (auto& a : body.attributes) a.shadingRate = 4.f;
+    RenderResult r = renderWith(body);
+    EXPECT_GT(r.stats["welded_edges"].get<int>(), 0);
+    int pinholes = 0;
+    for (int y = 1; y < 239; ++y)
+        for (int x = 1; x < 319; ++x) {
+            if (alphaAt(r.image, x, y) == 1.f) continue;
+            bool surrounded = true;
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx)
+                    if ((dx || dy) && alphaAt(r.image, x + dx, y + dy) != 1.f) surrounded = false;
+            if (surrounded) ++pinholes;
+        }
+    EXPECT_EQ(pinholes, 0);
+}
+
+TEST(Weld, UnifiesNearlyEqualEdgesAndLeavesDistinctOnesAlone) {
+    BezierPatch a = flatSquare(2.f, 5.f, 0.f, 0.f), b = flatSquare(2.f, 5.f, 2.f, 0.f);
+    // b's u=0 edge coincides with a's u=1 edge up to 1e-7.
+    for (int v = 0; v < 4; ++v) b.at(0, v) += Vec3{1e-7f, -1e-7f, 0.f};
+    BezierPatch far = flatSquare(2.f, 5.f, 10.f, 0.f);
+    std::vector<BezierPatch> ps = {a, b, far};
+    WeldResult w = weldSharedEdges(ps, 1e-5f);
+    for (int v = 0; v < 4; ++v) EXPECT_TRUE(ps[1].at(0, v) == ps[0].at(3, v)) << v;
+    EXPECT_EQ(w.cornersMoved, 2u);
+    EXPECT_EQ(w.edgesWelded, 1u);
+    for (int k = 0; k < 16; ++k) EXPECT_TRUE(ps[2].cp[k] == far.cp[k]);
 }

@@ -10,6 +10,8 @@
 #include <vector>
 
 #include "core/basis.h"
+#include "core/nurbs.h"
+#include "core/subdivision.h"
 #include "io/rib_lexer.h"
 
 namespace tessera {
@@ -177,7 +179,7 @@ class RibReader {
         }
         if (scene_.patches.empty())
             fail(lex.eofLine(),
-                 "no geometry: the file has no Patch or PatchMesh (bicubic/bilinear) primitives");
+                 "no geometry: the file has no Patch, PatchMesh, NuPatch or SubdivisionMesh primitives");
         if (scene_.lights.empty())
             warnAt(lex.eofLine(), "no light sources: only \"constant\" surfaces will be visible");
     }
@@ -968,6 +970,209 @@ class RibReader {
             }
     }
 
+    // Appends a patch that is already in Bezier form (object space), ignoring the current Basis.
+    void addBezier(const BezierPatch& patch, const PatchAttributes& a) {
+        BezierPatch b = patch;
+        for (Vec3& c : b.cp) c = ctm_.point(c);
+        scene_.patches.push_back(b);
+        scene_.attributes.push_back(a);
+    }
+
+    std::vector<double> numberArray(const Request& r, size_t i, const char* what) const {
+        const Value& v = r.args.at(i);
+        if (!v.numeric())
+            fail(v.line, r.name + ": " + what + " must be an array of numbers, found " + describe(v));
+        return v.nums;
+    }
+    std::vector<int> intArray(const Request& r, size_t i, const char* what) const {
+        std::vector<int> out;
+        for (double d : numberArray(r, i, what)) {
+            if (d != std::floor(d) || std::fabs(d) > 2e9)
+                fail(r.args[i].line, r.name + ": " + what + " must hold integers, found " + std::to_string(d));
+            out.push_back(int(d));
+        }
+        return out;
+    }
+
+    // RiNuPatch (RI spec 3.2, sec. 5.3): non-rational NURBS, converted exactly to Bezier patches.
+    void nuPatch(const Request& r) {
+        minArgs(r, 10, "nu uorder uknot umin umax nv vorder vknot vmin vmax ...parameterlist...");
+        NurbsSurface s;
+        s.nu = integer(r, 0);
+        s.uorder = integer(r, 1);
+        s.uknot = numberArray(r, 2, "uknot");
+        s.umin = number(r, 3);
+        s.umax = number(r, 4);
+        s.nv = integer(r, 5);
+        s.vorder = integer(r, 6);
+        s.vknot = numberArray(r, 7, "vknot");
+        s.vmin = number(r, 8);
+        s.vmax = number(r, 9);
+        if (s.nu < 1 || s.nv < 1 || s.nu > 1000000 || s.nv > 1000000)
+            fail(r.line, "NuPatch: nu and nv must be positive");
+        size_t nverts = size_t(s.nu) * size_t(s.nv);
+        size_t segu = size_t(std::max(1, s.nu - s.uorder + 1)), segv = size_t(std::max(1, s.nv - s.vorder + 1));
+        auto ps = params(r, 10, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex") return nverts;
+            if (cls == "varying" || cls == "facevarying" || cls == "facevertex") return (segu + 1) * (segv + 1);
+            if (cls == "uniform") return segu * segv;
+            return 1;
+        });
+        requireWorld(r);
+        // Check the knots before the points, so that a bad knot vector is reported as such.
+        try {
+            NurbsSurface k = s;
+            k.cp.assign(nverts, Vec3{});
+            validateNurbs(k);
+        } catch (const NurbsError& e) {
+            fail(r.line, std::string("NuPatch: ") + e.what());
+        }
+        for (const Param& p : ps)
+            if (p.name == "Pw" && p.value->numeric() && p.value->nums.size() == 4 * nverts)
+                for (size_t i = 0; i < nverts; ++i)
+                    if (std::fabs(p.value->nums[4 * i + 3] - 1.0) > 1e-9)
+                        fail(p.line,
+                             "NuPatch: rational NURBS (\"Pw\" with w != 1) are not supported; only non-rational "
+                             "surfaces (all weights 1) convert exactly to bicubic Bezier patches");
+        auto pts = positions(r, ps, nverts, "NuPatch");
+        if (!pts) return;
+        s.cp = std::move(*pts);
+        std::vector<BezierPatch> patches;
+        try {
+            patches = nurbsToBezier(s);
+        } catch (const NurbsError& e) {
+            fail(r.line, std::string("NuPatch: ") + e.what());
+        }
+        PatchAttributes a = primitiveAttributes();
+        for (const BezierPatch& b : patches) addBezier(b, a);
+    }
+
+    // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted by subdivToBezier().
+    void subdivisionMesh(const Request& r) {
+        minArgs(r, 3, "scheme nvertices vertices [tags nargs intargs floatargs] ...parameterlist...");
+        const std::string& scheme = string(r, 0);
+        std::vector<int> nverts = intArray(r, 1, "nvertices");
+        std::vector<int> verts = intArray(r, 2, "vertices");
+        if (!r.args[1].isArray() || !r.args[2].isArray())
+            fail(r.line, "SubdivisionMesh: nvertices and vertices must be arrays");
+        size_t start = 3;
+        SubdivMesh mesh;
+        mesh.boundary = BoundaryMode::None;  // RenderMan default without "interpolateboundary"
+        size_t total = 0;
+        for (size_t f = 0; f < nverts.size(); ++f) {
+            if (nverts[f] < 3)
+                fail(r.args[1].line, "SubdivisionMesh: face " + std::to_string(f) + " has " +
+                                         std::to_string(nverts[f]) + " vertices; a face needs at least 3");
+            total += size_t(nverts[f]);
+        }
+        if (nverts.empty()) fail(r.args[1].line, "SubdivisionMesh: no faces");
+        if (total != verts.size())
+            fail(r.args[2].line, "SubdivisionMesh: nvertices adds up to " + std::to_string(total) +
+                                     " vertex indices, but vertices has " + std::to_string(verts.size()));
+        int maxIndex = -1;
+        for (int v : verts) {
+            if (v < 0) fail(r.args[2].line, "SubdivisionMesh: negative vertex index " + std::to_string(v));
+            maxIndex = std::max(maxIndex, v);
+        }
+        size_t npoints = size_t(maxIndex) + 1;
+        struct Tag {
+            std::string name;
+            std::vector<int> ints;
+            std::vector<double> floats;
+            int line;
+        };
+        std::vector<Tag> tags;
+        if (r.args.size() > 3 && r.args[3].isArray()) {
+            if (r.args.size() < 7) fail(r.line, "SubdivisionMesh: tags need the arrays tags nargs intargs floatargs");
+            const Value& tv = r.args[3];
+            if (tv.numeric() && !tv.nums.empty())
+                fail(tv.line, "SubdivisionMesh: tags must be an array of strings");
+            std::vector<int> nargs = intArray(r, 4, "nargs");
+            std::vector<int> ints = intArray(r, 5, "intargs");
+            std::vector<double> floats = numberArray(r, 6, "floatargs");
+            if (nargs.size() != 2 * tv.strs.size())
+                fail(r.args[4].line, "SubdivisionMesh: nargs needs 2 numbers per tag (" +
+                                         std::to_string(2 * tv.strs.size()) + "), got " +
+                                         std::to_string(nargs.size()));
+            size_t io = 0, fo = 0;
+            for (size_t t = 0; t < tv.strs.size(); ++t) {
+                int ni = nargs[2 * t], nf = nargs[2 * t + 1];
+                if (ni < 0 || nf < 0 || io + size_t(ni) > ints.size() || fo + size_t(nf) > floats.size())
+                    fail(r.args[4].line, "SubdivisionMesh: nargs for tag \"" + tv.strs[t] +
+                                             "\" asks for more intargs/floatargs than given");
+                Tag tag{tv.strs[t], {ints.begin() + long(io), ints.begin() + long(io + size_t(ni))},
+                        {floats.begin() + long(fo), floats.begin() + long(fo + size_t(nf))}, tv.line};
+                io += size_t(ni);
+                fo += size_t(nf);
+                tags.push_back(std::move(tag));
+            }
+            start = 7;
+        }
+        auto ps = params(r, start, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex" || cls == "varying") return npoints;
+            if (cls == "facevarying" || cls == "facevertex") return verts.size();
+            if (cls == "uniform") return nverts.size();
+            return 1;
+        });
+        requireWorld(r);
+        if (scheme != "catmull-clark") {
+            warnOnce("subdiv:" + scheme, r.line,
+                     "SubdivisionMesh scheme \"" + scheme + "\" is not supported (only \"catmull-clark\"); "
+                     "primitive skipped");
+            return;
+        }
+        auto pts = positions(r, ps, npoints, "SubdivisionMesh");
+        if (!pts) return;
+        mesh.points = std::move(*pts);
+        mesh.faceSizes = std::move(nverts);
+        mesh.faceVerts = std::move(verts);
+        for (const Tag& t : tags) {
+            auto checkVertex = [&](int v) {
+                if (v < 0 || size_t(v) >= npoints)
+                    fail(t.line, "SubdivisionMesh: tag \"" + t.name + "\" names vertex " + std::to_string(v) +
+                                     ", outside 0.." + std::to_string(npoints - 1));
+            };
+            if (t.name == "interpolateboundary") {
+                int mode = t.ints.empty() ? 1 : t.ints[0];
+                mesh.boundary = mode == 0 ? BoundaryMode::None
+                                          : (mode == 2 ? BoundaryMode::EdgesOnly : BoundaryMode::EdgesAndCorners);
+            } else if (t.name == "crease") {
+                if (t.ints.size() < 2 || t.floats.empty())
+                    fail(t.line, "SubdivisionMesh: a \"crease\" tag needs at least 2 vertices and 1 sharpness");
+                for (int v : t.ints) checkVertex(v);
+                for (size_t i = 0; i + 1 < t.ints.size(); ++i)
+                    mesh.creases.push_back({t.ints[i], t.ints[i + 1],
+                                            float(t.floats.size() == 1 ? t.floats[0]
+                                                                       : t.floats[std::min(i, t.floats.size() - 1)])});
+            } else if (t.name == "corner") {
+                if (t.floats.empty()) fail(t.line, "SubdivisionMesh: a \"corner\" tag needs a sharpness");
+                for (size_t i = 0; i < t.ints.size(); ++i) {
+                    checkVertex(t.ints[i]);
+                    mesh.corners.push_back({t.ints[i], float(t.floats[std::min(i, t.floats.size() - 1)])});
+                }
+            } else if (t.name == "hole") {
+                for (int f : t.ints) {
+                    if (f < 0 || size_t(f) >= mesh.faceSizes.size())
+                        fail(t.line, "SubdivisionMesh: \"hole\" names face " + std::to_string(f) +
+                                         ", outside 0.." + std::to_string(mesh.faceSizes.size() - 1));
+                    mesh.holes.push_back(f);
+                }
+            } else {
+                warnOnce("subdivtag:" + t.name, t.line,
+                         "SubdivisionMesh tag \"" + t.name + "\" is not supported; ignored");
+            }
+        }
+        SubdivResult res;
+        try {
+            res = subdivToBezier(mesh);
+        } catch (const SubdivError& e) {
+            fail(r.line, std::string("SubdivisionMesh: ") + e.what());
+        }
+        for (const std::string& w : res.warnings) warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
+        PatchAttributes a = primitiveAttributes();
+        for (const BezierPatch& b : res.patches) addBezier(b, a);
+    }
+
     // ---- ReadArchive (RI spec 3.2, sec. 8.1) -----------------------------------------------------
     void readArchive(const Request& r, int depth) {
         argCount(r, 1, "filename");
@@ -1038,6 +1243,8 @@ class RibReader {
             {"CoordSysTransform", &RibReader::coordSysTransform},
             {"Patch", &RibReader::patch},
             {"PatchMesh", &RibReader::patchMesh},
+            {"NuPatch", &RibReader::nuPatch},
+            {"SubdivisionMesh", &RibReader::subdivisionMesh},
             {"ReadArchive", nullptr},  // handled in parse(): it needs the include depth
         };
         // Predeclared variables and standard shader parameters (RI spec 3.2, sec. 3 and appendix A).

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "reyes/reyes_renderer.h"
+#include "rt/rt_renderer.h"
 
 namespace tessera {
 
@@ -16,6 +17,8 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
     arena.execute([&] {
         if (settings.engine == "reyes") {
             result = renderReyes(scene, settings);
+        } else if (settings.engine == "rt") {
+            result = renderRt(scene, settings);
         } else {
             throw std::invalid_argument("unknown engine '" + settings.engine + "' (use reyes or rt)");
         }

@@ -14,6 +14,7 @@
 #include "reyes/grid.h"
 #include "reyes/rasterize.h"
 #include "reyes/split.h"
+#include "scene/weld.h"
 
 namespace tessera {
 namespace {
@@ -53,6 +54,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t i) {
         for (int k = 0; k < 16; ++k) patches[i].cp[k] = cam.cameraFromWorld.point(scene.patches[i].cp[k]);
     });
+    // Shared edges must be bit-identical for crack-free dicing: weld what matches only up to rounding.
+    const WeldResult weld = weldSharedEdges(patches, defaultWeldTolerance(patches));
     std::vector<ShadingLight> lights;
     for (const Light& l : scene.lights) lights.push_back(prepareLight(l, cam.cameraFromWorld));
 
@@ -189,6 +192,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     s["patches_culled"] = patchesCulled.load();
     s["pieces_culled"] = pieceCulls.load();
     s["splits"] = splits.load();
+    s["welded_corners"] = weld.cornersMoved;
+    s["welded_edges"] = weld.edgesWelded;
     s["pieces"] = pieces.size();
     s["grids"] = total.grids;
     s["micropolygons"] = total.micropolygons;

@@ -1,0 +1,624 @@
+#include "rt/rt_renderer.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <mutex>
+
+namespace tessera {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+enum Kind : uint8_t { kPrimary = 0, kShadow = 1, kReflection = 2, kRefraction = 3, kKinds = 4 };
+const char* const kKindNames[kKinds] = {"primary", "shadow", "reflection", "refraction"};
+constexpr uint32_t kNone = UINT32_MAX;
+constexpr size_t kChunk = 128;  // rays per parallel work item
+constexpr int kHistBins = 18;   // Newton iteration counts 0..17
+
+// Ray list, structure of arrays.
+struct RayList {
+    std::vector<Vec3> o, d;
+    std::vector<float> tmin, tmax;
+    std::vector<uint32_t> owner;   // primary/secondary: sample index in the tile; shadow: unused
+    std::vector<Color> weight;     // throughput to the sample
+    std::vector<uint32_t> ignore;  // originating patch (self-intersection guard)
+    std::vector<uint8_t> kind, depth;
+    size_t size() const { return o.size(); }
+    void clear() {
+        o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
+        kind.clear(), depth.clear();
+    }
+    void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k, uint8_t dep) {
+        o.push_back(o_), d.push_back(d_), tmin.push_back(t0), tmax.push_back(t1), owner.push_back(own);
+        weight.push_back(w), ignore.push_back(ign), kind.push_back(k), depth.push_back(dep);
+    }
+};
+
+// Traversal output: Newton's starting points, grouped by ray (segments sorted by box entry distance).
+struct Candidate {
+    uint32_t ray, patch;
+    float u0, v0, tEnter;
+};
+
+struct Counters {
+    uint64_t rays[kKinds] = {}, hits[kKinds] = {};
+    uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0;
+    std::array<uint64_t, kHistBins> hist{};
+    double traversalMs = 0, newtonMs = 0, shadeMs = 0, filterMs = 0;
+    void add(const Counters& c) {
+        for (int k = 0; k < kKinds; ++k) rays[k] += c.rays[k], hits[k] += c.hits[k];
+        candidates += c.candidates, newtonRuns += c.newtonRuns, newtonIterations += c.newtonIterations;
+        boxTests += c.boxTests;
+        for (int i = 0; i < kHistBins; ++i) hist[i] += c.hist[i];
+        traversalMs += c.traversalMs, newtonMs += c.newtonMs, shadeMs += c.shadeMs, filterMs += c.filterMs;
+    }
+};
+
+struct Chunk {
+    std::vector<Candidate> cand;
+    std::vector<uint32_t> segEnd;  // per ray of the chunk: end of its candidates
+    Counters c;                    // counters of this chunk (merged in chunk order)
+};
+
+// Per-hit shading inputs.
+struct HitInfo {
+    Vec3 P, N, I;
+};
+
+struct Workspace {
+    SampleTile tile;
+    RayList rays, next, shadow;
+    std::vector<Chunk> chunks;
+    std::vector<RayHit> hits, shadowHits;
+    std::vector<HitInfo> info;
+    std::vector<uint32_t> shadowIdx;
+    std::vector<Color> contrib;
+    std::vector<uint8_t> secondaryFlags;
+    std::vector<Vec3> secO, secD;
+    std::vector<Color> secW;
+    Counters c;
+};
+
+TraceOptions optionsFor(uint8_t kind, uint32_t ignore, float offset, bool cull) {
+    TraceOptions o;
+    o.anyHit = kind == kShadow;
+    o.respectSides = kind == kPrimary;
+    o.cullBackfaces = kind == kPrimary && cull;
+    o.ignorePatch = ignore;
+    o.ignoreT = 8.f * offset;
+    return o;
+}
+
+// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates.
+void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
+    const size_t n = rays.size();
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    if (chunks.size() < nChunks) chunks.resize(nChunks);
+    const Bvh& bvh = acc.bvh;
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
+        Chunk& ch = chunks[ci];
+        ch.cand.clear();
+        ch.segEnd.clear();
+        ch.c = Counters();
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        for (size_t r = r0; r < r1; ++r) {
+            const size_t segBegin = ch.cand.size();
+            const Vec3 o = rays.o[r], d = rays.d[r];
+            const Vec3 inv = safeInverse(d);
+            const float tmin = rays.tmin[r], tmax = rays.tmax[r];
+            const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
+            uint32_t stack[64];
+            int sp = 0;
+            if (!bvh.nodes.empty()) stack[sp++] = 0;
+            while (sp > 0) {
+                const BvhNode& node = bvh.nodes[stack[--sp]];
+                const uint32_t ni = uint32_t(&node - bvh.nodes.data());
+                float te;
+                ++ch.c.boxTests;
+                if (!rayBox(node.box, o, inv, tmin, tmax, te)) continue;
+                if (node.count == 0) {
+                    // Visit the near child first (pushed last).
+                    if (d[node.axis] < 0.f) {
+                        stack[sp++] = ni + 1;
+                        stack[sp++] = node.offset;
+                    } else {
+                        stack[sp++] = node.offset;
+                        stack[sp++] = ni + 1;
+                    }
+                    continue;
+                }
+                for (uint32_t k = 0; k < node.count; ++k) {
+                    const uint32_t patch = bvh.prims[node.offset + k];
+                    const Bounds3* tree = forest.tree(patch);
+                    const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                    uint32_t st[32];
+                    int s2 = 0;
+                    st[s2++] = 0;
+                    while (s2 > 0) {
+                        const uint32_t m = st[--s2];
+                        ++ch.c.boxTests;
+                        if (!rayBox(tree[m], o, inv, tmin, tmax, te)) continue;
+                        if (back && back[m]) continue;
+                        if (m >= firstLeaf) {
+                            const Vec2 c = forest.leafCentre[m - firstLeaf];
+                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, te});
+                        } else {
+                            st[s2++] = 2 * m + 2;
+                            st[s2++] = 2 * m + 1;
+                        }
+                    }
+                }
+            }
+            // Sort the ray's candidates by entry distance (stable insertion sort: short segments).
+            for (size_t i = segBegin + 1; i < ch.cand.size(); ++i) {
+                Candidate x = ch.cand[i];
+                size_t j = i;
+                while (j > segBegin && ch.cand[j - 1].tEnter > x.tEnter) {
+                    ch.cand[j] = ch.cand[j - 1];
+                    --j;
+                }
+                ch.cand[j] = x;
+            }
+            ch.segEnd.push_back(uint32_t(ch.cand.size()));
+        }
+        ch.c.candidates = ch.cand.size();
+    });
+}
+
+// Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
+// sorted candidates; candidates whose box starts beyond the best hit so far cannot win and are skipped).
+void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, std::vector<RayHit>& hits,
+                bool cull) {
+    const size_t n = rays.size();
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    hits.assign(n, RayHit());
+    tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
+        Chunk& ch = chunks[ci];
+        const size_t r0 = ci * kChunk;
+        uint32_t begin = 0;
+        for (size_t k = 0; k < ch.segEnd.size(); ++k) {
+            const uint32_t end = ch.segEnd[k];
+            const size_t r = r0 + k;
+            if (begin == end) continue;
+            Ray ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
+            const TraceOptions opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
+            const RayPlanes pl = makeRayPlanes(ray.o, ray.d);
+            RayHit& best = hits[r];
+            for (uint32_t i = begin; i < end; ++i) {
+                const Candidate& c = ch.cand[i];
+                if (c.tEnter > ray.tmax) break;
+                NewtonParams prm{newtonTolerance(acc.forest.tree(c.patch)[0], ray.o)};
+                PatchHit h;
+                bool ok = newtonSolve<float>(acc.patches[c.patch], pl, ray, c.u0, c.v0, prm, h);
+                ++ch.c.newtonRuns;
+                ch.c.newtonIterations += uint32_t(h.iterations);
+                ++ch.c.hist[std::min(h.iterations, kHistBins - 1)];
+                if (ok && h.t < ray.tmax && acceptHit(acc, ray, opt, c.patch, h)) {
+                    best.hit = true;
+                    best.patch = c.patch;
+                    best.h = h;
+                    ray.tmax = h.t;
+                    if (opt.anyHit) break;
+                }
+            }
+            begin = end;
+        }
+    });
+}
+
+void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vector<RayHit>& hits, bool cull) {
+    auto t0 = Clock::now();
+    traverseList(acc, rays, ws.chunks, cull);
+    auto t1 = Clock::now();
+    newtonList(acc, rays, ws.chunks, hits, cull);
+    ws.c.traversalMs += std::chrono::duration<double, std::milli>(t1 - t0).count();
+    ws.c.newtonMs += msSince(t1);
+    const size_t nChunks = (rays.size() + kChunk - 1) / kChunk;
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        const Counters& c = ws.chunks[ci].c;
+        ws.c.candidates += c.candidates, ws.c.newtonRuns += c.newtonRuns;
+        ws.c.newtonIterations += c.newtonIterations, ws.c.boxTests += c.boxTests;
+        for (int i = 0; i < kHistBins; ++i) ws.c.hist[i] += c.hist[i];
+    }
+    for (size_t r = 0; r < rays.size(); ++r) {
+        ++ws.c.rays[rays.kind[r]];
+        if (hits[r].hit) ++ws.c.hits[rays.kind[r]];
+    }
+}
+
+struct Frame {
+    const Scene& scene;
+    const RtAccel& acc;
+    std::vector<ShadingLight> lights;
+    int maxDepth;
+    bool cull;
+};
+
+// One wavefront generation: shade the hits of `ws.rays`, trace their shadow rays, accumulate colour into
+// the tile and write the next generation (reflection, refraction) to `ws.next`.
+void shadeGeneration(const Frame& fr, Workspace& ws) {
+    const RtAccel& acc = fr.acc;
+    const RayList& rays = ws.rays;
+    const size_t n = rays.size();
+    const size_t nL = fr.lights.size();
+    auto ts = Clock::now();
+    ws.info.resize(n);
+    ws.shadowIdx.assign(n * nL, kNone);
+    ws.shadow.clear();
+    for (size_t r = 0; r < n; ++r) {
+        const RayHit& rh = ws.hits[r];
+        if (!rh.hit) continue;
+        HitInfo& hi = ws.info[r];
+        hi.P = rh.h.p;
+        hi.N = hitNormal(acc, rh.patch, rh.h);
+        hi.I = normalize(rays.d[r]);
+        const Material& m = fr.scene.materials[acc.material[rh.patch]];
+        if (m.type == MaterialType::Constant) continue;
+        const Vec3 Nf = faceForward(hi.N, hi.I);
+        for (size_t l = 0; l < nL; ++l) {
+            const ShadingLight& light = fr.lights[l];
+            if (light.type == LightType::Ambient) continue;
+            Vec3 L;
+            Color Cl;
+            float dist;
+            if (!lightIncidence(light, hi.P, L, Cl, dist)) continue;
+            if (dot(Nf, L) <= 0.f) continue;
+            const float tmax = std::isfinite(dist) ? dist - acc.offset : dist;
+            ws.shadowIdx[r * nL + l] = uint32_t(ws.shadow.size());
+            ws.shadow.push(hi.P + Nf * acc.offset, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0);
+        }
+    }
+    ws.c.shadeMs += msSince(ts);
+    traceList(acc, ws.shadow, ws, ws.shadowHits, fr.cull);
+
+    ts = Clock::now();
+    ws.contrib.assign(n, Color{});
+    ws.secondaryFlags.assign(n, 0);
+    ws.secO.resize(2 * n);
+    ws.secD.resize(2 * n);
+    ws.secW.resize(2 * n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& range) {
+        for (size_t r = range.begin(); r != range.end(); ++r) {
+            const RayHit& rh = ws.hits[r];
+            if (!rh.hit) continue;
+            const HitInfo& hi = ws.info[r];
+            const Material& m = fr.scene.materials[acc.material[rh.patch]];
+            auto visible = [&](size_t l, Vec3, Vec3, float) -> float {
+                const uint32_t s = ws.shadowIdx[r * nL + l];
+                return (s != kNone && ws.shadowHits[s].hit) ? 0.f : 1.f;
+            };
+            const Color w = rays.weight[r];
+            ws.contrib[r] = w * shadeLocal(m, hi.P, hi.N, hi.I, fr.lights, visible);
+            if (rays.depth[r] >= fr.maxDepth) continue;
+            const Vec3 Nf = faceForward(hi.N, hi.I);
+            if (m.type == MaterialType::Mirror) {
+                const Color wr = w * m.Cs * m.Kr;
+                if (maxComponent(wr) > 1e-4f) {
+                    ws.secondaryFlags[r] |= 1;
+                    ws.secO[2 * r] = hi.P + Nf * acc.offset;
+                    ws.secD[2 * r] = reflectDir(hi.I, Nf);
+                    ws.secW[2 * r] = wr;
+                }
+            } else if (m.type == MaterialType::Glass) {
+                // hi.N is the outward normal (orientation attributes applied).
+                Vec3 T;
+                float F;
+                const bool refr = refractDir(hi.I, hi.N, m.eta, T, F);
+                const Color wr = w * (m.Kr * F);
+                if (maxComponent(wr) > 1e-4f) {
+                    ws.secondaryFlags[r] |= 1;
+                    ws.secO[2 * r] = hi.P + Nf * acc.offset;
+                    ws.secD[2 * r] = reflectDir(hi.I, Nf);
+                    ws.secW[2 * r] = wr;
+                }
+                const Color wt = w * m.Cs * (m.Kt * (1.f - F));
+                if (refr && maxComponent(wt) > 1e-4f) {
+                    ws.secondaryFlags[r] |= 2;
+                    ws.secO[2 * r + 1] = hi.P - Nf * acc.offset;
+                    ws.secD[2 * r + 1] = T;
+                    ws.secW[2 * r + 1] = wt;
+                }
+            }
+        }
+    });
+    // Accumulate in ray order (deterministic) and compact the next generation.
+    SampleTile& tile = ws.tile;
+    ws.next.clear();
+    for (size_t r = 0; r < n; ++r) {
+        const uint32_t s = rays.owner[r];
+        if (rays.kind[r] == kPrimary && ws.hits[r].hit) {
+            tile.a[s] = 1.f;
+            tile.z[s] = ws.hits[r].h.t;
+            tile.pixelHit[s / size_t(tile.spp)] = 1;
+        }
+        if (!ws.hits[r].hit) continue;
+        tile.r[s] += ws.contrib[r].x;
+        tile.g[s] += ws.contrib[r].y;
+        tile.b[s] += ws.contrib[r].z;
+        const uint8_t f = ws.secondaryFlags[r];
+        if (f & 1)
+            ws.next.push(ws.secO[2 * r], ws.secD[2 * r], 0.f, std::numeric_limits<float>::infinity(), s,
+                         ws.secW[2 * r], ws.hits[r].patch, kReflection, uint8_t(rays.depth[r] + 1));
+        if (f & 2)
+            ws.next.push(ws.secO[2 * r + 1], ws.secD[2 * r + 1], 0.f, std::numeric_limits<float>::infinity(), s,
+                         ws.secW[2 * r + 1], ws.hits[r].patch, kRefraction, uint8_t(rays.depth[r] + 1));
+    }
+    ws.c.shadeMs += msSince(ts);
+}
+
+}  // namespace
+
+// ---- shared helpers -------------------------------------------------------------------------------
+
+Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
+    Vec3 N = cross(h.dpdu, h.dpdv);
+    const float scale = dot(h.dpdu, h.dpdu) + dot(h.dpdv, h.dpdv);
+    if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(acc.patches[patch], h.u, h.v);
+    N = normalize(N);
+    if (!isFinite(N) || dot(N, N) == 0.f) N = Vec3{0, 0, 1};
+    return acc.flip[patch] ? -N : N;
+}
+
+bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint32_t patch, const PatchHit& h) {
+    if (patch == opt.ignorePatch && h.t < opt.ignoreT) return false;
+    if (opt.respectSides && !acc.twoSided[patch]) {
+        Vec3 N = cross(h.dpdu, h.dpdv);
+        if (acc.flip[patch]) N = -N;
+        if (dot(N, ray.d) > 0.f) return false;  // back face of a one-sided surface
+    }
+    return true;
+}
+
+Vec3 reflectDir(Vec3 I, Vec3 N) { return normalize(I - N * (2.f * dot(I, N))); }
+
+bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F) {
+    float cosi = -dot(I, N);
+    float n1 = 1.f, n2 = eta;
+    Vec3 n = N;
+    if (cosi < 0.f) {  // leaving the medium
+        cosi = -cosi;
+        n = -N;
+        std::swap(n1, n2);
+    }
+    const float r = n1 / n2;
+    const float sin2t = r * r * std::max(0.f, 1.f - cosi * cosi);
+    if (sin2t >= 1.f) {
+        F = 1.f;
+        return false;
+    }
+    const float cost = std::sqrt(1.f - sin2t);
+    const float rs = (n1 * cosi - n2 * cost) / (n1 * cosi + n2 * cost);
+    const float rp = (n1 * cost - n2 * cosi) / (n1 * cost + n2 * cosi);
+    F = 0.5f * (rs * rs + rp * rp);
+    T = normalize(I * r + n * (r * cosi - cost));
+    return true;
+}
+
+void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin, RtAccel& acc) {
+    const size_t n = scene.patches.size();
+    acc.patches.resize(n);
+    acc.flip.resize(n);
+    acc.twoSided.resize(n);
+    acc.material.resize(n);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        for (int k = 0; k < 16; ++k) acc.patches[i].cp[k] = toSpace.point(scene.patches[i].cp[k]);
+        acc.flip[i] = scene.attributes[i].flipNormal;
+        acc.twoSided[i] = scene.attributes[i].twoSided;
+        acc.material[i] = scene.attributes[i].material;
+    });
+    auto t0 = Clock::now();
+    buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip);
+    acc.subpatchMs = msSince(t0);
+    auto t1 = Clock::now();
+    std::vector<Bounds3> roots(n);
+    Bounds3 all;
+    for (size_t i = 0; i < n; ++i) {
+        roots[i] = acc.forest.tree(uint32_t(i))[0];
+        all.extend(roots[i]);
+    }
+    buildBvh(roots, acc.bvh);
+    acc.bvhMs = msSince(t1);
+    float mag = 0.f;
+    if (!all.empty())
+        for (int k = 0; k < 3; ++k) mag = std::max({mag, std::fabs(all.lo[k]), std::fabs(all.hi[k])});
+    acc.offset = 2e-5f * mag + 1e-6f;
+}
+
+bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, RayHit& out) {
+    out = RayHit();
+    if (acc.bvh.nodes.empty()) return false;
+    Ray r = ray;
+    const Vec3 inv = safeInverse(r.d);
+    uint32_t stack[64];
+    int sp = 0;
+    stack[sp++] = 0;
+    while (sp > 0) {
+        const uint32_t ni = stack[--sp];
+        const BvhNode& node = acc.bvh.nodes[ni];
+        float te;
+        if (!rayBox(node.box, r.o, inv, r.tmin, r.tmax, te)) continue;
+        if (node.count == 0) {
+            stack[sp++] = node.offset;
+            stack[sp++] = ni + 1;
+            continue;
+        }
+        for (uint32_t k = 0; k < node.count; ++k) {
+            const uint32_t patch = acc.bvh.prims[node.offset + k];
+            PatchHit h;
+            const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(patch) : nullptr;
+            auto accept = [&](const PatchHit& ph) { return acceptHit(acc, r, opt, patch, ph); };
+            if (intersectPatch<float>(acc.patches[patch], acc.forest, patch, r, h, back, nullptr, nullptr, accept)) {
+                out.hit = true;
+                out.patch = patch;
+                out.h = h;
+                r.tmax = h.t;
+                if (opt.anyHit) return true;
+            }
+        }
+    }
+    return out.hit;
+}
+
+RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
+    const auto tStart = Clock::now();
+    RenderResult result;
+    const Camera& cam = scene.camera;
+    const int W = cam.width, H = cam.height;
+    result.image = Image(W, H);
+    const PixelFilter filter = makeFilter(scene.image);
+    const int nx = std::max(1, scene.image.pixelSamplesX), ny = std::max(1, scene.image.pixelSamplesY);
+
+    // Build: camera space (eye at the origin), both levels of the hierarchy.
+    const auto tBuild = Clock::now();
+    RtAccel acc;
+    buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc);
+    const double buildMs = msSince(tBuild);
+    Frame fr{scene, acc, {}, std::max(0, settings.maxDepth), settings.cullBackfaces};
+    for (const Light& l : scene.lights) fr.lights.push_back(prepareLight(l, cam.cameraFromWorld));
+    const Projector proj(cam);
+
+    const int bs = std::max(settings.bucketSize, 64);
+    const int rx = filter.radiusX(), ry = filter.radiusY();
+    const int nbx = (W + bs - 1) / bs, nby = (H + bs - 1) / bs, nb = nbx * nby;
+
+    std::mutex poolMutex;
+    std::vector<std::unique_ptr<Workspace>> pool, all;
+    auto acquire = [&]() -> Workspace* {
+        std::lock_guard<std::mutex> lock(poolMutex);
+        if (pool.empty()) {
+            all.push_back(std::make_unique<Workspace>());
+            return all.back().get();
+        }
+        Workspace* w = pool.back().release();
+        pool.pop_back();
+        return w;
+    };
+    auto release = [&](Workspace* w) {
+        std::lock_guard<std::mutex> lock(poolMutex);
+        pool.emplace_back(w);
+    };
+    // `all` owns the workspaces; `pool` holds non-owning views of the idle ones.
+    auto renderTile = [&](int b) {
+        Workspace* wsp = acquire();
+        Workspace& ws = *wsp;
+        const int bx = b % nbx, by = b / nbx;
+        Rect target{bx * bs, by * bs, std::min(W, (bx + 1) * bs), std::min(H, (by + 1) * bs)};
+        Rect region{std::max(0, target.x0 - rx), std::max(0, target.y0 - ry), std::min(W, target.x1 + rx),
+                    std::min(H, target.y1 + ry)};
+        ws.tile.reset(region, nx, ny, settings.seed, std::numeric_limits<float>::infinity());
+        auto ts = Clock::now();
+        ws.rays.clear();
+        const size_t ns = ws.tile.sampleCount();
+        for (size_t i = 0; i < ns; ++i) {
+            const float x = float(ws.tile.sx[i]) / kSubpixelScale, y = float(ws.tile.sy[i]) / kSubpixelScale;
+            const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
+            if (proj.perspective)
+                ws.rays.push({0, 0, 0}, {cx, cy, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1}, kNone,
+                             kPrimary, 0);
+            else
+                ws.rays.push({cx, cy, 0}, {0, 0, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1}, kNone,
+                             kPrimary, 0);
+        }
+        ws.c.shadeMs += msSince(ts);
+        while (ws.rays.size() > 0) {
+            traceList(acc, ws.rays, ws, ws.hits, fr.cull);
+            shadeGeneration(fr, ws);
+            std::swap(ws.rays, ws.next);
+        }
+        auto tf = Clock::now();
+        reconstruct(ws.tile, filter, target, result.image);
+        ws.c.filterMs += msSince(tf);
+        release(wsp);
+    };
+    // The pool's unique_ptrs must not double-own: keep ownership in `all` only.
+    auto cleanup = [&] {
+        for (auto& p : pool) p.release();
+        pool.clear();
+    };
+
+    const auto tTrace = Clock::now();
+    std::atomic<int> nextTile{0}, doneTiles{0};
+    std::atomic<bool> cancelled{false};
+    const int workers = tbb::this_task_arena::max_concurrency();
+    tbb::parallel_for(0, workers, [&](int) {
+        for (;;) {
+            if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) {
+                cancelled = true;
+                break;
+            }
+            int b = nextTile.fetch_add(1);
+            if (b >= nb) break;
+            renderTile(b);
+            int done = ++doneTiles;
+            if (settings.progress) settings.progress(done, nb);
+        }
+    }, tbb::static_partitioner());
+    const double traceMs = msSince(tTrace);
+    cleanup();
+
+    Counters total;
+    size_t wsBytes = 0;
+    for (const auto& w : all) {
+        total.add(w->c);
+        wsBytes += w->tile.sampleCount() * 30 + w->rays.o.capacity() * 56;
+        for (const Chunk& ch : w->chunks) wsBytes += ch.cand.capacity() * sizeof(Candidate);
+    }
+    result.cancelled = cancelled.load();
+    nlohmann::json& s = result.stats;
+    s["engine"] = "rt";
+    s["patches_in"] = scene.patches.size();
+    nlohmann::json rays, hits;
+    uint64_t totalRays = 0;
+    for (int k = 0; k < kKinds; ++k) {
+        rays[kKindNames[k]] = total.rays[k];
+        hits[kKindNames[k]] = total.hits[k];
+        totalRays += total.rays[k];
+    }
+    s["rays"] = rays;
+    s["rays_total"] = totalRays;
+    s["hits"] = hits;
+    s["candidates"] = total.candidates;
+    s["candidates_per_ray"] = totalRays ? double(total.candidates) / double(totalRays) : 0.0;
+    s["box_tests"] = total.boxTests;
+    s["newton_runs"] = total.newtonRuns;
+    s["newton_iterations"] = {
+        {"total", total.newtonIterations},
+        {"mean", total.newtonRuns ? double(total.newtonIterations) / double(total.newtonRuns) : 0.0},
+        {"histogram", total.hist}};
+    s["bvh_nodes"] = acc.bvh.nodes.size();
+    s["bvh_depth"] = acc.bvh.maxDepth;
+    s["subpatch_depth"] = acc.forest.depth;
+    s["subpatch_nodes"] = acc.forest.boxes.size();
+    const size_t np = std::max<size_t>(1, scene.patches.size());
+    s["memory"] = {{"bvh_bytes", acc.bvh.memoryBytes()},
+                   {"subpatch_bytes", acc.forest.memoryBytes()},
+                   {"patch_bytes", acc.patches.size() * sizeof(BezierPatch)},
+                   {"bytes_per_patch", double(acc.bvh.memoryBytes() + acc.forest.memoryBytes()) / double(np)},
+                   {"workspace_bytes", wsBytes}};
+    s["build_ms"] = buildMs;
+    s["build"] = {{"bvh_ms", acc.bvhMs}, {"subpatch_ms", acc.subpatchMs}};
+    s["trace_ms"] = traceMs;
+    s["mrays_per_s"] = traceMs > 0 ? double(totalRays) / (traceMs * 1e3) : 0.0;
+    s["tile_size"] = bs;
+    s["tiles"] = nb;
+    s["cull_backfaces"] = settings.cullBackfaces;
+    s["max_depth"] = fr.maxDepth;
+    s["stage_ms"] = {{"traversal_cpu", total.traversalMs},
+                     {"newton_cpu", total.newtonMs},
+                     {"shading_cpu", total.shadeMs},
+                     {"filter_cpu", total.filterMs}};
+    s["engine_ms"] = msSince(tStart);
+    return result;
+}
+
+}  // namespace tessera
