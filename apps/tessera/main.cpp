@@ -86,6 +86,9 @@ public:
         if (done < last_) return;
         last_ = done;
         double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+        // Redraw at most ten times a second (and always at the end).
+        if (done != total && elapsed - lastDraw_ < 0.1) return;
+        lastDraw_ = elapsed;
         double eta = done > 0 ? elapsed * (total - done) / done : 0.0;
         const int width = 30;
         int filled = total > 0 ? done * width / total : width;
@@ -99,6 +102,7 @@ private:
     std::chrono::steady_clock::time_point start_;
     std::mutex mutex_;
     int last_ = -1;
+    double lastDraw_ = -1;
 };
 
 int runRender(const RenderArgs& a) {

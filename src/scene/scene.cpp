@@ -22,7 +22,8 @@ void frameSceneDefault(Scene& scene, int width, int height) {
     cam.fovDegrees = 30.f;
     // Look at the centre from the (+x, -y, +z) octant (z is up, as in the teapot data).
     Vec3 dir = normalize(Vec3{-0.55f, 0.75f, -0.38f});  // viewing direction
-    float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 1.05f;
+    // The bounding sphere of the box is conservative (about 1.3x for typical models): pull in a little.
+    float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 0.85f;
     Vec3 eye = c - dir * dist;
     Vec3 up{0, 0, 1};
     Vec3 zc = dir;                          // camera +z: into the screen
