@@ -259,3 +259,16 @@ TEST(Weld, UnifiesNearlyEqualEdgesAndLeavesDistinctOnesAlone) {
     EXPECT_EQ(w.edgesWelded, 1u);
     for (int k = 0; k < 16; ++k) EXPECT_TRUE(ps[2].cp[k] == far.cp[k]);
 }
+
+TEST(ReyesSides, OneSidedSurfacesFacingAwayAreCulled) {
+    // flatSquare has dP/du x dP/dv = +z, pointing away from the eye: back-facing unless flipped.
+    Scene s = cameraSpaceScene(64, 64, 40.f);
+    addPatch(s, flatSquare(2.f, 5.f));
+    s.attributes[0].twoSided = false;
+    EXPECT_EQ(alphaSum(renderWith(s).image), 0.0) << "Sides 1, facing away";
+    s.attributes[0].flipNormal = true;  // e.g. ReverseOrientation
+    EXPECT_GT(alphaSum(renderWith(s).image), 100.0) << "Sides 1, facing the eye";
+    s.attributes[0].twoSided = true;
+    s.attributes[0].flipNormal = false;
+    EXPECT_GT(alphaSum(renderWith(s).image), 100.0) << "Sides 2";
+}
