@@ -148,3 +148,22 @@ TEST(Cli, FailedRenderKeepsThePreviousImage) {
         EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << "temporary left behind";
     fs::remove_all(dir);
 }
+
+TEST(Cli, ConvertWritesARibThatRendersTheSameImage) {
+    fs::path dir = tempDir() / "convert";
+    fs::create_directories(dir);
+    const std::string bpt = std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt";
+    const std::string rib = (dir / "teapot.rib").string();
+    ASSERT_EQ(run("convert " + bpt + " -o " + rib).exitCode, 0);
+    CommandResult info = run("info " + rib);
+    EXPECT_NE(info.output.find("patches:  32"), std::string::npos) << info.output;
+    const std::string a = (dir / "a.exr").string(), b = (dir / "b.exr").string();
+    ASSERT_EQ(run("render " + bpt + " --res 160x120 -q -o " + a).exitCode, 0);
+    ASSERT_EQ(run("render " + rib + " --res 160x120 -q -o " + b).exitCode, 0);
+    Image ia = readExr(a), ib = readExr(b);
+    double maxDiff = 0;
+    for (size_t i = 0; i < ia.rgba.size(); ++i) maxDiff = std::max(maxDiff, double(std::fabs(ia.rgba[i] - ib.rgba[i])));
+    EXPECT_LT(maxDiff, 2e-3) << "same geometry, camera, lights and material after the round trip";
+    EXPECT_EQ(run("convert " + bpt + " -o " + (dir / "x.png").string()).exitCode, 2);
+    fs::remove_all(dir);
+}

@@ -11,9 +11,11 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <optional>
 
 #include "io/diagnostics.h"
 #include "io/image_io.h"
+#include "io/rib_writer.h"
 #include "io/scene_loader.h"
 #include "render/render.h"
 
@@ -22,8 +24,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr int kMaxResolution = 16384;  // per axis; documented in docs/errors.md
-constexpr int kMaxSpp = 1024;
+constexpr int kMaxResolution = kMaxImageSize;  // per axis; documented in docs/errors.md
+constexpr int kMaxSpp = kMaxPixelSamples;
 std::atomic<bool> gCancel{false};
 
 extern "C" void onSigint(int) { gCancel.store(true); }
@@ -40,18 +42,23 @@ double peakRssMb() {
 }
 
 struct RenderArgs {
-    std::string scene, output, engine = "reyes", res, stats;
+    std::string scene, output, engine = "reyes", res, stats, format = "auto";
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
     bool quiet = false, cullBackfaces = false;
 };
 
-Scene loadOrFail(const std::string& path, bool quiet) {
+Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatName = "auto") {
+    std::optional<SceneFormat> format = parseSceneFormat(formatName);
+    if (!format) fail(fmt::format("error: unknown --format '{}' (auto, rib, bpt, obj, micropolis)", formatName));
     try {
-        return loadScene(path, [quiet](const std::string& w) {
-            if (!quiet) fmt::print(stderr, "{}\n", w);
-        });
+        return loadScene(
+            path,
+            [quiet](const std::string& w) {
+                if (!quiet) fmt::print(stderr, "{}\n", w);
+            },
+            *format);
     } catch (const InputError& e) {
         fail(e.what());
     } catch (const std::exception& e) {
@@ -114,7 +121,13 @@ int runRender(const RenderArgs& a) {
     if (!a.output.empty() && !isSupportedImageExtension(a.output))
         fail(fmt::format("{}: error: unsupported output format (use .png or .exr)", a.output));
 
-    Scene scene = loadOrFail(a.scene, a.quiet);
+    // Ctrl-C from here on: stop cleanly (no output written) and exit 130.
+    std::signal(SIGINT, onSigint);
+    Scene scene = loadOrFail(a.scene, a.quiet, a.format);
+    if (gCancel.load()) {
+        fmt::print(stderr, "interrupted while loading {}: no image written\n", a.scene);
+        return 130;
+    }
     // Command-line options override the scene's.
     if (!a.res.empty()) {
         int w = 0, h = 0;
@@ -147,7 +160,6 @@ int runRender(const RenderArgs& a) {
     ProgressBar bar(!a.quiet && isatty(STDERR_FILENO));
     settings.progress = [&bar](int done, int total) { bar.update(done, total); };
     settings.cancel = &gCancel;
-    std::signal(SIGINT, onSigint);
 
     auto t0 = std::chrono::steady_clock::now();
     RenderResult result;
@@ -166,7 +178,7 @@ int runRender(const RenderArgs& a) {
     try {
         writeImage(output, result.image, enc);
     } catch (const std::exception& e) {
-        fmt::print(stderr, "{}\n", e.what());
+        fmt::print(stderr, "error: {}\n", e.what());
         return 1;
     }
 
@@ -192,8 +204,21 @@ int runRender(const RenderArgs& a) {
     return 0;
 }
 
-int runInfo(const std::string& path) {
-    Scene scene = loadOrFail(path, false);
+int runConvert(const std::string& in, const std::string& out, const std::string& format) {
+    if (fs::path(out).extension() != ".rib") fail(fmt::format("{}: error: convert writes RIB: name it .rib", out));
+    Scene scene = loadOrFail(in, false, format);
+    try {
+        writeRib(scene, out);
+    } catch (const std::exception& e) {
+        fmt::print(stderr, "{}\n", e.what());
+        return 1;
+    }
+    fmt::print(stderr, "{}: {} patches written\n", out, scene.patches.size());
+    return 0;
+}
+
+int runInfo(const std::string& path, const std::string& format) {
+    Scene scene = loadOrFail(path, false, format);
     Bounds3 b = scene.worldBounds();
     const Camera& c = scene.camera;
     fmt::print("scene:    {}\n", path);
@@ -222,6 +247,7 @@ int main(int argc, char** argv) {
     CLI::App* render = app.add_subcommand("render", "Render a .rib or .bpt scene to .png or .exr");
     render->add_option("scene", ra.scene, "Scene file (.rib, .rib.gz or .bpt)")->required();
     render->add_option("-o,--output", ra.output, "Output image (.png or .exr)");
+    render->add_option("--format", ra.format, "Input format: auto, rib, bpt, obj, micropolis");
     render->add_option("--engine", ra.engine, "reyes or rt")->check(CLI::IsMember({"reyes", "rt"}));
     render->add_option("--res", ra.res, "Resolution WIDTHxHEIGHT (overrides Format)");
     render->add_option("--spp", ra.spp, "Samples per pixel (overrides PixelSamples)")->check(CLI::Range(1, kMaxSpp));
@@ -236,9 +262,15 @@ int main(int argc, char** argv) {
     render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(CLI::Range(0, 64));
     render->add_flag("--cull-backfaces", ra.cullBackfaces, "rt: cull back-facing subpatches for primary rays");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");
-    std::string infoPath;
+    std::string infoPath, infoFormat = "auto";
     CLI::App* info = app.add_subcommand("info", "Print patch count, objects, bounds and camera of a scene");
     info->add_option("scene", infoPath, "Scene file")->required();
+    info->add_option("--format", infoFormat, "Input format: auto, rib, bpt, obj, micropolis");
+    std::string convertIn, convertOut, convertFormat = "auto";
+    CLI::App* convert = app.add_subcommand("convert", "Write any supported input as a RIB of Bezier patches");
+    convert->add_option("input", convertIn, "Input scene")->required();
+    convert->add_option("-o,--output", convertOut, "Output .rib")->required();
+    convert->add_option("--format", convertFormat, "Input format: auto, rib, bpt, obj, micropolis");
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -247,6 +279,7 @@ int main(int argc, char** argv) {
         return 2;
     }
     if (*render) return runRender(ra);
-    if (*info) return runInfo(infoPath);
+    if (*info) return runInfo(infoPath, infoFormat);
+    if (*convert) return runConvert(convertIn, convertOut, convertFormat);
     return 2;
 }

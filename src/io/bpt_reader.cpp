@@ -4,6 +4,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <limits>
 
 #include "io/diagnostics.h"
 
@@ -27,6 +28,7 @@ class WordReader {
             fail(std::string("unexpected end of file: expected ") + what);
         }
         size_t start = pos_;
+        lastStart_ = start;
         while (pos_ < text_.size() && !std::isspace(static_cast<unsigned char>(text_[pos_]))) ++pos_;
         wordLine_ = line_;
         return std::string_view(text_).substr(start, pos_ - start);
@@ -38,7 +40,7 @@ class WordReader {
         std::string_view s = w.size() > 1 && w[0] == '+' ? w.substr(1) : w;
         auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
         if (ec != std::errc() || end != s.data() + s.size())
-            fail("expected " + std::string(what) + ", found '" + std::string(w) + "'");
+            fail("expected " + std::string(what) + ", found '" + printable(w) + "'");
         if (!std::isfinite(v))
             fail("invalid number '" + std::string(w) + "': NaN and infinity are not allowed");
         return v;
@@ -46,7 +48,9 @@ class WordReader {
 
     long integer(const char* what) {
         double v = number(what);
-        if (v != std::floor(v)) fail(std::string("expected ") + what + ", found " + std::to_string(v));
+        if (v != std::floor(v) || std::fabs(v) > 1e15)
+            fail(std::string("expected ") + what + ", found '" +
+                 printable(std::string_view(text_).substr(lastStart_, pos_ - lastStart_)) + "'");
         return static_cast<long>(v);
     }
 
@@ -70,7 +74,7 @@ class WordReader {
 
     const std::string& text_;
     const std::string& file_;
-    size_t pos_ = 0;
+    size_t pos_ = 0, lastStart_ = 0;
     int line_ = 1;
     int wordLine_ = 1;
 };
@@ -84,7 +88,8 @@ std::vector<BezierPatch> parseBpt(const std::string& text, const std::string& fi
     if (count < 0) in.fail("negative patch count " + std::to_string(count));
     if (count == 0) in.fail("no patches (patch count is 0)");
     std::vector<BezierPatch> patches;
-    patches.reserve(static_cast<size_t>(std::min(count, 1L << 20)));
+    // A patch takes at least 100 characters ("3 3" and 48 numbers): never reserve for more than the text holds.
+    patches.reserve(static_cast<size_t>(std::min(count, static_cast<long>(text.size() / 100 + 1))));
     for (long i = 0; i < count; ++i) {
         long du = in.integer("the u degree");
         int degreeLine = in.line();
@@ -97,6 +102,9 @@ std::vector<BezierPatch> parseBpt(const std::string& text, const std::string& fi
         for (Vec3& c : p.cp) {
             double x = in.number("a coordinate"), y = in.number("a coordinate"),
                    z = in.number("a coordinate");
+            const double fmax = std::numeric_limits<float>::max();
+            if (std::fabs(x) > fmax || std::fabs(y) > fmax || std::fabs(z) > fmax)
+                in.fail("coordinate out of range (larger than single precision allows)");
             c = {float(x), float(y), float(z)};
         }
         patches.push_back(p);

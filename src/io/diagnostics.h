@@ -3,6 +3,7 @@
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace tessera {
 
@@ -22,6 +23,28 @@ private:
     std::string file_;
     int line_;
 };
+
+// `s` for an error message: bytes outside printable ASCII as \xNN, at most `max` characters then "...".
+inline std::string printable(std::string_view s, size_t max = 40) {
+    static const char* hex = "0123456789abcdef";
+    std::string out;
+    for (size_t i = 0; i < s.size() && i < max; ++i) {
+        unsigned char c = static_cast<unsigned char>(s[i]);
+        if (c >= 0x20 && c < 0x7f) {
+            out += char(c);
+        } else {
+            out += "\\x";
+            out += hex[c >> 4];
+            out += hex[c & 15];
+        }
+    }
+    if (s.size() > max) out += "...";
+    return out;
+}
+
+// Input limits (docs/errors.md): larger values are rejected before anything is allocated for them.
+inline constexpr int kMaxImageSize = 16384;     // pixels per axis (RIB Format, --res)
+inline constexpr int kMaxPixelSamples = 1024;  // samples per pixel (RIB PixelSamples x * y, --spp)
 
 // Receives `file:line: warning: message` lines; the CLI prints them to stderr.
 using WarningSink = std::function<void(const std::string&)>;

@@ -26,7 +26,10 @@ std::string extensionOf(const std::string& path) {
 // A temporary path beside the target, unique per process.
 std::string tempPathFor(const std::string& path) {
     fs::path p(path);
-    return (p.parent_path() / ("." + p.filename().string() + ".tmp" + std::to_string(getpid()))).string();
+    std::string name = ".";  // built up in steps: `"." + string` trips a g++ 12 -Wrestrict false positive
+    name += p.filename().string();
+    name += ".tmp" + std::to_string(getpid());
+    return (p.parent_path() / name).string();
 }
 
 // Runs `write(tmp)` then renames tmp over `path`; removes tmp on any failure.

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "io/diagnostics.h"
@@ -42,17 +43,17 @@ bool isNonFiniteWord(std::string s) {
 std::string describe(const Token& t) {
     switch (t.type) {
         case TokenType::Request:
-            return "request '" + t.text + "'";
+            return "request '" + printable(t.text) + "'";
         case TokenType::Number:
             return "number '" + t.text + "'";
         case TokenType::String:
-            return "string \"" + t.text + "\"";
+            return "string \"" + printable(t.text) + "\"";
         case TokenType::ArrayBegin:
             return "'['";
         case TokenType::ArrayEnd:
             return "']'";
         case TokenType::Other:
-            return "token '" + t.text + "'";
+            return "token '" + printable(t.text) + "'";
         case TokenType::End:
             return "end of file";
     }
@@ -149,14 +150,25 @@ Token RibLexer::lex() {
             // from_chars rejects a leading '+'.
             const char* first = text_.data() + start + (text_[start] == '+' ? 1 : 0);
             auto [end, ec] = std::from_chars(first, text_.data() + p, t.number);
-            if (ec != std::errc() || end != text_.data() + p || !std::isfinite(t.number))
+            // Everything downstream is single precision: larger magnitudes would become infinities.
+            if (ec != std::errc() || end != text_.data() + p || !std::isfinite(t.number) ||
+                std::fabs(t.number) > std::numeric_limits<float>::max())
                 fail(t.line, "invalid number '" + t.text + "': out of range");
             return t;
         }
     }
-    // Anything else up to the next delimiter is one opaque token.
+    // Anything else up to the next delimiter is one opaque token; control characters and bytes >= 0x7f
+    // outside strings and comments mean binary data (binary RIB, an image, a compressed file...).
     pos_ = start;
-    while (pos_ < text_.size() && !isDelimiter(text_[pos_])) ++pos_;
+    while (pos_ < text_.size() && !isDelimiter(text_[pos_])) {
+        unsigned char b = static_cast<unsigned char>(text_[pos_]);
+        if (b < 0x20 || b >= 0x7f) {
+            static const char* hex = "0123456789abcdef";
+            fail(t.line, std::string("binary data (byte 0x") + hex[b >> 4] + hex[b & 15] +
+                             "): not a RIB text file (binary RIB is not supported)");
+        }
+        ++pos_;
+    }
     t.type = TokenType::Other;
     t.text = text_.substr(start, pos_ - start);
     if (isNonFiniteWord(t.text))

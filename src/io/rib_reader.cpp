@@ -1,6 +1,7 @@
 #include "io/rib_reader.h"
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -92,7 +93,7 @@ std::optional<Decl> parseDecl(const std::string& text) {
     if (w < words.size()) {
         char* end = nullptr;
         long n = std::strtol(words[w].c_str(), &end, 10);
-        if (*end != 0 || n < 1) return std::nullopt;
+        if (*end != 0 || n < 1 || n > (1 << 20)) return std::nullopt;
         d.arraySize = static_cast<int>(n);
         ++w;
     }
@@ -167,8 +168,9 @@ class RibReader {
   public:
     RibReader(Scene& scene, const WarningSink& warn) : scene_(scene), warn_(warn) { initTables(); }
 
-    void run(const std::string& path) {
-        RibLexer lex(readInputFile(path), path);
+    void run(const std::string& path) { runText(readInputFile(path), path); }
+    void runText(std::string text, const std::string& path) {
+        RibLexer lex(std::move(text), path);
         lex_ = &lex;
         if (lex.peek().type == TokenType::End) fail(lex.eofLine(), "empty file: no RIB requests");
         parse(lex, 0);
@@ -222,6 +224,7 @@ class RibReader {
                 readArchive(r, depth);
                 continue;
             }
+            requestLine_ = r.line;
             (this->*(h->second))(r);
         }
     }
@@ -482,6 +485,12 @@ class RibReader {
         if (v[0] < 1 || v[1] < 1 || v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || !(v[2] > 0))
             fail(r.line,
                  "Format: the resolution must be positive integers and the pixel aspect ratio positive");
+        if (v[0] > kMaxImageSize || v[1] > kMaxImageSize) {
+            char res[64];
+            std::snprintf(res, sizeof res, "%.15gx%.15g", v[0], v[1]);
+            fail(r.line, std::string("Format: resolution ") + res + " exceeds the limit of " +
+                             std::to_string(kMaxImageSize) + " pixels per axis");
+        }
         scene_.camera.width = int(v[0]);
         scene_.camera.height = int(v[1]);
         scene_.camera.pixelAspect = float(v[2]);
@@ -534,6 +543,8 @@ class RibReader {
     void pixelSamples(const Request& r) {
         auto v = numbers(r, 2, "xsamples ysamples");
         if (!(v[0] > 0 && v[1] > 0)) fail(r.line, "PixelSamples must be positive");
+        if (std::max(1.0, std::round(v[0])) * std::max(1.0, std::round(v[1])) > kMaxPixelSamples)
+            fail(r.line, "PixelSamples: more than " + std::to_string(kMaxPixelSamples) + " samples per pixel");
         scene_.image.pixelSamplesX = std::max(1, int(std::lround(v[0])));
         scene_.image.pixelSamplesY = std::max(1, int(std::lround(v[1])));
     }
@@ -875,6 +886,7 @@ class RibReader {
         }
         // Bezier patches are affinely invariant: transforming the control points transforms the surface.
         for (Vec3& c : b.cp) c = ctm_.point(c);
+        checkFinite(b);
         scene_.patches.push_back(b);
         scene_.attributes.push_back(a);
     }
@@ -970,10 +982,18 @@ class RibReader {
             }
     }
 
+    // Huge coordinates or transformations can overflow single precision: reject them rather than render NaNs.
+    void checkFinite(const BezierPatch& b) const {
+        for (const Vec3& c : b.cp)
+            if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
+                fail(requestLine_, "control point out of range after transformation (overflows single precision)");
+    }
+
     // Appends a patch that is already in Bezier form (object space), ignoring the current Basis.
     void addBezier(const BezierPatch& patch, const PatchAttributes& a) {
         BezierPatch b = patch;
         for (Vec3& c : b.cp) c = ctm_.point(c);
+        checkFinite(b);
         scene_.patches.push_back(b);
         scene_.attributes.push_back(a);
     }
@@ -1022,7 +1042,12 @@ class RibReader {
         // Check the knots before the points, so that a bad knot vector is reported as such.
         try {
             NurbsSurface k = s;
-            k.cp.assign(nverts, Vec3{});
+            // Placeholders for the points "P"/"Pw" hold (params() checked their size): without them,
+            // nu * nv alone could ask for terabytes.
+            size_t given = 0;
+            for (const Param& p : ps)
+                if (p.name == "P" || p.name == "Pw") given = p.value->size() / (p.name == "P" ? 3 : 4);
+            k.cp.assign(std::min(given, nverts), Vec3{});
             validateNurbs(k);
         } catch (const NurbsError& e) {
             fail(r.line, std::string("NuPatch: ") + e.what());
@@ -1277,6 +1302,7 @@ class RibReader {
     Attributes attrs_;
     std::optional<std::string> skipUntil_;
     int framesSeen_ = 0, worldsSeen_ = 0;
+    int requestLine_ = 0;  // line of the request being executed
 };
 
 }  // namespace
@@ -1285,6 +1311,12 @@ void readRib(const std::string& path, Scene& scene, const WarningSink& warn) {
     scene.sourcePath = path;
     RibReader reader(scene, warn);
     reader.run(path);
+}
+
+void readRibText(std::string text, const std::string& path, Scene& scene, const WarningSink& warn) {
+    scene.sourcePath = path;
+    RibReader reader(scene, warn);
+    reader.runText(std::move(text), path);
 }
 
 }  // namespace tessera

@@ -14,4 +14,8 @@ namespace tessera {
 // Object ids: each Patch / PatchMesh request is one object (scene.objectCount counts them).
 void readRib(const std::string& path, Scene& scene, const WarningSink& warn);
 
+// As readRib, for RIB text already in memory (plain, not gzipped): `path` names it in errors and is the
+// base of relative ReadArchive names. Used by the fuzz targets.
+void readRibText(std::string text, const std::string& path, Scene& scene, const WarningSink& warn);
+
 }  // namespace tessera

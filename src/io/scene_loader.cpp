@@ -2,12 +2,142 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 
 #include "io/bpt_reader.h"
+#include "io/micropolis_reader.h"
+#include "io/obj_reader.h"
 #include "io/rib_lexer.h"
 #include "io/rib_reader.h"
 
 namespace tessera {
+
+namespace {
+
+std::string lowercase(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+    return s;
+}
+
+bool endsWith(const std::string& s, std::string_view suffix) {
+    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// First statement of an OBJ file: a lowercase OBJ keyword followed by a blank.
+bool looksLikeObj(const std::string& text) {
+    size_t pos = 0;
+    while (pos < text.size()) {
+        size_t eol = text.find('\n', pos);
+        if (eol == std::string::npos) eol = text.size();
+        std::string_view line(text.data() + pos, eol - pos);
+        pos = eol + 1;
+        size_t i = line.find_first_not_of(" \t\r");
+        if (i == std::string_view::npos || line[i] == '#') continue;
+        line = line.substr(i);
+        for (std::string_view k : {"v", "vt", "vn", "f", "o", "g", "s", "usemtl", "mtllib"})
+            if (line.size() > k.size() && line.substr(0, k.size()) == k &&
+                (line[k.size()] == ' ' || line[k.size()] == '\t'))
+                return true;
+        return false;
+    }
+    return false;
+}
+
+// Camera and lights for a scene without its own: the bounding box seen from the front-right and above,
+// with `up` as the vertical axis. frameSceneDefault() is the z-up case; models from polygon modellers
+// (OBJ, Big Guy) are y-up.
+void frameSceneYUp(Scene& scene, int width, int height) {
+    frameSceneDefault(scene, width, height);  // image options, clipping and the light set-up
+    Bounds3 b = scene.worldBounds();
+    if (b.empty()) return;
+    Vec3 c = b.center();
+    float radius = 0.5f * length(b.diagonal());
+    if (!(radius > 0)) radius = 1;
+    Camera& cam = scene.camera;
+    float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 1.05f;
+    Vec3 dir = normalize(Vec3{-0.45f, -0.3f, -0.84f});  // looking at the model's front (+z) from right, above
+    Vec3 eye = c - dir * dist;
+    Vec3 up{0, 1, 0};
+    // Camera space is left-handed (x right, y up, z forward): x = z x up keeps the picture unmirrored.
+    Vec3 zc = dir;
+    Vec3 xc = normalize(cross(zc, up));
+    Vec3 yc = cross(xc, zc);
+    Mat4 m;
+    const Vec3 axes[3] = {xc, yc, zc};
+    for (int r = 0; r < 3; ++r) {
+        m.m[r][0] = axes[r].x;
+        m.m[r][1] = axes[r].y;
+        m.m[r][2] = axes[r].z;
+        m.m[r][3] = -dot(axes[r], eye);
+    }
+    cam.cameraFromWorld = m;
+    cam.nearClip = dist * 1e-3f;
+    cam.farClip = dist * 100.f;
+    scene.lights.clear();
+    scene.lights.push_back({LightType::Ambient, {0.08f, 0.08f, 0.08f}, {}, {}});
+    scene.lights.push_back(
+        {LightType::Distant, {0.9f, 0.88f, 0.85f}, eye + xc * dist * -0.6f + yc * dist * 0.8f, c});
+    scene.lights.push_back({LightType::Distant, {0.25f, 0.27f, 0.3f}, eye + xc * dist, c});
+}
+
+// Patches without a scene around them: one object, one plastic material, a synthesised camera.
+Scene patchScene(const std::string& path, std::vector<BezierPatch> patches, bool yUp) {
+    Scene scene;
+    scene.sourcePath = path;
+    scene.patches = std::move(patches);
+    scene.materials.push_back(defaultMaterial(MaterialType::Plastic));
+    scene.attributes.assign(scene.patches.size(), PatchAttributes{});
+    scene.objectCount = 1;
+    if (yUp)
+        frameSceneYUp(scene, 800, 600);
+    else
+        frameSceneDefault(scene, 800, 600);
+    return scene;
+}
+
+}  // namespace
+
+std::optional<SceneFormat> parseSceneFormat(std::string_view name) {
+    std::string n = lowercase(std::string(name));
+    if (n == "auto") return SceneFormat::Auto;
+    if (n == "rib") return SceneFormat::Rib;
+    if (n == "bpt") return SceneFormat::Bpt;
+    if (n == "obj") return SceneFormat::Obj;
+    if (n == "micropolis") return SceneFormat::Micropolis;
+    return std::nullopt;
+}
+
+const char* sceneFormatName(SceneFormat format) {
+    switch (format) {
+        case SceneFormat::Auto: return "auto";
+        case SceneFormat::Rib: return "rib";
+        case SceneFormat::Bpt: return "bpt";
+        case SceneFormat::Obj: return "obj";
+        case SceneFormat::Micropolis: return "micropolis";
+    }
+    return "auto";
+}
+
+SceneFormat detectSceneFormat(const std::string& path) {
+    std::string lower = lowercase(path);
+    if (endsWith(lower, ".bpt")) return SceneFormat::Bpt;
+    if (endsWith(lower, ".obj")) return SceneFormat::Obj;
+    if (endsWith(lower, ".rib") || endsWith(lower, ".rib.gz") || endsWith(lower, ".gz")) return SceneFormat::Rib;
+    if (endsWith(lower, ".mscene"))
+        throw InputError(path, 0,
+                         "binary Micropolis .mscene scenes (Cap'n Proto) are not supported; use the text "
+                         "indexed-vertex files or the RIB/NURBS form of the model");
+    // Unknown or no extension: look at the content.
+    std::string text;
+    try {
+        text = readInputFile(path);
+    } catch (const InputError&) {
+        return SceneFormat::Rib;  // the RIB reader reports the unreadable file
+    }
+    if (looksLikeMicropolis(text)) return SceneFormat::Micropolis;
+    if (looksLikeObj(text)) return SceneFormat::Obj;
+    return SceneFormat::Rib;
+}
 
 Scene loadRib(const std::string& path, const WarningSink& warn) {
     Scene scene;
@@ -16,29 +146,34 @@ Scene loadRib(const std::string& path, const WarningSink& warn) {
 }
 
 Scene loadBpt(const std::string& path, const WarningSink& /*warn*/) {
-    Scene scene;
-    scene.sourcePath = path;
-    scene.patches = parseBpt(readInputFile(path), path);
     // A .bpt file is one object with one material; the camera and lights are synthesised.
-    scene.materials.push_back(defaultMaterial(MaterialType::Plastic));
-    scene.attributes.assign(scene.patches.size(), PatchAttributes{});
-    scene.objectCount = 1;
-    frameSceneDefault(scene, 800, 600);
-    return scene;
+    return patchScene(path, parseBpt(readInputFile(path), path), false);
 }
 
-Scene loadScene(const std::string& path, const WarningSink& warn) {
-    std::string lower = path;
-    std::transform(lower.begin(), lower.end(), lower.begin(),
-                   [](unsigned char c) { return std::tolower(c); });
-    auto endsWith = [&](const char* s) {
-        std::string_view suffix(s);
-        return lower.size() >= suffix.size() &&
-               lower.compare(lower.size() - suffix.size(), suffix.size(), suffix) == 0;
-    };
-    if (endsWith(".bpt")) return loadBpt(path, warn);
-    // Everything else is read as RIB; the RIB reader itself inflates gzip input by its magic bytes.
-    return loadRib(path, warn);
+Scene loadObj(const std::string& path, const WarningSink& warn) {
+    return patchScene(path, objToPatches(readInputFile(path), path, warn), true);
+}
+
+Scene loadMicropolis(const std::string& path, const WarningSink& /*warn*/) {
+    std::vector<BezierPatch> patches = parseMicropolis(readInputFile(path), path);
+    // The teapot is z-up (its longest axis is x); Big Guy is y-up and tallest along y.
+    Bounds3 b;
+    for (const BezierPatch& p : patches) b.extend(hullBounds(p));
+    Vec3 d = b.diagonal();
+    bool yUp = d.y >= d.x && d.y >= d.z;
+    return patchScene(path, std::move(patches), yUp);
+}
+
+Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format) {
+    if (format == SceneFormat::Auto) format = detectSceneFormat(path);
+    switch (format) {
+        case SceneFormat::Bpt: return loadBpt(path, warn);
+        case SceneFormat::Obj: return loadObj(path, warn);
+        case SceneFormat::Micropolis: return loadMicropolis(path, warn);
+        default:
+            // The RIB reader itself inflates gzip input by its magic bytes.
+            return loadRib(path, warn);
+    }
 }
 
 }  // namespace tessera

@@ -87,9 +87,10 @@ struct Builder {
         } else {
             if (n <= uint32_t(maxLeaf) && leafCost <= splitCost) return makeLeaf();
             const float lo = cbox.lo[axis], scale = kBins / (cbox.hi[axis] - lo);
-            auto it = std::stable_partition(bvh.prims.begin() + begin, bvh.prims.begin() + end, [&](uint32_t p) {
-                return std::min(kBins - 1, int((centroid[p][axis] - lo) * scale)) <= bestSplit;
-            });
+            auto it =
+                std::stable_partition(bvh.prims.begin() + begin, bvh.prims.begin() + end, [&](uint32_t p) {
+                    return std::min(kBins - 1, int((centroid[p][axis] - lo) * scale)) <= bestSplit;
+                });
             mid = uint32_t(it - bvh.prims.begin());
             if (mid == begin || mid == end) mid = begin + n / 2;
         }

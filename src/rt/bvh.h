@@ -11,10 +11,10 @@
 namespace tessera {
 
 struct BvhNode {
-    Bounds3 box;           // 24 bytes
-    uint32_t offset = 0;   // interior: index of the right child; leaf: first entry in Bvh::prims
-    uint16_t count = 0;    // leaf: number of patches (> 0); interior: 0
-    uint16_t axis = 0;     // interior: split axis (visit order by the ray's direction sign)
+    Bounds3 box;          // 24 bytes
+    uint32_t offset = 0;  // interior: index of the right child; leaf: first entry in Bvh::prims
+    uint16_t count = 0;   // leaf: number of patches (> 0); interior: 0
+    uint16_t axis = 0;    // interior: split axis (visit order by the ray's direction sign)
 };
 static_assert(sizeof(BvhNode) == 32);
 

@@ -15,7 +15,9 @@ namespace tessera {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+double msSince(Clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
 
 enum Kind : uint8_t { kPrimary = 0, kShadow = 1, kReflection = 2, kRefraction = 3, kKinds = 4 };
 const char* const kKindNames[kKinds] = {"primary", "shadow", "reflection", "refraction"};
@@ -36,7 +38,8 @@ struct RayList {
         o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
         kind.clear(), depth.clear();
     }
-    void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k, uint8_t dep) {
+    void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k,
+              uint8_t dep) {
         o.push_back(o_), d.push_back(d_), tmin.push_back(t0), tmax.push_back(t1), owner.push_back(own);
         weight.push_back(w), ignore.push_back(ign), kind.push_back(k), depth.push_back(dep);
     }
@@ -177,11 +180,13 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 
 // Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
 // sorted candidates; candidates whose box starts beyond the best hit so far cannot win and are skipped).
-void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, std::vector<RayHit>& hits,
-                bool cull) {
+void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks,
+                std::vector<RayHit>& hits, bool cull) {
     const size_t n = rays.size();
     const size_t nChunks = (n + kChunk - 1) / kChunk;
     hits.assign(n, RayHit());
+    float hu, hv;
+    leafHalfSize(acc.forest.depth, hu, hv);
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         Chunk& ch = chunks[ci];
         const size_t r0 = ci * kChunk;
@@ -199,10 +204,12 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 if (c.tEnter > ray.tmax) break;
                 NewtonParams prm{newtonTolerance(acc.forest.tree(c.patch)[0], ray.o)};
                 PatchHit h;
-                bool ok = newtonSolve<float>(acc.patches[c.patch], pl, ray, c.u0, c.v0, prm, h);
-                ++ch.c.newtonRuns;
-                ch.c.newtonIterations += uint32_t(h.iterations);
-                ++ch.c.hist[std::min(h.iterations, kHistBins - 1)];
+                uint32_t runs = 0, iters = 0;
+                bool ok =
+                    solveLeaf<float>(acc.patches[c.patch], pl, ray, c.u0, c.v0, hu, hv, prm, h, runs, iters);
+                ch.c.newtonRuns += runs;
+                ch.c.newtonIterations += iters;
+                ++ch.c.hist[std::min(int(iters), kHistBins - 1)];
                 if (ok && h.t < ray.tmax && acceptHit(acc, ray, opt, c.patch, h)) {
                     best.hit = true;
                     best.patch = c.patch;
@@ -350,8 +357,8 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
             ws.next.push(ws.secO[2 * r], ws.secD[2 * r], 0.f, std::numeric_limits<float>::infinity(), s,
                          ws.secW[2 * r], ws.hits[r].patch, kReflection, uint8_t(rays.depth[r] + 1));
         if (f & 2)
-            ws.next.push(ws.secO[2 * r + 1], ws.secD[2 * r + 1], 0.f, std::numeric_limits<float>::infinity(), s,
-                         ws.secW[2 * r + 1], ws.hits[r].patch, kRefraction, uint8_t(rays.depth[r] + 1));
+            ws.next.push(ws.secO[2 * r + 1], ws.secD[2 * r + 1], 0.f, std::numeric_limits<float>::infinity(),
+                         s, ws.secW[2 * r + 1], ws.hits[r].patch, kRefraction, uint8_t(rays.depth[r] + 1));
     }
     ws.c.shadeMs += msSince(ts);
 }
@@ -369,7 +376,8 @@ Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
     return acc.flip[patch] ? -N : N;
 }
 
-bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint32_t patch, const PatchHit& h) {
+bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint32_t patch,
+               const PatchHit& h) {
     if (patch == opt.ignorePatch && h.t < opt.ignoreT) return false;
     if (opt.respectSides && !acc.twoSided[patch]) {
         Vec3 N = cross(h.dpdu, h.dpdv);
@@ -379,7 +387,9 @@ bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint
     return true;
 }
 
-Vec3 reflectDir(Vec3 I, Vec3 N) { return normalize(I - N * (2.f * dot(I, N))); }
+Vec3 reflectDir(Vec3 I, Vec3 N) {
+    return normalize(I - N * (2.f * dot(I, N)));
+}
 
 bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F) {
     float cosi = -dot(I, N);
@@ -404,7 +414,8 @@ bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F) {
     return true;
 }
 
-void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin, RtAccel& acc) {
+void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
+                  RtAccel& acc) {
     const size_t n = scene.patches.size();
     acc.patches.resize(n);
     acc.flip.resize(n);
@@ -457,7 +468,8 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
             PatchHit h;
             const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(patch) : nullptr;
             auto accept = [&](const PatchHit& ph) { return acceptHit(acc, r, opt, patch, ph); };
-            if (intersectPatch<float>(acc.patches[patch], acc.forest, patch, r, h, back, nullptr, nullptr, accept)) {
+            if (intersectPatch<float>(acc.patches[patch], acc.forest, patch, r, h, back, nullptr, nullptr,
+                                      accept)) {
                 out.hit = true;
                 out.patch = patch;
                 out.h = h;
@@ -467,6 +479,16 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
         }
     }
     return out.hit;
+}
+
+void traceBatch(const RtAccel& acc, std::span<const Ray> rays, const TraceOptions& opt,
+                std::vector<RayHit>& hits) {
+    Workspace ws;
+    const uint8_t kind = opt.anyHit                                ? kShadow
+                         : (opt.respectSides || opt.cullBackfaces) ? kPrimary
+                                                                   : kReflection;
+    for (const Ray& r : rays) ws.rays.push(r.o, r.d, r.tmin, r.tmax, 0, {1, 1, 1}, opt.ignorePatch, kind, 0);
+    traceList(acc, ws.rays, ws, hits, opt.cullBackfaces);
 }
 
 RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
@@ -523,11 +545,11 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
             const float x = float(ws.tile.sx[i]) / kSubpixelScale, y = float(ws.tile.sy[i]) / kSubpixelScale;
             const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
             if (proj.perspective)
-                ws.rays.push({0, 0, 0}, {cx, cy, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1}, kNone,
-                             kPrimary, 0);
+                ws.rays.push({0, 0, 0}, {cx, cy, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1},
+                             kNone, kPrimary, 0);
             else
-                ws.rays.push({cx, cy, 0}, {0, 0, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1}, kNone,
-                             kPrimary, 0);
+                ws.rays.push({cx, cy, 0}, {0, 0, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1},
+                             kNone, kPrimary, 0);
         }
         ws.c.shadeMs += msSince(ts);
         while (ws.rays.size() > 0) {
@@ -550,19 +572,22 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     std::atomic<int> nextTile{0}, doneTiles{0};
     std::atomic<bool> cancelled{false};
     const int workers = tbb::this_task_arena::max_concurrency();
-    tbb::parallel_for(0, workers, [&](int) {
-        for (;;) {
-            if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) {
-                cancelled = true;
-                break;
+    tbb::parallel_for(
+        0, workers,
+        [&](int) {
+            for (;;) {
+                if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) {
+                    cancelled = true;
+                    break;
+                }
+                int b = nextTile.fetch_add(1);
+                if (b >= nb) break;
+                renderTile(b);
+                int done = ++doneTiles;
+                if (settings.progress) settings.progress(done, nb);
             }
-            int b = nextTile.fetch_add(1);
-            if (b >= nb) break;
-            renderTile(b);
-            int done = ++doneTiles;
-            if (settings.progress) settings.progress(done, nb);
-        }
-    }, tbb::static_partitioner());
+        },
+        tbb::static_partitioner());
     const double traceMs = msSince(tTrace);
     cleanup();
 

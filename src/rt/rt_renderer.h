@@ -5,6 +5,7 @@
 // (traceRayScalar) is kept as the reference for tests.
 #pragma once
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "render/render.h"
@@ -28,12 +29,13 @@ struct RtAccel {
 
 // Transform the patches by `toSpace` and build both levels. `cullFromOrigin` also marks subpatches that
 // face away from the origin (the eye, in camera space) for --cull-backfaces.
-void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin, RtAccel& acc);
+void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
+                  RtAccel& acc);
 
 struct TraceOptions {
-    bool anyHit = false;        // shadow rays: stop at the first hit
-    bool respectSides = false;  // one-sided patches are invisible from behind (camera rays)
-    bool cullBackfaces = false; // skip subpatches marked back-facing (camera rays, --cull-backfaces)
+    bool anyHit = false;                // shadow rays: stop at the first hit
+    bool respectSides = false;          // one-sided patches are invisible from behind (camera rays)
+    bool cullBackfaces = false;         // skip subpatches marked back-facing (camera rays, --cull-backfaces)
     uint32_t ignorePatch = UINT32_MAX;  // reject hits on this patch with t < ignoreT (self-intersection)
     float ignoreT = 0.f;
 };
@@ -51,13 +53,19 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
 Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h);
 
 // Whether a hit is acceptable under the options (sides, self-intersection).
-bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint32_t patch, const PatchHit& h);
+bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint32_t patch,
+               const PatchHit& h);
 
 // Secondary directions. I: unit incident direction, N: unit normal (either side).
 Vec3 reflectDir(Vec3 I, Vec3 N);
 // Refraction through a surface of relative index eta (outside 1, inside eta; N points outside).
 // Returns false on total internal reflection; F receives the Fresnel reflectance.
 bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F);
+
+// The wavefront path (the renderer's traversal and Newton stages) over a batch of rays, serially in
+// the caller's thread: the same answers as traceRayScalar, for tests and tools.
+void traceBatch(const RtAccel& acc, std::span<const Ray> rays, const TraceOptions& opt,
+                std::vector<RayHit>& hits);
 
 RenderResult renderRt(const Scene& scene, const RenderSettings& settings);
 

@@ -93,13 +93,14 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
         subpatchLeafRect(depth, l, u0, u1, v0, v1);
         f.leafCentre[l] = {0.5f * (u0 + u1), 0.5f * (v0 + v1)};
     }
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) {
-            uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
-            float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
-            buildNode(patches[i], 0, depth, 0, f.boxes.data() + i * f.nodesPerPatch, back, sign);
-        }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i != r.end(); ++i) {
+                uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
+                float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
+                buildNode(patches[i], 0, depth, 0, f.boxes.data() + i * f.nodesPerPatch, back, sign);
+            }
+        });
 }
 
 }  // namespace tessera

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets (clang, -fsanitize=fuzzer,address,undefined) into build-fuzz/ and runs each
+# for a fixed time from the seed corpus (fuzz/corpus/<target>, plus the shipped scenes). A crash, leak,
+# sanitizer report, timeout or out-of-memory fails the script; the input is left in
+# build-fuzz/artifacts/<target>/: fix the bug, then keep the input in fuzz/regressions/<target>/.
+# Usage: bash scripts/ci_fuzz.sh [seconds per target (default 45)] [targets... (default: all)]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+SECONDS_PER_TARGET=${1:-45}
+shift || true
+
+# Debian packages (only the missing ones): the build's own plus clang and its libFuzzer runtime.
+PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
+          libfmt-dev nlohmann-json3-dev clang libclang-rt-14-dev)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "Installing missing packages: ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+TARGETS=("$@")
+if ((${#TARGETS[@]} == 0)); then
+  TARGETS=(rib bpt)
+  [ -f src/io/obj_reader.h ] && TARGETS+=(obj)
+fi
+
+B=build-fuzz
+cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTESSERA_FUZZ=ON \
+  -DTESSERA_TESTS=OFF -DTESSERA_BENCH=OFF >/dev/null
+cmake --build $B -j"$(nproc)" --target "${TARGETS[@]/#/fuzz_}"
+
+status=0
+for t in "${TARGETS[@]}"; do
+  work=$B/corpus/$t        # grows across runs; the seeds stay in fuzz/corpus/<t>
+  seeds=$B/seeds/$t        # the shipped scenes and shared models, when present
+  art=$B/artifacts/$t
+  mkdir -p "$work" "$seeds" "$art" $B/run
+  case $t in
+    rib) cp scenes/*.rib "$seeds"/ 2>/dev/null || true
+         find ../shared/data -name '*.rib' -size -16k -exec cp {} "$seeds"/ \; 2>/dev/null || true ;;
+    bpt) find ../shared/data -name '*.bpt' -size -16k -exec cp {} "$seeds"/ \; 2>/dev/null || true ;;
+    obj) find ../shared/data -name '*.obj' -size -16k -exec cp {} "$seeds"/ \; 2>/dev/null || true ;;
+  esac
+  dict=()
+  [ -f fuzz/$t.dict ] && dict=(-dict="$ROOT/fuzz/$t.dict")
+  echo "--- fuzz_$t: ${SECONDS_PER_TARGET} s"
+  log=$B/fuzz_$t.log
+  # Run in a scratch directory: relative ReadArchive names resolve there.
+  if (cd $B/run && "$ROOT/$B/fuzz_$t" -max_total_time="$SECONDS_PER_TARGET" -max_len=16384 -timeout=5 \
+        -rss_limit_mb=2048 -malloc_limit_mb=1024 -print_final_stats=1 -artifact_prefix="$ROOT/$art/" \
+        "${dict[@]}" "$ROOT/$work" "$ROOT/fuzz/corpus/$t" "$ROOT/$seeds") >"$log" 2>&1; then
+    execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
+    cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 || true)
+    echo "fuzz_$t: ok, $execs executions, $cov, corpus $(ls "$work" | wc -l) inputs"
+  else
+    status=1
+    echo "fuzz_$t: FAILED (log: $log); inputs:"
+    ls -1 "$art"
+    grep -E "ERROR|runtime error|invariant|Test unit written" "$log" | head -20 || true
+  fi
+done
+exit $status

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Builds Tessera with AddressSanitizer and UndefinedBehaviorSanitizer (g++) into build-asan/ and runs the
+# whole test suite there; any sanitizer report fails the test that triggered it.
+# Usage: bash scripts/ci_sanitize.sh [extra ctest args...]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# Debian packages (only the missing ones), as scripts/build.sh.
+PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
+          libfmt-dev nlohmann-json3-dev libgtest-dev libgmock-dev)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "Installing missing packages: ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+B=build-asan
+# -O1: fast enough to run the renders, still readable stacks. float-cast-overflow is not part of
+# g++'s "undefined": out-of-range float -> int conversions are exactly what huge inputs cause.
+cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
+  -DTESSERA_SANITIZE=address,undefined,float-cast-overflow -DTESSERA_BENCH=OFF >/dev/null
+cmake --build $B -j"$(nproc)"
+
+export ASAN_OPTIONS=abort_on_error=1:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1
+export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+ctest --test-dir $B --output-on-failure -j"$(nproc)" --timeout 900 "$@"

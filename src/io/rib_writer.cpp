@@ -1,0 +1,194 @@
+#include "io/rib_writer.h"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <charconv>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+namespace tessera {
+
+namespace {
+
+// Shortest text that reads back to exactly the same float.
+std::string num(float v) {
+    if (v == 0) return "0";  // also turns -0 into 0
+    char buf[32];
+    auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, ec == std::errc() ? end : buf);
+}
+std::string num(double v) {
+    char buf[40];
+    auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, ec == std::errc() ? end : buf);
+}
+std::string triple(Vec3 v) { return num(v.x) + " " + num(v.y) + " " + num(v.z); }
+
+// RIB string literal (RI spec 3.2, appendix C.1): backslash-escape quotes, backslashes and newlines.
+std::string quoted(const std::string& s) {
+    std::string out = "\"";
+    for (char c : s) {
+        if (c == '"' || c == '\\')
+            out += '\\', out += c;
+        else if (c == '\n')
+            out += "\\n";
+        else
+            out += c;
+    }
+    return out + "\"";
+}
+
+const char* filterName(FilterType f) {
+    switch (f) {
+        case FilterType::Box: return "box";
+        case FilterType::Triangle: return "triangle";
+        case FilterType::CatmullRom: return "catmull-rom";
+        case FilterType::Gaussian:
+        default: return "gaussian";
+    }
+}
+
+void writeSurface(std::ostream& o, const Material& m) {
+    o << "Color [" << triple(m.Cs) << "]\n";
+    o << "Opacity [" << triple(m.Os) << "]\n";
+    switch (m.type) {
+        case MaterialType::Matte:
+            o << "Surface \"matte\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "]\n";
+            break;
+        case MaterialType::Metal:
+            o << "Surface \"metal\" \"Ka\" [" << num(m.Ka) << "] \"Ks\" [" << num(m.Ks) << "] \"roughness\" ["
+              << num(m.roughness) << "]\n";
+            break;
+        case MaterialType::Constant:
+            o << "Surface \"constant\"\n";
+            break;
+        case MaterialType::Mirror:
+            o << "Surface \"mirror\" \"Kr\" [" << num(m.Kr) << "]\n";
+            break;
+        case MaterialType::Glass:
+            o << "Surface \"glass\" \"Kr\" [" << num(m.Kr) << "] \"Kt\" [" << num(m.Kt) << "] \"eta\" ["
+              << num(m.eta) << "]\n";
+            break;
+        case MaterialType::Plastic:
+        default:
+            o << "Surface \"plastic\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" ["
+              << num(m.Ks) << "] \"roughness\" [" << num(m.roughness) << "] \"specularcolor\" ["
+              << triple(m.specularColor) << "]\n";
+            break;
+    }
+}
+
+}  // namespace
+
+void writeRib(const Scene& scene, std::ostream& o) {
+    const Camera& cam = scene.camera;
+    o << "##RenderMan RIB\n";
+    o << "# Written by tessera: " << scene.patches.size() << " bicubic Bezier patches";
+    if (!scene.sourcePath.empty()) {
+        std::string src = scene.sourcePath;
+        for (char& c : src)
+            if (c == '\n' || c == '\r') c = ' ';
+        o << " converted from " << src;
+    }
+    o << "\nversion 3.04\n";
+    o << "Format " << cam.width << " " << cam.height << " " << num(cam.pixelAspect) << "\n";
+    if (cam.frameAspect > 0) o << "FrameAspectRatio " << num(cam.frameAspect) << "\n";
+    if (cam.hasScreenWindow)
+        o << "ScreenWindow " << num(cam.screenWindow[0]) << " " << num(cam.screenWindow[1]) << " "
+          << num(cam.screenWindow[2]) << " " << num(cam.screenWindow[3]) << "\n";
+    o << "Clipping " << num(cam.nearClip) << " " << num(cam.farClip) << "\n";
+    const ImageOptions& img = scene.image;
+    o << "PixelSamples " << img.pixelSamplesX << " " << img.pixelSamplesY << "\n";
+    o << "PixelFilter \"" << filterName(img.filter) << "\" " << num(img.filterWidthX) << " "
+      << num(img.filterWidthY) << "\n";
+    if (img.srgbOutput && img.exposureGamma == 1.f && img.exposureGain == 1.f)
+        o << "# The source had no image options; display gamma 2.2 approximates its sRGB output.\n"
+          << "Exposure 1 2.2\n";
+    else
+        o << "Exposure " << num(img.exposureGain) << " " << num(img.exposureGamma) << "\n";
+    if (!img.displayName.empty()) o << "Display " << quoted(img.displayName) << " \"file\" \"rgba\"\n";
+    if (cam.perspective)
+        o << "Projection \"perspective\" \"fov\" [" << num(cam.fovDegrees) << "]\n";
+    else
+        o << "Projection \"orthographic\"\n";
+    // RIB matrices are row-major for row vectors: element [i*4+j] is our m[j][i].
+    o << "Transform [";
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) o << (i || j ? " " : "") << num(cam.cameraFromWorld.m[j][i]);
+    o << "]\n";
+    o << "WorldBegin\n";
+    int handle = 1;
+    for (const Light& l : scene.lights) {
+        switch (l.type) {
+            case LightType::Ambient:
+                o << "LightSource \"ambientlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
+                  << triple(l.color) << "]\n";
+                break;
+            case LightType::Distant:
+                o << "LightSource \"distantlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
+                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to) << "]\n";
+                break;
+            case LightType::Point:
+                o << "LightSource \"pointlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
+                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "]\n";
+                break;
+        }
+    }
+    // RI spec 4.2.4: our reader flips a patch when Orientation disagrees with the handedness of the
+    // object-to-camera transform; in this world block that transform is cameraFromWorld.
+    const bool mirrored = cam.cameraFromWorld.det3() < 0;
+    const PatchAttributes defaults{};
+    size_t i = 0;
+    while (i < scene.patches.size()) {
+        const PatchAttributes& a = i < scene.attributes.size() ? scene.attributes[i] : defaults;
+        o << "AttributeBegin\n";
+        if (a.material < scene.materials.size()) writeSurface(o, scene.materials[a.material]);
+        o << "ShadingRate " << num(a.shadingRate) << "\n";
+        o << "Sides " << (a.twoSided ? 2 : 1) << "\n";
+        o << "Orientation \"" << ((a.flipNormal != mirrored) ? "rh" : "lh") << "\"\n";
+        // One block per run of patches with the same attributes.
+        for (; i < scene.patches.size(); ++i) {
+            const PatchAttributes& b = i < scene.attributes.size() ? scene.attributes[i] : defaults;
+            if (b.material != a.material || b.object != a.object || b.shadingRate != a.shadingRate ||
+                b.twoSided != a.twoSided || b.flipNormal != a.flipNormal)
+                break;
+            o << "Patch \"bicubic\" \"P\" [";
+            const BezierPatch& p = scene.patches[i];
+            for (int k = 0; k < 16; ++k) o << (k ? " " : "") << triple(p.cp[k]);
+            o << "]\n";
+        }
+        o << "AttributeEnd\n";
+    }
+    o << "WorldEnd\n";
+}
+
+void writeRib(const Scene& scene, const std::string& path) {
+    namespace fs = std::filesystem;
+    fs::path target(path);
+    fs::path tmp = target;
+    tmp += ".tmp" + std::to_string(::getpid());
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (!out) throw std::runtime_error(path + ": error: cannot create " + tmp.string() + ": " + std::strerror(errno));
+        writeRib(scene, out);
+        out.flush();
+        if (!out) {
+            out.close();
+            std::error_code ec;
+            fs::remove(tmp, ec);
+            throw std::runtime_error(path + ": error: writing failed (disk full?)");
+        }
+    }
+    std::error_code ec;
+    fs::rename(tmp, target, ec);
+    if (ec) {
+        std::error_code ignored;
+        fs::remove(tmp, ignored);
+        throw std::runtime_error(path + ": error: cannot rename the temporary file into place: " + ec.message());
+    }
+}
+
+}  // namespace tessera
