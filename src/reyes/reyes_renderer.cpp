@@ -55,7 +55,9 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
         for (int k = 0; k < 16; ++k) patches[i].cp[k] = cam.cameraFromWorld.point(scene.patches[i].cp[k]);
     });
     // Shared edges must be bit-identical for crack-free dicing: weld what matches only up to rounding.
+    const auto tWeld = Clock::now();
     const WeldResult weld = weldSharedEdges(patches, defaultWeldTolerance(patches));
+    const double weldMs = msSince(tWeld);
     std::vector<ShadingLight> lights;
     for (const Light& l : scene.lights) lights.push_back(prepareLight(l, cam.cameraFromWorld));
 
@@ -200,7 +202,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     s["sample_tests"] = total.sampleTests;
     s["buckets"] = nb;
     s["bucket_size"] = bs;
-    s["stage_ms"] = {{"split", splitMs},
+    s["stage_ms"] = {{"weld", weldMs},
+                     {"split", splitMs},
                      {"buckets_wall", bucketMs},
                      {"dice_shade_cpu", total.diceMs},
                      {"sample_cpu", total.sampleMs},

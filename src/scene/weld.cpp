@@ -50,6 +50,7 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
     };
     // 1. Corners: the first corner seen in a cell (or a neighbouring cell) is the representative.
     std::unordered_map<CellKey, std::vector<Vec3>, CellHash> reps;
+    reps.reserve(patches.size() * 2);
     static const int kCorners[4] = {0, 3, 12, 15};
     for (auto& patch : patches) {
         for (int c : kCorners) {
@@ -57,17 +58,21 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
             if (!isFinite(p)) continue;
             CellKey k = keyOf(p);
             const Vec3* found = nullptr;
+            auto search = [&](CellKey cellKey) {
+                auto it = reps.find(cellKey);
+                if (it == reps.end()) return;
+                for (const Vec3& r : it->second)
+                    if (near(r, p, tol)) {
+                        found = &r;
+                        return;
+                    }
+            };
+            // The point's own cell first (the common case), then the 26 neighbours.
+            search(k);
             for (int64_t dx = -1; dx <= 1 && !found; ++dx)
                 for (int64_t dy = -1; dy <= 1 && !found; ++dy)
-                    for (int64_t dz = -1; dz <= 1 && !found; ++dz) {
-                        auto it = reps.find({k.x + dx, k.y + dy, k.z + dz});
-                        if (it == reps.end()) continue;
-                        for (const Vec3& r : it->second)
-                            if (near(r, p, tol)) {
-                                found = &r;
-                                break;
-                            }
-                    }
+                    for (int64_t dz = -1; dz <= 1 && !found; ++dz)
+                        if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
             if (found) {
                 if (!(*found == p)) {
                     p = *found;
@@ -95,6 +100,7 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
         return a.z < b.z;
     };
     std::unordered_map<std::pair<CellKey, CellKey>, std::vector<EdgeRef>, PairHash> edges;
+    edges.reserve(patches.size() * 3);
     for (uint32_t pi = 0; pi < patches.size(); ++pi) {
         for (int e = 0; e < 4; ++e) {
             BezierPatch& patch = patches[pi];
