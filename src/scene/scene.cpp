@@ -27,8 +27,9 @@ void frameSceneDefault(Scene& scene, int width, int height) {
     Vec3 eye = c - dir * dist;
     Vec3 up{0, 0, 1};
     Vec3 zc = dir;                          // camera +z: into the screen
-    Vec3 xc = normalize(cross(up, zc));     // left-handed camera: x right
-    Vec3 yc = cross(zc, xc);
+    // Right-handed world to left-handed camera: right = forward x up, up = right x forward.
+    Vec3 xc = normalize(cross(zc, up));
+    Vec3 yc = cross(xc, zc);
     Mat4 m;
     const Vec3 axes[3] = {xc, yc, zc};
     for (int r = 0; r < 3; ++r) {

@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""Writes the multi-object benchmark scenes of scenes/ (run from the repository root):
+killeroo2.rib (2 killeroos), bigguy9.rib / bigguy24.rib (3x3 and 6x4 grids of the 3570-patch Big Guy) and
+bigguy_box.rib (Big Guy in a five-walled box, for the lighting work to come)."""
+import math
+
+def normalize(v):
+    l = math.sqrt(sum(c * c for c in v))
+    return [c / l for c in v]
+
+def cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+def look_at(eye, target, up):
+    """RIB Transform (row vectors) for a left-handed camera at eye looking at target in a right-handed world."""
+    z = normalize([t - e for t, e in zip(target, eye)])
+    x = normalize(cross(z, up))   # right = forward x up
+    y = cross(x, z)               # up = right x forward
+    rows = [x, y, z]
+    t = [-sum(r[i] * eye[i] for i in range(3)) for r in rows]
+    # Column-vector matrix A has rows x, y, z; the RIB array is A transposed, written row by row.
+    m = [[rows[j][i] for j in range(3)] + [0] for i in range(3)] + [t + [1]]
+    return "Transform [ " + " ".join(f"{v:.6g}" for row in m for v in row) + " ]"
+
+HEADER = """##RenderMan RIB
+# Tessera benchmark scene written by scripts/make_scenes.py: {what}
+version 3.04
+Display "{name}.png" "file" "rgba"
+Format {w} {h} 1
+PixelSamples 4 4
+ShadingRate 1
+Projection "perspective" "fov" [ {fov} ]
+{xform}
+Clipping {near} {far}
+WorldBegin
+"""
+
+def write(name, what, w, h, fov, eye, target, up, near, far, body):
+    with open(f"scenes/{name}.rib", "w") as f:
+        f.write(HEADER.format(what=what, name=name, w=w, h=h, fov=fov, xform=look_at(eye, target, up),
+                              near=near, far=far))
+        f.write(body)
+        f.write("WorldEnd\n")
+
+LIGHTS_Y_UP = """LightSource "ambientlight" 1 "intensity" [ 0.06 ]
+LightSource "distantlight" 2 "intensity" [ 0.95 ] "from" [ 8 14 12 ] "to" [ 0 0 0 ]
+LightSource "distantlight" 3 "intensity" [ 0.3 ] "lightcolor" [ 0.8 0.88 1 ] "from" [ -14 2 6 ] "to" [ 0 0 0 ]
+"""
+
+def bigguy_grid(name, cols, rows):
+    body = LIGHTS_Y_UP + 'Surface "plastic" "Ka" [ 1 ] "Kd" [ 0.8 ] "Ks" [ 0.35 ] "roughness" [ 0.15 ]\n'
+    sx, sz = 6.5, 6.5
+    for r in range(rows):
+        for c in range(cols):
+            x, z = (c - (cols - 1) / 2) * sx, (r - (rows - 1) / 2) * sz
+            hue = (0.55 + 0.3 * ((r * cols + c) % 3) / 2, 0.6, 0.5 + 0.2 * (c % 2))
+            body += (f"AttributeBegin\nTranslate {x:g} 0 {z:g}\nColor [ {hue[0]:.3g} {hue[1]:.3g} {hue[2]:.3g} ]\n"
+                     'ReadArchive "bigguy_patches.rib"\nAttributeEnd\n')
+    extent = max(cols * sx, rows * sz)
+    eye = [0.3 * extent, 0.45 * extent, 1.3 * extent]
+    write(name, f"{cols * rows} Big Guys ({cols * rows * 3570} bicubic patches) on a {cols}x{rows} grid",
+          1024, 768, 42, eye, [0, -1, 0], [0, 1, 0], 0.5, 1000, body)
+
+def killeroo2():
+    body = """LightSource "ambientlight" 1 "intensity" [ 0.04 ]
+LightSource "distantlight" 2 "intensity" [ 1.1 ] "from" [ -10 -5 8 ] "to" [ 0 0 0 ]
+LightSource "distantlight" 3 "intensity" [ 0.2 ] "lightcolor" [ 0.85 0.9 1 ] "from" [ -8 12 -2 ] "to" [ 0 0 0 ]
+Surface "matte" "Ka" [ 1 ] "Kd" [ 1 ]
+AttributeBegin
+Translate 0 -130 0
+Color [ 0.82 0.8 0.76 ]
+ReadArchive "killeroo_model.rib"
+AttributeEnd
+AttributeBegin
+Translate 40 150 0
+Rotate 180 0 0 1
+Color [ 0.7 0.75 0.82 ]
+ReadArchive "killeroo_model.rib"
+AttributeEnd
+"""
+    write("killeroo2", "two Killeroos (23064 bicubic patches)", 1024, 768, 40, [-560, 40, 200], [10, 10, -40],
+          [0, 0, 1], 10, 5000, body)
+
+def bigguy_box():
+    # Five walls (floor, ceiling, back, left, right) as bilinear patches around one Big Guy; open front.
+    s, h = 6.0, 5.0
+    def quad(p):
+        return 'Patch "bilinear" "P" [ ' + " ".join(f"{v:g}" for pt in p for v in pt) + " ]\n"
+    floor_y = -3.0
+    walls = [
+        ("floor", [0.8, 0.8, 0.8], [[-s, floor_y, -s], [s, floor_y, -s], [-s, floor_y, s], [s, floor_y, s]]),
+        ("ceiling", [0.8, 0.8, 0.8], [[-s, floor_y + 2 * h, s], [s, floor_y + 2 * h, s], [-s, floor_y + 2 * h, -s], [s, floor_y + 2 * h, -s]]),
+        ("back", [0.8, 0.8, 0.8], [[-s, floor_y, -s], [-s, floor_y + 2 * h, -s], [s, floor_y, -s], [s, floor_y + 2 * h, -s]]),
+        ("left", [0.75, 0.2, 0.2], [[-s, floor_y, s], [-s, floor_y + 2 * h, s], [-s, floor_y, -s], [-s, floor_y + 2 * h, -s]]),
+        ("right", [0.2, 0.6, 0.25], [[s, floor_y, -s], [s, floor_y + 2 * h, -s], [s, floor_y, s], [s, floor_y + 2 * h, s]]),
+    ]
+    body = """LightSource "ambientlight" 1 "intensity" [ 0.08 ]
+LightSource "pointlight" 2 "intensity" [ 40 ] "from" [ 0 6 3 ]
+Surface "matte" "Ka" [ 1 ] "Kd" [ 0.9 ]
+"""
+    for name, col, pts in walls:
+        body += f"AttributeBegin # {name}\nColor [ {col[0]} {col[1]} {col[2]} ]\n" + quad(pts) + "AttributeEnd\n"
+    body += ('AttributeBegin # Big Guy\nColor [ 0.8 0.62 0.5 ]\n'
+             'Surface "plastic" "Ka" [ 1 ] "Kd" [ 0.8 ] "Ks" [ 0.35 ] "roughness" [ 0.15 ]\n'
+             'ReadArchive "bigguy_patches.rib"\nAttributeEnd\n')
+    write("bigguy_box", "Big Guy (3570 patches) in a five-walled box (a Cornell-box-like set for lighting work)",
+          800, 800, 48, [0, 2.5, 17.5], [0, 2, 0], [0, 1, 0], 0.5, 1000, body)
+
+if __name__ == "__main__":
+    bigguy_grid("bigguy9", 3, 3)
+    bigguy_grid("bigguy24", 6, 4)
+    killeroo2()
+    bigguy_box()
