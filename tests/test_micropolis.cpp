@@ -31,7 +31,8 @@ class TempCleanup : public ::testing::Environment {
         fs::remove_all(fs::temp_directory_path() / ("tessera_mp_" + std::to_string(::getpid())), ec);
     }
 };
-[[maybe_unused]] ::testing::Environment* const kTempCleanup = ::testing::AddGlobalTestEnvironment(new TempCleanup);
+[[maybe_unused]] ::testing::Environment* const kTempCleanup =
+    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 // One flat patch: 16 vertices of a 4 x 4 grid.
 std::string onePatch(const std::string& indices = "1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16", int count = 16) {
@@ -91,7 +92,8 @@ TEST(Micropolis, TeapotEqualsBpt) {
         for (int k = 0; k < 16; ++k) EXPECT_EQ(a.patches[p].cp[k], b.patches[p].cp[k]) << p << " " << k;
     // Same framing as the .bpt (z up).
     for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) EXPECT_EQ(a.camera.cameraFromWorld.m[i][j], b.camera.cameraFromWorld.m[i][j]);
+        for (int j = 0; j < 4; ++j)
+            EXPECT_EQ(a.camera.cameraFromWorld.m[i][j], b.camera.cameraFromWorld.m[i][j]);
 }
 
 TEST(Micropolis, BigGuy) {

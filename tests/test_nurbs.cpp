@@ -39,7 +39,8 @@ class TempCleanup : public ::testing::Environment {
         fs::remove_all(fs::temp_directory_path() / ("tessera_nurbs_" + std::to_string(::getpid())), ec);
     }
 };
-[[maybe_unused]] ::testing::Environment* const kTempCleanup = ::testing::AddGlobalTestEnvironment(new TempCleanup);
+[[maybe_unused]] ::testing::Environment* const kTempCleanup =
+    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 // Random knot vector of n + order values: clamped or not, with some repeated interior knots.
 std::vector<double> randomKnots(std::mt19937& rng, int n, int order, bool clamped) {
@@ -128,7 +129,8 @@ double maxRelativeError(std::mt19937& rng, const NurbsSurface& s, int samples) {
         size_t sv = size_t(std::upper_bound(bv.begin(), bv.end(), v) - bv.begin()) - 1;
         su = std::min(su, bu.size() - 2);
         sv = std::min(sv, bv.size() - 2);
-        float lu = float((u - bu[su]) / (bu[su + 1] - bu[su])), lv = float((v - bv[sv]) / (bv[sv + 1] - bv[sv]));
+        float lu = float((u - bu[su]) / (bu[su + 1] - bu[su])),
+              lv = float((v - bv[sv]) / (bv[sv + 1] - bv[sv]));
         Vec3 a = evalPatch(patches[su * (bv.size() - 1) + sv], lu, lv);
         Vec3 b = evalNurbs(s, u, v);
         worst = std::max(worst, double(length(a - b)) / scale);
@@ -141,13 +143,15 @@ double maxRelativeError(std::mt19937& rng, const NurbsSurface& s, int samples) {
 TEST(Nurbs, KnotInsertionMatchesDeBoorClamped) {
     std::mt19937 rng(1);
     for (int trial = 0; trial < 40; ++trial)
-        EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, true, false), 200), 1e-5) << "trial " << trial;
+        EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, true, false), 200), 1e-5)
+            << "trial " << trial;
 }
 
 TEST(Nurbs, KnotInsertionMatchesDeBoorUnclampedAndClipped) {
     std::mt19937 rng(2);
     for (int trial = 0; trial < 40; ++trial) {
-        EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, false, false), 200), 1e-5) << "trial " << trial;
+        EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, false, false), 200), 1e-5)
+            << "trial " << trial;
         EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, trial % 2 == 0, true), 200), 1e-5)
             << "trial " << trial;
     }
@@ -158,7 +162,8 @@ TEST(Nurbs, LowerOrdersAreDegreeElevatedExactly) {
     for (int uo = 2; uo <= 4; ++uo)
         for (int vo = 2; vo <= 4; ++vo)
             for (int trial = 0; trial < 5; ++trial)
-                EXPECT_LT(maxRelativeError(rng, validSurface(rng, uo, vo, trial % 2 == 0, trial == 4), 100), 1e-5)
+                EXPECT_LT(maxRelativeError(rng, validSurface(rng, uo, vo, trial % 2 == 0, trial == 4), 100),
+                          1e-5)
                     << "orders " << uo << " " << vo;
 }
 
@@ -267,11 +272,12 @@ TEST(NuPatchRib, BicubicWithPAndPw) {
         // Same 16 points with w = 1.
         std::istringstream in(kGrid16);
         float x, y, z;
-        while (in >> x >> y >> z) pw += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(z) + " 1 ";
+        while (in >> x >> y >> z)
+            pw += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(z) + " 1 ";
     }
     for (const std::string& param : {std::string("\"P\" [") + kGrid16 + "]", "\"Pw\" [" + pw + "]"}) {
-        std::string path = writeFile("scene.rib", nuPatchRib("NuPatch 4 4 [0 0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 2 2 2 2] 0 2\n" +
-                                                             param));
+        std::string path = writeFile(
+            "scene.rib", nuPatchRib("NuPatch 4 4 [0 0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 2 2 2 2] 0 2\n" + param));
         Scene s = loadScene(path, {});
         ASSERT_EQ(s.patches.size(), 1u);
         EXPECT_EQ(s.patches[0].at(1, 1), (Vec3{1, 1, 1}));
@@ -283,13 +289,17 @@ TEST(NuPatchRib, ClippedRangeAndSpans) {
     // 5 x 4 control points, uknot with one interior knot: 2 u spans; vmin/vmax clip to the middle.
     std::string pts;
     for (int j = 0; j < 4; ++j)
-        for (int i = 0; i < 5; ++i) pts += std::to_string(i) + " " + std::to_string(j) + " " + std::to_string((i * j) % 3) + " ";
-    std::string path = writeFile(
-        "scene.rib", nuPatchRib("NuPatch 5 4 [0 0 0 0 1 2 2 2 2] 0 2 4 4 [0 0 0 0 1 1 1 1] 0.25 0.75 \"P\" [" + pts + "]"));
+        for (int i = 0; i < 5; ++i)
+            pts += std::to_string(i) + " " + std::to_string(j) + " " + std::to_string((i * j) % 3) + " ";
+    std::string path =
+        writeFile("scene.rib",
+                  nuPatchRib("NuPatch 5 4 [0 0 0 0 1 2 2 2 2] 0 2 4 4 [0 0 0 0 1 1 1 1] 0.25 0.75 \"P\" [" +
+                             pts + "]"));
     Scene s = loadScene(path, {});
     EXPECT_EQ(s.patches.size(), 2u);
-    path = writeFile("scene.rib", nuPatchRib("NuPatch 5 4 [0 0 0 0 1 2 2 2 2] 0.5 0.9 4 4 [0 0 0 0 1 1 1 1] 0 1 \"P\" [" +
-                                             pts + "]"));
+    path = writeFile(
+        "scene.rib",
+        nuPatchRib("NuPatch 5 4 [0 0 0 0 1 2 2 2 2] 0.5 0.9 4 4 [0 0 0 0 1 1 1 1] 0 1 \"P\" [" + pts + "]"));
     s = loadScene(path, {});
     EXPECT_EQ(s.patches.size(), 1u);
 }
@@ -298,8 +308,8 @@ TEST(NuPatchRib, Errors) {
     int line = 0;
     std::string head = "WorldBegin\nLightSource \"ambientlight\" 1\n";
     // Knot vector of the wrong length.
-    std::string msg = errorOf(head + "NuPatch 4 4 [0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 1 1 1 1] 0 1 \"P\" [" + kGrid16 +
-                                  "]\nWorldEnd\n",
+    std::string msg = errorOf(head + "NuPatch 4 4 [0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 1 1 1 1] 0 1 \"P\" [" +
+                                  kGrid16 + "]\nWorldEnd\n",
                               line);
     EXPECT_EQ(line, 3) << msg;
     EXPECT_NE(msg.find("uknot has 7 values, expected 8"), std::string::npos) << msg;
@@ -310,14 +320,16 @@ TEST(NuPatchRib, Errors) {
     EXPECT_EQ(line, 4) << msg;
     EXPECT_NE(msg.find("vknot is decreasing"), std::string::npos) << msg;
     // Wrong number of points.
-    msg = errorOf(head + "NuPatch 4 4 [0 0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 1 1 1 1] 0 1 \"P\" [0 0 0 1 1 1]\nWorldEnd\n",
-                  line);
+    msg = errorOf(
+        head + "NuPatch 4 4 [0 0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 1 1 1 1] 0 1 \"P\" [0 0 0 1 1 1]\nWorldEnd\n",
+        line);
     EXPECT_EQ(line, 3) << msg;
     EXPECT_NE(msg.find("needs 48 values"), std::string::npos) << msg;
     // Rational.
     std::string pw;
     for (int i = 0; i < 16; ++i) pw += std::to_string(i) + " 0 0 " + (i == 5 ? "2 " : "1 ");
-    msg = errorOf(head + "NuPatch 4 4 [0 0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 1 1 1 1] 0 1\n \"Pw\" [" + pw + "]\nWorldEnd\n",
+    msg = errorOf(head + "NuPatch 4 4 [0 0 0 0 1 1 1 1] 0 1 4 4 [0 0 0 0 1 1 1 1] 0 1\n \"Pw\" [" + pw +
+                      "]\nWorldEnd\n",
                   line);
     EXPECT_EQ(line, 4) << msg;
     EXPECT_NE(msg.find("rational NURBS"), std::string::npos) << msg;

@@ -31,7 +31,8 @@ class TempCleanup : public ::testing::Environment {
         fs::remove_all(fs::temp_directory_path() / ("tessera_obj_" + std::to_string(::getpid())), ec);
     }
 };
-[[maybe_unused]] ::testing::Environment* const kTempCleanup = ::testing::AddGlobalTestEnvironment(new TempCleanup);
+[[maybe_unused]] ::testing::Environment* const kTempCleanup =
+    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 const char* kCubeVerts =
     "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n";
@@ -52,18 +53,20 @@ void expectError(const std::string& text, int line, const std::string& part) {
 }  // namespace
 
 TEST(Obj, StatementsAndIndexForms) {
-    std::string text = std::string("# a cube\nmtllib cube.mtl\no cube\ng box\ns 1\nusemtl red\n") + kCubeVerts +
+    std::string text = std::string("# a cube\nmtllib cube.mtl\no cube\ng box\ns 1\nusemtl red\n") +
+                       kCubeVerts +
                        "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
-                       "f 1/1 4/2 3/3 2/4\n"           // v/vt
-                       "f 5/1/1 6/2/1 7/3/1 8/4/1\n"   // v/vt/vn
-                       "f 1//1 2//1 6//1 5//1\n"       // v//vn
-                       "f -7 -6 -2 -3\n"               // relative: 2 3 7 6
+                       "f 1/1 4/2 3/3 2/4\n"          // v/vt
+                       "f 5/1/1 6/2/1 7/3/1 8/4/1\n"  // v/vt/vn
+                       "f 1//1 2//1 6//1 5//1\n"      // v//vn
+                       "f -7 -6 -2 -3\n"              // relative: 2 3 7 6
                        "f 3 4 8 7 # trailing comment\n"
-                       "f 4 \\\n 1 5 8\n";            // line continuation
+                       "f 4 \\\n 1 5 8\n";  // line continuation
     ObjMesh m = parseObj(text, "cube.obj", {});
     ASSERT_EQ(m.mesh.points.size(), 8u);
     ASSERT_EQ(m.mesh.faceSizes.size(), 6u);
-    EXPECT_EQ((std::vector<int>(m.mesh.faceVerts.begin(), m.mesh.faceVerts.begin() + 4)), (std::vector<int>{0, 3, 2, 1}));
+    EXPECT_EQ((std::vector<int>(m.mesh.faceVerts.begin(), m.mesh.faceVerts.begin() + 4)),
+              (std::vector<int>{0, 3, 2, 1}));
     EXPECT_EQ((std::vector<int>(m.mesh.faceVerts.begin() + 12, m.mesh.faceVerts.begin() + 16)),
               (std::vector<int>{1, 2, 6, 5}));
     EXPECT_EQ(m.faceLine[0], 20);
@@ -78,8 +81,9 @@ TEST(Obj, StatementsAndIndexForms) {
 
 TEST(Obj, UnsupportedStatementsWarnOnce) {
     std::vector<std::string> warnings;
-    std::string text = std::string(kCubeVerts) + "l 1 2\nl 2 3\np 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\n"
-                                                 "f 3 4 8 7\nf 4 1 5 8\n";
+    std::string text = std::string(kCubeVerts) +
+                       "l 1 2\nl 2 3\np 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\n"
+                       "f 3 4 8 7\nf 4 1 5 8\n";
     loadScene(writeObj(text), [&](const std::string& w) { warnings.push_back(w); });
     ASSERT_EQ(warnings.size(), 2u);
     EXPECT_NE(warnings[0].find(":9: warning: OBJ statement 'l'"), std::string::npos) << warnings[0];
@@ -114,7 +118,8 @@ TEST(Obj, BigGuy) {
 }
 
 TEST(Obj, DetectedByContentWithoutExtension) {
-    std::string text = std::string(kCubeVerts) + "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+    std::string text =
+        std::string(kCubeVerts) + "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
     std::string path = writeObj(text, "cube");
     EXPECT_EQ(detectSceneFormat(path), SceneFormat::Obj);
     EXPECT_EQ(loadScene(path, {}).patches.size(), 24u);

@@ -31,7 +31,8 @@ class TempCleanup : public ::testing::Environment {
         fs::remove_all(fs::temp_directory_path() / ("tessera_ribw_" + std::to_string(::getpid())), ec);
     }
 };
-[[maybe_unused]] ::testing::Environment* const kTempCleanup = ::testing::AddGlobalTestEnvironment(new TempCleanup);
+[[maybe_unused]] ::testing::Environment* const kTempCleanup =
+    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 void expectSameScene(const Scene& a, const Scene& b) {
     ASSERT_EQ(a.patches.size(), b.patches.size());
@@ -84,7 +85,8 @@ TEST(RibWriter, RoundTripRibScene) {
 
 TEST(RibWriter, RoundTripHandMadeSceneWithAttributes) {
     std::string text =
-        "Format 200 100 1\nProjection \"perspective\" \"fov\" [40]\nScale 1 1 -1\nTranslate 0 0 -5\nWorldBegin\n"
+        "Format 200 100 1\nProjection \"perspective\" \"fov\" [40]\nScale 1 1 -1\nTranslate 0 0 "
+        "-5\nWorldBegin\n"
         "LightSource \"ambientlight\" 1 \"intensity\" [0.2]\n"
         "LightSource \"pointlight\" 2 \"from\" [1 2 3] \"intensity\" [5]\n"
         "AttributeBegin\nColor 1 0 0\nSurface \"plastic\" \"roughness\" [0.3]\nSides 1\nShadingRate 4\n"

@@ -118,7 +118,8 @@ void validateDirection(const char* dir, int n, int order, const std::vector<doub
     const double eps = 1e-9 * std::max(1.0, b - a);
     if (lo < a - eps || hi > b + eps)
         throw NurbsError(d + "min/" + d + "max [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                         "] lies outside the knot domain [" + std::to_string(a) + ", " + std::to_string(b) + "]");
+                         "] lies outside the knot domain [" + std::to_string(a) + ", " + std::to_string(b) +
+                         "]");
     lo = std::max(lo, a);
     hi = std::min(hi, b);
     if (!(lo < hi)) throw NurbsError(d + "min must be less than " + d + "max");
@@ -157,8 +158,8 @@ void validateNurbs(const NurbsSurface& s) {
     validateDirection("u", s.nu, s.uorder, s.uknot, ulo, uhi);
     validateDirection("v", s.nv, s.vorder, s.vknot, vlo, vhi);
     if (s.cp.size() != size_t(s.nu) * size_t(s.nv))
-        throw NurbsError("expected " + std::to_string(size_t(s.nu) * size_t(s.nv)) + " control points (nu x nv), got " +
-                         std::to_string(s.cp.size()));
+        throw NurbsError("expected " + std::to_string(size_t(s.nu) * size_t(s.nv)) +
+                         " control points (nu x nv), got " + std::to_string(s.cp.size()));
     for (const Vec3& p : s.cp)
         if (!isFinite(p)) throw NurbsError("a control point is not finite");
 }
@@ -202,7 +203,8 @@ std::vector<BezierPatch> nurbsToBezier(const NurbsSurface& s) {
         for (int j = 0; j < s.nv; ++j)
             for (int c = 0; c < 4; ++c)
                 for (int d = 0; d < 3; ++d)
-                    cv.pts[size_t(j) * 12 + size_t(c) * 3 + d] = useg[size_t(c) * 3 * s.nv + size_t(j) * 3 + d];
+                    cv.pts[size_t(j) * 12 + size_t(c) * 3 + d] =
+                        useg[size_t(c) * 3 * s.nv + size_t(j) * 3 + d];
         for (const std::vector<double>& vseg : bezierSegments(std::move(cv), vlo, vhi)) {
             BezierPatch b;
             for (int r = 0; r < 4; ++r)

@@ -18,9 +18,9 @@ namespace tessera {
 // A tensor-product NURBS surface with all weights 1. Control points are row-major, u fastest:
 // cp[j * nu + i] (the RIB layout of "P" in NuPatch).
 struct NurbsSurface {
-    int nu = 0, nv = 0;          // control points per direction
-    int uorder = 4, vorder = 4;  // order = degree + 1
-    std::vector<double> uknot, vknot;  // nu + uorder and nv + vorder values, non-decreasing
+    int nu = 0, nv = 0;                             // control points per direction
+    int uorder = 4, vorder = 4;                     // order = degree + 1
+    std::vector<double> uknot, vknot;               // nu + uorder and nv + vorder values, non-decreasing
     double umin = 0, umax = 1, vmin = 0, vmax = 1;  // parameter range to keep (RiNuPatch umin umax ...)
     std::vector<Vec3> cp;
 };
@@ -32,7 +32,8 @@ class NurbsError : public std::invalid_argument {
     using std::invalid_argument::invalid_argument;
 };
 
-// Checks the surface; throws NurbsError with a message such as "uknot has 8 values, expected 9 (nu + uorder)".
+// Checks the surface; throws NurbsError with a message such as "uknot has 8 values, expected 9 (nu +
+// uorder)".
 void validateNurbs(const NurbsSurface& s);
 
 // Exact conversion to bicubic Bezier patches, one per non-empty knot span inside [umin,umax] x [vmin,vmax].

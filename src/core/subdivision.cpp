@@ -28,8 +28,12 @@ struct D3 {
     }
     Vec3 f() const { return {float(x), float(y), float(z)}; }
 };
-double dot(D3 a, D3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-D3 cross(D3 a, D3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
+double dot(D3 a, D3 b) {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+D3 cross(D3 a, D3 b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
 
 uint64_t edgeKey(int a, int b) {
     if (a > b) std::swap(a, b);
@@ -41,8 +45,8 @@ struct Level {
     std::vector<D3> p;
     std::vector<int> fOff{0};  // face f: fv[fOff[f] .. fOff[f+1])
     std::vector<int> fv;
-    std::vector<char> hole;        // per face
-    std::vector<char> cornerTag;   // per vertex
+    std::vector<char> hole;               // per face
+    std::vector<char> cornerTag;          // per vertex
     std::unordered_set<uint64_t> crease;  // tagged sharp edges (boundary edges are sharp implicitly)
     BoundaryMode mode = BoundaryMode::EdgesAndCorners;
 
@@ -135,9 +139,9 @@ Topo buildTopo(const Level& L, const std::vector<int>* origFace = nullptr) {
         ++outCount[size_t(v)];
         if (T.twin[h] == -1) {
             if (start[size_t(v)] != -1 && T.twin[size_t(start[size_t(v)])] == -1)
-                throw SubdivError("vertex " + std::to_string(v) +
-                                      " joins separate fans of faces (non-manifold vertex)",
-                                  faceOf(T.heFace[h]));
+                throw SubdivError(
+                    "vertex " + std::to_string(v) + " joins separate fans of faces (non-manifold vertex)",
+                    faceOf(T.heFace[h]));
             start[size_t(v)] = int(h);
         } else if (start[size_t(v)] == -1) {
             start[size_t(v)] = int(h);
@@ -157,8 +161,9 @@ Topo buildTopo(const Level& L, const std::vector<int>* origFace = nullptr) {
             h = T.twin[size_t(T.prev(h))];
         } while (h != -1 && h != start[size_t(v)]);
         if (k != outCount[size_t(v)] || (h != -1 && h != start[size_t(v)]))
-            throw SubdivError("vertex " + std::to_string(v) + " joins separate fans of faces (non-manifold vertex)",
-                              faceOf(T.heFace[size_t(start[size_t(v)])]));
+            throw SubdivError(
+                "vertex " + std::to_string(v) + " joins separate fans of faces (non-manifold vertex)",
+                faceOf(T.heFace[size_t(start[size_t(v)])]));
     }
 
     // Vertex types from the sharp edges around each vertex.
@@ -218,9 +223,9 @@ Level refine(const Level& L, const Topo& T) {
         if (n == 0 || T.type[size_t(v)] == VType::Corner) {
             N.p[size_t(v)] = p;
         } else if (T.type[size_t(v)] == VType::Crease) {
-            N.p[size_t(v)] = (L.p[size_t(T.creaseNbr[size_t(v)][0])] + p * 6.0 +
-                              L.p[size_t(T.creaseNbr[size_t(v)][1])]) *
-                             (1.0 / 8.0);
+            N.p[size_t(v)] =
+                (L.p[size_t(T.creaseNbr[size_t(v)][0])] + p * 6.0 + L.p[size_t(T.creaseNbr[size_t(v)][1])]) *
+                (1.0 / 8.0);
         } else {  // smooth (interior): (Q + 2R + (n - 3) v) / n
             D3 Q, R;
             for (int k = 0; k < n; ++k) {
@@ -237,7 +242,8 @@ Level refine(const Level& L, const Topo& T) {
         int b = L.fOff[size_t(f)], k = L.size(f);
         for (int c = 0; c < k; ++c) {
             int h = b + c, hp = b + (c + k - 1) % k;
-            N.fv.insert(N.fv.end(), {L.fv[size_t(h)], nv + T.heEdge[size_t(h)], nv + ne + f, nv + T.heEdge[size_t(hp)]});
+            N.fv.insert(N.fv.end(),
+                        {L.fv[size_t(h)], nv + T.heEdge[size_t(h)], nv + ne + f, nv + T.heEdge[size_t(hp)]});
             N.fOff.push_back(int(N.fv.size()));
             N.hole.push_back(L.hole[size_t(f)]);
         }
@@ -340,9 +346,8 @@ Level fromMesh(const SubdivMesh& m, std::vector<std::string>* warnings) {
                                   int(f));
             for (int j = 0; j < i; ++j)
                 if (m.faceVerts[total + size_t(j)] == v)
-                    throw SubdivError("face " + std::to_string(f) + " uses vertex " + std::to_string(v) +
-                                          " twice",
-                                      int(f));
+                    throw SubdivError(
+                        "face " + std::to_string(f) + " uses vertex " + std::to_string(v) + " twice", int(f));
             L.fv.push_back(v);
         }
         total += size_t(k);
@@ -375,7 +380,8 @@ Level fromMesh(const SubdivMesh& m, std::vector<std::string>* warnings) {
         L.crease.insert(edgeKey(c.v0, c.v1));
     }
     if (semiSharp && warnings)
-        warnings->push_back("semi-sharp creases or corners (sharpness below 10) are treated as infinitely sharp");
+        warnings->push_back(
+            "semi-sharp creases or corners (sharpness below 10) are treated as infinitely sharp");
     return L;
 }
 
@@ -408,8 +414,8 @@ class PatchBuilder {
         for (int v = 0; v < nv; ++v) {
             if (T_.valence(v) == 0) continue;
             limit_[size_t(v)] = limitPosition(L_, T_, v);
-            if (T_.type[size_t(v)] == VType::Smooth && T_.sharpCount[size_t(v)] == 0 && !T_.boundary[size_t(v)] &&
-                T_.valence(v) != 4 && T_.valence(v) >= 3)
+            if (T_.type[size_t(v)] == VType::Smooth && T_.sharpCount[size_t(v)] == 0 &&
+                !T_.boundary[size_t(v)] && T_.valence(v) != 4 && T_.valence(v) >= 3)
                 normal_[size_t(v)] = limitNormal(L_, T_, v);
         }
         // Boundary curves: once per edge of a rendered face.
@@ -444,7 +450,8 @@ class PatchBuilder {
     D3 interiorPoint(int f, int c) const {
         int v = L_.vert(f, c);
         int n = (T_.type[size_t(v)] == VType::Smooth && !T_.boundary[size_t(v)]) ? T_.valence(v) : 4;
-        return (L_.p[size_t(v)] * double(n) + (L_.p[size_t(L_.vert(f, c + 1))] + L_.p[size_t(L_.vert(f, c - 1))]) * 2.0 +
+        return (L_.p[size_t(v)] * double(n) +
+                (L_.p[size_t(L_.vert(f, c + 1))] + L_.p[size_t(L_.vert(f, c - 1))]) * 2.0 +
                 L_.p[size_t(L_.vert(f, c + 2))]) *
                (1.0 / (n + 5));
     }
@@ -472,7 +479,8 @@ class PatchBuilder {
         static const int axisA[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
         static const int axisB[4][2] = {{0, 1}, {-1, 0}, {0, -1}, {1, 0}};
         // Ring positions (alpha, beta) of e_0, d_0, e_1, d_1, ... around a valence-4 vertex.
-        static const int ringPos[8][2] = {{1, 0}, {1, 1}, {0, 1}, {-1, 1}, {-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
+        static const int ringPos[8][2] = {{1, 0},  {1, 1},   {0, 1},  {-1, 1},
+                                          {-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
         Vec3 g[16];
         for (int c = 0; c < 4; ++c) {
             int v = L_.vert(f, c), h0 = L_.fOff[size_t(f)] + c;
@@ -487,7 +495,8 @@ class PatchBuilder {
             for (int j = 0; j < 4; ++j) {
                 int h = T_.ring[size_t(o + (k0 + j) % 4)];
                 put(ringPos[2 * j][0], ringPos[2 * j][1], L_.p[size_t(T_.to(h))].f());
-                put(ringPos[2 * j + 1][0], ringPos[2 * j + 1][1], L_.p[size_t(L_.fv[size_t(T_.next(T_.next(h)))])].f());
+                put(ringPos[2 * j + 1][0], ringPos[2 * j + 1][1],
+                    L_.p[size_t(L_.fv[size_t(T_.next(T_.next(h)))])].f());
             }
         }
         return toBezier(g, bsplineBasis(), bsplineBasis());
@@ -510,10 +519,18 @@ class PatchBuilder {
             for (int k = 0; k < 4; ++k) {
                 Vec3 q = cv[size_t(forward ? k : 3 - k)];
                 switch (s) {
-                    case 0: p.at(k, 0) = q; break;
-                    case 1: p.at(3, k) = q; break;
-                    case 2: p.at(3 - k, 3) = q; break;
-                    default: p.at(0, 3 - k) = q; break;
+                    case 0:
+                        p.at(k, 0) = q;
+                        break;
+                    case 1:
+                        p.at(3, k) = q;
+                        break;
+                    case 2:
+                        p.at(3 - k, 3) = q;
+                        break;
+                    default:
+                        p.at(0, 3 - k) = q;
+                        break;
                 }
             }
         }
@@ -538,9 +555,13 @@ SubdivResult subdivToBezier(const SubdivMesh& mesh, const SubdivOptions& options
     bool allQuads = true;
     for (int f = 0; f < L.faces(); ++f) allQuads &= L.size(f) == 4;
     if (steps < 0) {
+        // Regular meshes need no refinement. One step isolates the extraordinary vertices of a quad mesh;
+        // after one step a non-quad face leaves quads with two extraordinary corners (its centre and an
+        // original vertex), so meshes with other polygons get a second step.
         steps = 0;
         for (int f = 0; f < L.faces() && steps == 0; ++f)
             if (!L.hole[size_t(f)] && !regularFace(L, T, f)) steps = 1;
+        if (steps == 1 && !allQuads) steps = 2;
     } else if (steps == 0 && !allQuads) {
         throw SubdivError("refineSteps 0 needs a mesh of quads only; this mesh has other polygons");
     }

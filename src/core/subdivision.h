@@ -3,9 +3,11 @@
 //
 // Method (docs/inputs.md has the user-facing summary):
 //  1. Unless every face is already regular, the whole mesh is refined by `refineSteps` Catmull-Clark steps
-//     (default 1). One step makes every face a quad and leaves at most one original extraordinary vertex
-//     per face. The refinement is uniform so that all patches meet edge to edge: T-junctions would break
-//     the Reyes engine's crack-free guarantee, which needs shared edges with identical control points.
+//     (default 1 for quad meshes, 2 for meshes with other polygons). One step makes every face a quad and
+//     leaves at most one extraordinary vertex per face in a quad mesh (two, the face centre and an original
+//     vertex, in the children of other polygons; the second step isolates those). The refinement is uniform
+//     so that all patches meet edge to edge: T-junctions would break the Reyes engine's crack-free guarantee,
+//     which needs shared edges with identical control points.
 //  2. Regular faces (a quad whose four vertices are interior, smooth, of valence 4 and surrounded by quads)
 //     become the exact bicubic B-spline patch of their 16-point neighbourhood, converted to Bezier form
 //     with toBezier(bsplineBasis()).
@@ -74,7 +76,9 @@ class SubdivError : public std::invalid_argument {
 };
 
 struct SubdivOptions {
-    int refineSteps = -1;  // -1: 0 if every face is regular, else 1. At most 4.
+    // -1 (automatic): 0 if every face is regular, 2 if the mesh has faces other than quads, else 1.
+    // At most 4.
+    int refineSteps = -1;
 };
 
 struct SubdivResult {

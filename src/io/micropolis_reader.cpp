@@ -10,7 +10,9 @@ namespace tessera {
 
 namespace {
 
-bool blank(char c) { return c == ' ' || c == '\t' || c == '\r'; }
+bool blank(char c) {
+    return c == ' ' || c == '\t' || c == '\r';
+}
 
 std::string_view trim(std::string_view s) {
     while (!s.empty() && blank(s.front())) s.remove_prefix(1);
@@ -46,7 +48,8 @@ std::vector<std::string_view> fields(std::string_view s) {
     size_t start = 0;
     while (true) {
         size_t c = s.find(',', start);
-        out.push_back(trim(s.substr(start, c == std::string_view::npos ? std::string_view::npos : c - start)));
+        out.push_back(
+            trim(s.substr(start, c == std::string_view::npos ? std::string_view::npos : c - start)));
         if (c == std::string_view::npos) break;
         start = c + 1;
     }
@@ -84,7 +87,8 @@ std::vector<BezierPatch> parseMicropolis(const std::string& text, const std::str
     std::string_view s;
     auto need = [&](const char* what) {
         if (!lines.next(s))
-            throw InputError(file, std::max(1, lines.line()), std::string("unexpected end of file: expected ") + what);
+            throw InputError(file, std::max(1, lines.line()),
+                             std::string("unexpected end of file: expected ") + what);
     };
     auto fail = [&](const std::string& msg) { throw InputError(file, lines.line(), msg); };
 
@@ -134,8 +138,7 @@ std::vector<BezierPatch> parseMicropolis(const std::string& text, const std::str
         verts.push_back({float(c[0]), float(c[1]), float(c[2])});
     }
     while (lines.next(s))
-        if (!s.empty())
-            fail("trailing data after " + std::to_string(nv) + " vertices (wrong vertex count?)");
+        if (!s.empty()) fail("trailing data after " + std::to_string(nv) + " vertices (wrong vertex count?)");
     std::vector<BezierPatch> patches(static_cast<size_t>(np));
     for (size_t p = 0; p < size_t(np); ++p)
         for (int k = 0; k < 16; ++k) {

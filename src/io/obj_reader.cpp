@@ -9,7 +9,9 @@ namespace tessera {
 
 namespace {
 
-bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+bool isSpace(char c) {
+    return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
+}
 
 std::vector<std::string_view> words(std::string_view s) {
     std::vector<std::string_view> out;
@@ -73,7 +75,8 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
         if (!w.empty()) {
             std::string_view key = w[0];
             if (key == "v") {
-                if (w.size() < 4) fail("a vertex needs 3 coordinates (v x y z), found " + std::to_string(w.size() - 1));
+                if (w.size() < 4)
+                    fail("a vertex needs 3 coordinates (v x y z), found " + std::to_string(w.size() - 1));
                 // v x y z, v x y z w, or the common extension v x y z r g b (vertex colour, ignored).
                 if (w.size() != 4 && w.size() != 5 && w.size() != 7)
                     fail("a vertex has 3, 4 (x y z w) or 6 (x y z r g b) numbers, found " +
@@ -99,8 +102,8 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
                     while (slash != std::string_view::npos) {
                         size_t nextSlash = ref.find('/', slash + 1);
                         std::string_view part = ref.substr(slash + 1, nextSlash == std::string_view::npos
-                                                                           ? std::string_view::npos
-                                                                           : nextSlash - slash - 1);
+                                                                          ? std::string_view::npos
+                                                                          : nextSlash - slash - 1);
                         long dummy;
                         if (!part.empty() && !parseInt(part, dummy))
                             fail("bad vertex reference '" + std::string(ref) + "' in a face");
@@ -112,8 +115,9 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
                     if (idx == 0) fail("vertex index 0 in a face (OBJ indices start at 1)");
                     if (idx < 0) {
                         if (-idx > n)
-                            fail("relative vertex index " + std::to_string(idx) + " reaches before the first vertex (" +
-                                 std::to_string(n) + " defined so far)");
+                            fail("relative vertex index " + std::to_string(idx) +
+                                 " reaches before the first vertex (" + std::to_string(n) +
+                                 " defined so far)");
                         idx = n + idx;
                     } else {
                         if (idx > n) forward.push_back({int(m.faceVerts.size()), ln});
@@ -128,7 +132,8 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
                        key == "usemtl" || key == "mtllib") {
                 // Texture coordinates, normals, grouping and materials do not change the surface.
             } else if (warned.insert(std::string(key)).second && warn) {
-                warn(formatWarning(file, ln, "OBJ statement '" + std::string(key) + "' is not supported; ignored"));
+                warn(formatWarning(file, ln,
+                                   "OBJ statement '" + std::string(key) + "' is not supported; ignored"));
             }
         }
         logical.clear();
@@ -137,14 +142,15 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
     for (auto [slot, ln] : forward)
         if (m.faceVerts[size_t(slot)] >= int(m.points.size()))
             throw InputError(file, int(ln),
-                             "vertex index " + std::to_string(m.faceVerts[size_t(slot)] + 1) + " is out of range (" +
-                                 std::to_string(m.points.size()) + " vertices in the file)");
+                             "vertex index " + std::to_string(m.faceVerts[size_t(slot)] + 1) +
+                                 " is out of range (" + std::to_string(m.points.size()) +
+                                 " vertices in the file)");
     if (m.faceSizes.empty()) throw InputError(file, line > 1 ? line - 1 : 1, "no faces (f) in the OBJ file");
     return out;
 }
 
-std::vector<BezierPatch> objToPatches(const std::string& text, const std::string& file, const WarningSink& warn,
-                                      SubdivResult* stats) {
+std::vector<BezierPatch> objToPatches(const std::string& text, const std::string& file,
+                                      const WarningSink& warn, SubdivResult* stats) {
     ObjMesh obj = parseObj(text, file, warn);
     SubdivResult r;
     try {

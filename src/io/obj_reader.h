@@ -23,7 +23,7 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
 
 // parseObj + subdivToBezier; topology errors (non-manifold edges, repeated vertices) are reported at the
 // line of the offending face.
-std::vector<BezierPatch> objToPatches(const std::string& text, const std::string& file, const WarningSink& warn,
-                                      SubdivResult* stats = nullptr);
+std::vector<BezierPatch> objToPatches(const std::string& text, const std::string& file,
+                                      const WarningSink& warn, SubdivResult* stats = nullptr);
 
 }  // namespace tessera

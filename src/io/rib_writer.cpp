@@ -25,7 +25,9 @@ std::string num(double v) {
     auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
     return std::string(buf, ec == std::errc() ? end : buf);
 }
-std::string triple(Vec3 v) { return num(v.x) + " " + num(v.y) + " " + num(v.z); }
+std::string triple(Vec3 v) {
+    return num(v.x) + " " + num(v.y) + " " + num(v.z);
+}
 
 // RIB string literal (RI spec 3.2, appendix C.1): backslash-escape quotes, backslashes and newlines.
 std::string quoted(const std::string& s) {
@@ -43,11 +45,15 @@ std::string quoted(const std::string& s) {
 
 const char* filterName(FilterType f) {
     switch (f) {
-        case FilterType::Box: return "box";
-        case FilterType::Triangle: return "triangle";
-        case FilterType::CatmullRom: return "catmull-rom";
+        case FilterType::Box:
+            return "box";
+        case FilterType::Triangle:
+            return "triangle";
+        case FilterType::CatmullRom:
+            return "catmull-rom";
         case FilterType::Gaussian:
-        default: return "gaussian";
+        default:
+            return "gaussian";
     }
 }
 
@@ -129,7 +135,8 @@ void writeRib(const Scene& scene, std::ostream& o) {
                 break;
             case LightType::Distant:
                 o << "LightSource \"distantlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
-                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to) << "]\n";
+                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to)
+                  << "]\n";
                 break;
             case LightType::Point:
                 o << "LightSource \"pointlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
@@ -172,7 +179,9 @@ void writeRib(const Scene& scene, const std::string& path) {
     tmp += ".tmp" + std::to_string(::getpid());
     {
         std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-        if (!out) throw std::runtime_error(path + ": error: cannot create " + tmp.string() + ": " + std::strerror(errno));
+        if (!out)
+            throw std::runtime_error(path + ": error: cannot create " + tmp.string() + ": " +
+                                     std::strerror(errno));
         writeRib(scene, out);
         out.flush();
         if (!out) {
@@ -187,7 +196,8 @@ void writeRib(const Scene& scene, const std::string& path) {
     if (ec) {
         std::error_code ignored;
         fs::remove(tmp, ignored);
-        throw std::runtime_error(path + ": error: cannot rename the temporary file into place: " + ec.message());
+        throw std::runtime_error(path +
+                                 ": error: cannot rename the temporary file into place: " + ec.message());
     }
 }
 

@@ -109,11 +109,16 @@ std::optional<SceneFormat> parseSceneFormat(std::string_view name) {
 
 const char* sceneFormatName(SceneFormat format) {
     switch (format) {
-        case SceneFormat::Auto: return "auto";
-        case SceneFormat::Rib: return "rib";
-        case SceneFormat::Bpt: return "bpt";
-        case SceneFormat::Obj: return "obj";
-        case SceneFormat::Micropolis: return "micropolis";
+        case SceneFormat::Auto:
+            return "auto";
+        case SceneFormat::Rib:
+            return "rib";
+        case SceneFormat::Bpt:
+            return "bpt";
+        case SceneFormat::Obj:
+            return "obj";
+        case SceneFormat::Micropolis:
+            return "micropolis";
     }
     return "auto";
 }
@@ -122,7 +127,8 @@ SceneFormat detectSceneFormat(const std::string& path) {
     std::string lower = lowercase(path);
     if (endsWith(lower, ".bpt")) return SceneFormat::Bpt;
     if (endsWith(lower, ".obj")) return SceneFormat::Obj;
-    if (endsWith(lower, ".rib") || endsWith(lower, ".rib.gz") || endsWith(lower, ".gz")) return SceneFormat::Rib;
+    if (endsWith(lower, ".rib") || endsWith(lower, ".rib.gz") || endsWith(lower, ".gz"))
+        return SceneFormat::Rib;
     if (endsWith(lower, ".mscene"))
         throw InputError(path, 0,
                          "binary Micropolis .mscene scenes (Cap'n Proto) are not supported; use the text "
@@ -167,9 +173,12 @@ Scene loadMicropolis(const std::string& path, const WarningSink& /*warn*/) {
 Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format) {
     if (format == SceneFormat::Auto) format = detectSceneFormat(path);
     switch (format) {
-        case SceneFormat::Bpt: return loadBpt(path, warn);
-        case SceneFormat::Obj: return loadObj(path, warn);
-        case SceneFormat::Micropolis: return loadMicropolis(path, warn);
+        case SceneFormat::Bpt:
+            return loadBpt(path, warn);
+        case SceneFormat::Obj:
+            return loadObj(path, warn);
+        case SceneFormat::Micropolis:
+            return loadMicropolis(path, warn);
         default:
             // The RIB reader itself inflates gzip input by its magic bytes.
             return loadRib(path, warn);

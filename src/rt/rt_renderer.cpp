@@ -431,13 +431,20 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip);
     acc.subpatchMs = msSince(t0);
     auto t1 = Clock::now();
-    std::vector<Bounds3> roots(n);
+    // Patches with non-finite control points (possible in scenes built in code; the loaders reject them)
+    // are left out of the BVH, so no ray ever reaches them.
+    std::vector<Bounds3> roots;
+    std::vector<uint32_t> ids;
     Bounds3 all;
     for (size_t i = 0; i < n; ++i) {
-        roots[i] = acc.forest.tree(uint32_t(i))[0];
-        all.extend(roots[i]);
+        const Bounds3& b = acc.forest.tree(uint32_t(i))[0];
+        if (!isFinite(b.lo) || !isFinite(b.hi)) continue;
+        roots.push_back(b);
+        ids.push_back(uint32_t(i));
+        all.extend(b);
     }
     buildBvh(roots, acc.bvh);
+    for (uint32_t& p : acc.bvh.prims) p = ids[p];
     acc.bvhMs = msSince(t1);
     float mag = 0.f;
     if (!all.empty())
