@@ -53,7 +53,7 @@ for t in "${TARGETS[@]}"; do
   echo "--- fuzz_$t: ${SECONDS_PER_TARGET} s"
   log=$B/fuzz_$t.log
   # Run in a scratch directory: relative ReadArchive names resolve there.
-  if (cd $B/run && "$ROOT/$B/fuzz_$t" -max_total_time="$SECONDS_PER_TARGET" -max_len=16384 -timeout=5 \
+  if (cd $B/run && "$ROOT/$B/fuzz/fuzz_$t" -max_total_time="$SECONDS_PER_TARGET" -max_len=16384 -timeout=5 \
         -rss_limit_mb=2048 -malloc_limit_mb=1024 -print_final_stats=1 -artifact_prefix="$ROOT/$art/" \
         "${dict[@]}" "$ROOT/$work" "$ROOT/fuzz/corpus/$t" "$ROOT/$seeds") >"$log" 2>&1; then
     execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
