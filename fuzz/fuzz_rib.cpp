@@ -25,6 +25,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         fuzz::bug("accepted a resolution outside the limits");
     if (scene.image.pixelSamplesX * scene.image.pixelSamplesY > kMaxPixelSamples)
         fuzz::bug("accepted too many pixel samples");
+    for (const Light& l : scene.lights)
+        if (!isFinite(l.color) || !isFinite(l.from) || !isFinite(l.to))
+            fuzz::bug("accepted a non-finite light");
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            if (!std::isfinite(c.cameraFromWorld.m[i][j])) fuzz::bug("accepted a non-finite camera");
     for (const PatchAttributes& a : scene.attributes)
         if (a.material >= scene.materials.size()) fuzz::bug("material index out of range");
     return 0;

@@ -444,3 +444,18 @@ TEST(BadInput, SigintStopsALongRenderCleanly) {
     EXPECT_FALSE(hasTempFiles(dir));
     fs::remove_all(dir);
 }
+
+// ---- OBJ --------------------------------------------------------------------------------------------
+
+TEST(BadInput, ObjFiles) {
+    const std::string quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
+    expectRejected("obj_empty.obj", "", 0, "error: ");
+    expectRejected("obj_huge.obj", "v 1e39 0 0\n" + quad + "f 2 3 4 5\n", 1,
+                   "expected a number in the vertex");
+    expectRejected("obj_nan.obj", quad + "v nan 0 0\nf 1 2 3 4\n", 5, "expected a number in the vertex");
+    expectRejected("obj_min_index.obj", quad + "f 1 2 -9223372036854775808\n", 5,
+                   "reaches before the first vertex");
+    expectRejected("obj_zero_index.obj", quad + "f 0 1 2\n", 5, "vertex index 0");
+    expectRejected("obj_short_face.obj", quad + "f 1 2\n", 5, "a face needs at least 3 vertices");
+    expectRejected("obj_bad_ref.obj", quad + "f 1 2 x\n", 5, "bad vertex reference 'x'");
+}

@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <limits>
 #include <set>
 #include <string_view>
 
@@ -29,7 +30,9 @@ std::vector<std::string_view> words(std::string_view s) {
 bool parseDouble(std::string_view w, double& v) {
     if (!w.empty() && w[0] == '+') w.remove_prefix(1);
     auto [end, ec] = std::from_chars(w.data(), w.data() + w.size(), v);
-    return ec == std::errc() && end == w.data() + w.size() && std::isfinite(v);
+    // Within single precision, which the patches use: 1e39 would become infinity.
+    return ec == std::errc() && end == w.data() + w.size() && std::isfinite(v) &&
+           std::fabs(v) <= std::numeric_limits<float>::max();
 }
 
 bool parseInt(std::string_view w, long& v) {
@@ -114,7 +117,7 @@ ObjMesh parseObj(const std::string& text, const std::string& file, const Warning
                     long n = long(m.points.size());
                     if (idx == 0) fail("vertex index 0 in a face (OBJ indices start at 1)");
                     if (idx < 0) {
-                        if (-idx > n)
+                        if (idx < -n)  // not -idx > n: -LONG_MIN overflows
                             fail("relative vertex index " + std::to_string(idx) +
                                  " reaches before the first vertex (" + std::to_string(n) +
                                  " defined so far)");

@@ -459,6 +459,10 @@ class RibReader {
         }
         ++worldsSeen_;
         // RI spec 4.1.1: the CTM at WorldBegin is the world-to-camera transformation.
+        for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j)
+                if (!std::isfinite(ctm_.m[i][j]))
+                    fail(r.line, "WorldBegin: the camera transformation is not finite (overflow)");
         scene_.camera.cameraFromWorld = ctm_;
         named_["camera"] = ctm_.inverse();
         push(Block::World, r);
@@ -728,6 +732,8 @@ class RibReader {
         // The light's "shader space" is the current object space.
         light.from = ctm_.point(from);
         light.to = ctm_.point(to);
+        if (!isFinite(light.color) || !isFinite(light.from) || !isFinite(light.to))
+            fail(r.line, "LightSource: intensity, colour or position out of range (overflows single precision)");
         scene_.lights.push_back(light);
     }
     void illuminate(const Request& r) {

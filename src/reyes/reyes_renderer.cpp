@@ -75,6 +75,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     std::vector<std::vector<Piece>> perPatch(patches.size());
     std::atomic<uint64_t> splits{0}, pieceCulls{0}, patchesCulled{0};
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t i) {
+        // Ctrl-C during a long split: skip the remaining patches (the bucket loop then reports it).
+        if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) return;
         SplitCounters c;
         float side = std::sqrt(std::max(scene.attributes[i].shadingRate, 1e-4f));
         splitPatch(view, uint32_t(i), side, perPatch[i], c);

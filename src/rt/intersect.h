@@ -43,15 +43,77 @@ inline Vec3 safeInverse(Vec3 d) {
     return {inv(d.x), inv(d.y), inv(d.z)};
 }
 
-// Slab test; on a hit returns the entry distance (clamped to tmin).
-inline bool rayBox(const Bounds3& b, Vec3 o, Vec3 inv, float tmin, float tmax, float& tEnter) {
-    float tx0 = (b.lo.x - o.x) * inv.x, tx1 = (b.hi.x - o.x) * inv.x;
-    float ty0 = (b.lo.y - o.y) * inv.y, ty1 = (b.hi.y - o.y) * inv.y;
-    float tz0 = (b.lo.z - o.z) * inv.z, tz1 = (b.hi.z - o.z) * inv.z;
-    float t0 = std::max({std::min(tx0, tx1), std::min(ty0, ty1), std::min(tz0, tz1), tmin});
-    float t1 = std::min({std::max(tx0, tx1), std::max(ty0, ty1), std::max(tz0, tz1), tmax});
+// Slab test; on a hit returns the entry and exit distances (clamped to [tmin, tmax]). Plain compares
+// (minss/maxss), no initializer lists: this is the traversal's inner kernel.
+inline bool rayBoxInterval(const Bounds3& b, const Vec3& o, const Vec3& inv, float tmin, float tmax,
+                           float& tEnter, float& tExit) {
+    const float tx0 = (b.lo.x - o.x) * inv.x, tx1 = (b.hi.x - o.x) * inv.x;
+    const float ty0 = (b.lo.y - o.y) * inv.y, ty1 = (b.hi.y - o.y) * inv.y;
+    const float tz0 = (b.lo.z - o.z) * inv.z, tz1 = (b.hi.z - o.z) * inv.z;
+    // std::min/std::max map to minss/maxss (no branches).
+    float t0 = std::max(std::max(std::min(tx0, tx1), std::min(ty0, ty1)), std::max(std::min(tz0, tz1), tmin));
+    float t1 = std::min(std::min(std::max(tx0, tx1), std::max(ty0, ty1)), std::min(std::max(tz0, tz1), tmax));
     tEnter = t0;
+    tExit = t1;
     return t0 <= t1;
+}
+
+inline bool rayBox(const Bounds3& b, Vec3 o, Vec3 inv, float tmin, float tmax, float& tEnter) {
+    float tExit;
+    return rayBoxInterval(b, o, inv, tmin, tmax, tEnter, tExit);
+}
+
+// Slab test of two adjacent boxes b[0], b[1] (the two children of a subpatch node). Returns bit 0 / bit 1
+// when the ray hits b[0] / b[1], with entry and exit distances in te[], tx[] (same arithmetic as
+// rayBoxInterval). With GCC the 12 floats are processed 4-wide.
+struct PairRay {
+#if defined(__GNUC__) && !defined(__clang__)
+    typedef float f4 __attribute__((vector_size(16)));
+    f4 o0, o1, o2, i0, i1, i2;  // o and 1/d in the lane order of three consecutive 4-float loads
+#endif
+    Vec3 o, inv;
+    PairRay(Vec3 o_, Vec3 inv_) : o(o_), inv(inv_) {
+#if defined(__GNUC__) && !defined(__clang__)
+        o0 = f4{o.x, o.y, o.z, o.x}, o1 = f4{o.y, o.z, o.x, o.y}, o2 = f4{o.z, o.x, o.y, o.z};
+        i0 = f4{inv.x, inv.y, inv.z, inv.x}, i1 = f4{inv.y, inv.z, inv.x, inv.y};
+        i2 = f4{inv.z, inv.x, inv.y, inv.z};
+#endif
+    }
+};
+
+inline int rayBoxPair(const Bounds3* b, const PairRay& r, float tmin, float tmax, float te[2], float tx[2]) {
+#if defined(__GNUC__) && !defined(__clang__)
+    static_assert(sizeof(Bounds3) == 24);
+    typedef float f4 __attribute__((vector_size(16)));
+    typedef int i4 __attribute__((vector_size(16)));
+    f4 v0, v1, v2;
+    const float* f = &b[0].lo.x;
+    __builtin_memcpy(&v0, f, 16);
+    __builtin_memcpy(&v1, f + 4, 16);
+    __builtin_memcpy(&v2, f + 8, 16);
+    // v0 = (A.lo.x A.lo.y A.lo.z A.hi.x), v1 = (A.hi.y A.hi.z B.lo.x B.lo.y), v2 = (B.lo.z B.hi.x B.hi.y
+    // B.hi.z)
+    const f4 t0 = (v0 - r.o0) * r.i0, t1 = (v1 - r.o1) * r.i1, t2 = (v2 - r.o2) * r.i2;
+    const f4 lo = __builtin_shuffle(t0, t1, i4{0, 1, 6, 7});  // A.x A.y B.x B.y (lo planes)
+    const f4 m = __builtin_shuffle(t0, t1, i4{3, 4, 2, 5});
+    const f4 hi = __builtin_shuffle(m, t2, i4{0, 1, 5, 6});  // A.x A.y B.x B.y (hi planes)
+    const f4 z = __builtin_shuffle(m, t2, i4{2, 3, 4, 7});   // A.zlo A.zhi B.zlo B.zhi
+    const f4 zs = __builtin_shuffle(z, i4{1, 0, 3, 2});
+    const f4 nxy = lo < hi ? lo : hi, fxy = lo < hi ? hi : lo;
+    const f4 nz = z < zs ? z : zs, fz = z < zs ? zs : z;
+    const f4 nxys = __builtin_shuffle(nxy, i4{1, 0, 3, 2}), fxys = __builtin_shuffle(fxy, i4{1, 0, 3, 2});
+    f4 n = nxy > nxys ? nxy : nxys, x = fxy < fxys ? fxy : fxys;
+    n = n > nz ? n : nz;
+    x = x < fz ? x : fz;
+    const f4 vmin = f4{tmin, tmin, tmin, tmin}, vmax = f4{tmax, tmax, tmax, tmax};
+    n = n > vmin ? n : vmin;
+    x = x < vmax ? x : vmax;
+    te[0] = n[0], te[1] = n[2], tx[0] = x[0], tx[1] = x[2];
+    return (n[0] <= x[0] ? 1 : 0) | (n[2] <= x[2] ? 2 : 0);
+#else
+    return (rayBoxInterval(b[0], r.o, r.inv, tmin, tmax, te[0], tx[0]) ? 1 : 0) |
+           (rayBoxInterval(b[1], r.o, r.inv, tmin, tmax, te[1], tx[1]) ? 2 : 0);
+#endif
 }
 
 struct NewtonParams {
@@ -76,9 +138,193 @@ inline float newtonTolerance(const Bounds3& box, Vec3 o) {
     return 2e-6f * mag + 1e-6f * maxComponent(box.diagonal()) + 1e-30f;
 }
 
+// The 16 control points projected on the ray's two planes: R(u,v) = (sum a1 B B, sum a2 B B). Computed once
+// per (ray, patch) and shared by all the Newton starts of that pair.
+template <class T>
+struct alignas(16) ProjectedPatch {
+    T a1[16], a2[16];  // row-major like BezierPatch::cp: [4 * j + i], u index i
+};
+
+template <class T>
+inline void projectPatch(const BezierPatch& patch, const T n1[3], const T n2[3], T d1, T d2,
+                         ProjectedPatch<T>& pp) {
+    for (int k = 0; k < 16; ++k) {
+        const Vec3& c = patch.cp[k];
+        pp.a1[k] = n1[0] * T(c.x) + n1[1] * T(c.y) + n1[2] * T(c.z) + d1;
+        pp.a2[k] = n2[0] * T(c.x) + n2[1] * T(c.y) + n2[2] * T(c.z) + d2;
+    }
+}
+
+inline void projectPatch(const BezierPatch& patch, const RayPlanes& pl, ProjectedPatch<float>& pp) {
+    const float n1[3] = {pl.n1.x, pl.n1.y, pl.n1.z}, n2[3] = {pl.n2.x, pl.n2.y, pl.n2.z};
+    projectPatch<float>(patch, n1, n2, pl.d1, pl.d2, pp);
+}
+
+// R = (r1, r2) and its Jacobian [j11 j12; j21 j22] (columns d/du, d/dv) at (u, v): scalar reference.
+template <class T>
+inline void evalProjected(const ProjectedPatch<T>& pp, T u, T v, T& r1, T& r2, T& j11, T& j12, T& j21,
+                          T& j22) {
+    T bu[4], bv[4], du[4], dv[4];
+    T s = 1 - u, t = u;
+    bu[0] = s * s * s, bu[1] = 3 * t * s * s, bu[2] = 3 * t * t * s, bu[3] = t * t * t;
+    du[0] = -3 * s * s, du[1] = 3 * s * s - 6 * t * s, du[2] = 6 * t * s - 3 * t * t, du[3] = 3 * t * t;
+    s = 1 - v, t = v;
+    bv[0] = s * s * s, bv[1] = 3 * t * s * s, bv[2] = 3 * t * t * s, bv[3] = t * t * t;
+    dv[0] = -3 * s * s, dv[1] = 3 * s * s - 6 * t * s, dv[2] = 6 * t * s - 3 * t * t, dv[3] = 3 * t * t;
+    r1 = r2 = j11 = j12 = j21 = j22 = 0;
+    for (int j = 0; j < 4; ++j) {
+        const T* p1 = pp.a1 + 4 * j;
+        const T* p2 = pp.a2 + 4 * j;
+        T c1 = p1[0] * bu[0] + p1[1] * bu[1] + p1[2] * bu[2] + p1[3] * bu[3];
+        T c2 = p2[0] * bu[0] + p2[1] * bu[1] + p2[2] * bu[2] + p2[3] * bu[3];
+        T e1 = p1[0] * du[0] + p1[1] * du[1] + p1[2] * du[2] + p1[3] * du[3];
+        T e2 = p2[0] * du[0] + p2[1] * du[1] + p2[2] * du[2] + p2[3] * du[3];
+        r1 += c1 * bv[j], r2 += c2 * bv[j];
+        j11 += e1 * bv[j], j21 += e2 * bv[j];
+        j12 += c1 * dv[j], j22 += c2 * dv[j];
+    }
+}
+
+#if defined(__GNUC__) && !defined(__clang__)
+// Float: 4-wide (GCC vector extensions, SSE2 at least). Rows of the projected net are weighted by the v
+// basis first (vectors over the u index), then dotted with the u basis; the six dot products are
+// reduced together. Same polynomial as the scalar version, different summation order.
+namespace rtsimd {
+typedef float f4 __attribute__((vector_size(16)));
+typedef int i4 __attribute__((vector_size(16)));
+inline f4 load4(const float* p) {
+    f4 v;
+    __builtin_memcpy(&v, p, sizeof(v));
+    return v;
+}
+inline f4 splat(float x) {
+    return f4{x, x, x, x};
+}
+// (sum of a, sum of b, sum of c, sum of d)
+inline f4 hsum4(f4 a, f4 b, f4 c, f4 d) {
+    const f4 ab = __builtin_shuffle(a, b, i4{0, 4, 1, 5}) + __builtin_shuffle(a, b, i4{2, 6, 3, 7});
+    const f4 cd = __builtin_shuffle(c, d, i4{0, 4, 1, 5}) + __builtin_shuffle(c, d, i4{2, 6, 3, 7});
+    return __builtin_shuffle(ab, cd, i4{0, 1, 4, 5}) + __builtin_shuffle(ab, cd, i4{2, 3, 6, 7});
+}
+}  // namespace rtsimd
+
+inline void evalProjected(const ProjectedPatch<float>& pp, float u, float v, float& r1, float& r2, float& j11,
+                          float& j12, float& j21, float& j22) {
+    using namespace rtsimd;
+    float s = 1 - u, t = u;
+    const f4 BU = {s * s * s, 3 * t * s * s, 3 * t * t * s, t * t * t};
+    const f4 DU = {-3 * s * s, 3 * s * s - 6 * t * s, 6 * t * s - 3 * t * t, 3 * t * t};
+    s = 1 - v, t = v;
+    const f4 bv0 = splat(s * s * s), bv1 = splat(3 * t * s * s), bv2 = splat(3 * t * t * s),
+             bv3 = splat(t * t * t);
+    const f4 dv0 = splat(-3 * s * s), dv1 = splat(3 * s * s - 6 * t * s), dv2 = splat(6 * t * s - 3 * t * t),
+             dv3 = splat(3 * t * t);
+    const f4 p0 = load4(pp.a1), p1 = load4(pp.a1 + 4), p2 = load4(pp.a1 + 8), p3 = load4(pp.a1 + 12);
+    const f4 q0 = load4(pp.a2), q1 = load4(pp.a2 + 4), q2 = load4(pp.a2 + 8), q3 = load4(pp.a2 + 12);
+    const f4 S1 = (p0 * bv0 + p1 * bv1) + (p2 * bv2 + p3 * bv3);
+    const f4 T1 = (p0 * dv0 + p1 * dv1) + (p2 * dv2 + p3 * dv3);
+    const f4 S2 = (q0 * bv0 + q1 * bv1) + (q2 * bv2 + q3 * bv3);
+    const f4 T2 = (q0 * dv0 + q1 * dv1) + (q2 * dv2 + q3 * dv3);
+    const f4 A = hsum4(S1 * BU, S2 * BU, S1 * DU, S2 * DU);
+    const f4 B = hsum4(T1 * BU, T2 * BU, T1 * BU, T2 * BU);
+    r1 = A[0], r2 = A[1], j11 = A[2], j21 = A[3];
+    j12 = B[0], j22 = B[1];
+}
+#endif
+
+// Newton iteration on the projected patch from (u, v) (updated in place). Stops on convergence
+// (|R|inf < eps, then one free step), leaving the domain, divergence, or 16 iterations. A singular
+// Jacobian (collapsed edge) nudges the iterate towards the domain centre. Returns convergence;
+// `iterations` receives the number of evaluations (+1 for the free step).
+template <class T>
+inline bool newtonIterate(const ProjectedPatch<T>& pp, T eps, T& u, T& v, int& iterations) {
+    const T outer = T(0.25);  // iterates may wander this far outside the domain before giving up
+    T prevNorm = std::numeric_limits<T>::infinity();
+    int it = 0, clamps = 0;
+    bool converged = false;
+    for (; it < 16; ++it) {
+        T r1, r2, j11, j12, j21, j22;
+        evalProjected(pp, u, v, r1, r2, j11, j12, j21, j22);
+        const T ar1 = std::fabs(r1), ar2 = std::fabs(r2);
+        const T norm = ar1 > ar2 ? ar1 : ar2;
+        if (!(norm == norm)) break;  // NaN
+        const T det = j11 * j22 - j12 * j21;
+        const T aj11 = std::fabs(j11), aj12 = std::fabs(j12), aj21 = std::fabs(j21), aj22 = std::fabs(j22);
+        const T ja = aj11 > aj12 ? aj11 : aj12, jb = aj21 > aj22 ? aj21 : aj22;
+        const T jscale = ja > jb ? ja : jb;
+        const bool singular = !(std::fabs(det) > T(1e-12) * jscale * jscale) || jscale == 0;
+        if (norm < eps) {
+            converged = true;
+            // One more (free) Newton step: the residual is already small, so this one is quadratic and
+            // brings the root to the precision floor without another convergence test.
+            if (!singular) {
+                const T inv = 1 / det;
+                u -= (j22 * r1 - j12 * r2) * inv;
+                v -= (j11 * r2 - j21 * r1) * inv;
+            }
+            break;
+        }
+        if (it >= 3 && norm > 2 * prevNorm) break;  // diverging
+        prevNorm = norm;
+        if (singular) {
+            // Singular Jacobian (a pole or a fold): step towards the centre and try again.
+            u += (u < T(0.5) ? T(1) : T(-1)) * T(1e-3);
+            v += (v < T(0.5) ? T(1) : T(-1)) * T(1e-3);
+            continue;
+        }
+        const T inv = 1 / det;
+        T su = (j22 * r1 - j12 * r2) * inv;
+        T sv = (j11 * r2 - j21 * r1) * inv;
+        // Damp wild steps (near-singular Jacobian far from the root).
+        const T maxStep = T(0.5);
+        const T asu = std::fabs(su), asv = std::fabs(sv);
+        const T sm = asu > asv ? asu : asv;
+        if (sm > maxStep) {
+            const T k = maxStep / sm;
+            su *= k, sv *= k;
+        }
+        u -= su;
+        v -= sv;
+        if (u < -outer || u > 1 + outer || v < -outer || v > 1 + outer) {
+            // Left the domain: clamp back once (near a collapsed edge u is nearly free and may run off
+            // while v converges); leaving it twice in a row means the root is on another patch.
+            if (++clamps > 1) break;
+            u = std::clamp(u, T(0), T(1));
+            v = std::clamp(v, T(0), T(1));
+        } else {
+            clamps = 0;
+        }
+    }
+    iterations = it + (converged ? 1 : 0);
+    return converged;
+}
+
+// Domain rule for a converged root (u, v): inside [0,1]^2 up to `domainTol`, or outside but the clamped
+// point still lies on the ray (|R| < 2 eps: a root at a collapsed edge, where u is free, or within rounding
+// of a shared edge). Returns the clamped parameters.
+template <class T>
+inline bool acceptRootDomain(const ProjectedPatch<T>& pp, T eps, T u, T v, float domainTol, float& uc,
+                             float& vc) {
+    const T tol = T(domainTol);
+    uc = std::clamp(float(u), 0.f, 1.f);
+    vc = std::clamp(float(v), 0.f, 1.f);
+    if (u < -tol || u > 1 + tol || v < -tol || v > 1 + tol) {
+        T bu[4], bv[4];
+        T s = 1 - T(uc), w = T(uc);
+        bu[0] = s * s * s, bu[1] = 3 * w * s * s, bu[2] = 3 * w * w * s, bu[3] = w * w * w;
+        s = 1 - T(vc), w = T(vc);
+        bv[0] = s * s * s, bv[1] = 3 * w * s * s, bv[2] = 3 * w * w * s, bv[3] = w * w * w;
+        T r1 = 0, r2 = 0;
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i)
+                r1 += pp.a1[4 * j + i] * bu[i] * bv[j], r2 += pp.a2[4 * j + i] * bu[i] * bv[j];
+        if (!(std::max(std::fabs(r1), std::fabs(r2)) < 2 * eps)) return false;
+    }
+    return true;
+}
+
 // Newton iteration from (u0, v0) in precision T (float in the renderer; double as the reference for the
-// precision measurement). Stops on convergence (|R|inf < epsR), leaving the domain, divergence, or 16
-// iterations. A singular Jacobian (collapsed edge) nudges the iterate towards the domain centre.
+// precision measurement): projection, newtonIterate, domain rule, then the point and t along the ray.
 template <class T>
 bool newtonSolve(const BezierPatch& patch, const RayPlanes& pl, const Ray& ray, float u0, float v0,
                  const NewtonParams& prm, PatchHit& out) {
@@ -100,102 +346,17 @@ bool newtonSolve(const BezierPatch& patch, const RayPlanes& pl, const Ray& ray, 
         d1 = -(n1.x * T(ray.o.x) + n1.y * T(ray.o.y) + n1.z * T(ray.o.z));
         d2 = -(n2.x * T(ray.o.x) + n2.y * T(ray.o.y) + n2.z * T(ray.o.z));
     }
-    // Project the control points on the two plane normals once: R and J then need 2D evaluation only.
-    T a1[16], a2[16];
-    for (int k = 0; k < 16; ++k) {
-        const Vec3& c = patch.cp[k];
-        a1[k] = n1.x * T(c.x) + n1.y * T(c.y) + n1.z * T(c.z) + d1;
-        a2[k] = n2.x * T(c.x) + n2.y * T(c.y) + n2.z * T(c.z) + d2;
-    }
+    ProjectedPatch<T> pp;
+    const T n1a[3] = {n1.x, n1.y, n1.z}, n2a[3] = {n2.x, n2.y, n2.z};
+    projectPatch<T>(patch, n1a, n2a, d1, d2, pp);
     const T eps = T(prm.epsR);
-    const T outer = T(0.25);  // iterates may wander this far outside the domain before giving up
     T u = u0, v = v0;
-    T prevNorm = std::numeric_limits<T>::infinity();
-    int it = 0, clamps = 0;
-    bool converged = false;
-    for (; it < 16; ++it) {
-        T bu[4], bv[4], du[4], dv[4];
-        {
-            T s = 1 - u, t = u;
-            bu[0] = s * s * s, bu[1] = 3 * t * s * s, bu[2] = 3 * t * t * s, bu[3] = t * t * t;
-            du[0] = -3 * s * s, du[1] = 3 * s * s - 6 * t * s, du[2] = 6 * t * s - 3 * t * t,
-            du[3] = 3 * t * t;
-            s = 1 - v, t = v;
-            bv[0] = s * s * s, bv[1] = 3 * t * s * s, bv[2] = 3 * t * t * s, bv[3] = t * t * t;
-            dv[0] = -3 * s * s, dv[1] = 3 * s * s - 6 * t * s, dv[2] = 6 * t * s - 3 * t * t,
-            dv[3] = 3 * t * t;
-        }
-        T r1 = 0, r2 = 0, j11 = 0, j12 = 0, j21 = 0, j22 = 0;
-        for (int j = 0; j < 4; ++j) {
-            const T* p1 = a1 + 4 * j;
-            const T* p2 = a2 + 4 * j;
-            T c1 = p1[0] * bu[0] + p1[1] * bu[1] + p1[2] * bu[2] + p1[3] * bu[3];
-            T c2 = p2[0] * bu[0] + p2[1] * bu[1] + p2[2] * bu[2] + p2[3] * bu[3];
-            T e1 = p1[0] * du[0] + p1[1] * du[1] + p1[2] * du[2] + p1[3] * du[3];
-            T e2 = p2[0] * du[0] + p2[1] * du[1] + p2[2] * du[2] + p2[3] * du[3];
-            r1 += c1 * bv[j], r2 += c2 * bv[j];
-            j11 += e1 * bv[j], j21 += e2 * bv[j];
-            j12 += c1 * dv[j], j22 += c2 * dv[j];
-        }
-        const T norm = std::max(std::fabs(r1), std::fabs(r2));
-        if (!(norm == norm)) break;  // NaN
-        T det = j11 * j22 - j12 * j21;
-        const T jscale = std::max({std::fabs(j11), std::fabs(j12), std::fabs(j21), std::fabs(j22)});
-        const bool singular = !(std::fabs(det) > T(1e-12) * jscale * jscale) || jscale == 0;
-        if (norm < eps) {
-            converged = true;
-            // One more (free) Newton step: the residual is already small, so this one is quadratic and
-            // brings the root to the precision floor without another convergence test.
-            if (!singular) {
-                u -= (j22 * r1 - j12 * r2) / det;
-                v -= (j11 * r2 - j21 * r1) / det;
-            }
-            break;
-        }
-        if (it >= 3 && norm > 2 * prevNorm) break;  // diverging
-        prevNorm = norm;
-        if (singular) {
-            // Singular Jacobian (a pole or a fold): step towards the centre and try again.
-            u += (u < T(0.5) ? T(1) : T(-1)) * T(1e-3);
-            v += (v < T(0.5) ? T(1) : T(-1)) * T(1e-3);
-            continue;
-        }
-        T su = (j22 * r1 - j12 * r2) / det;
-        T sv = (j11 * r2 - j21 * r1) / det;
-        // Damp wild steps (near-singular Jacobian far from the root).
-        const T maxStep = T(0.5);
-        const T sm = std::max(std::fabs(su), std::fabs(sv));
-        if (sm > maxStep) su *= maxStep / sm, sv *= maxStep / sm;
-        u -= su;
-        v -= sv;
-        if (u < -outer || u > 1 + outer || v < -outer || v > 1 + outer) {
-            // Left the domain: clamp back once (near a collapsed edge u is nearly free and may run off
-            // while v converges); leaving it twice in a row means the root is on another patch.
-            if (++clamps > 1) break;
-            u = std::clamp(u, T(0), T(1));
-            v = std::clamp(v, T(0), T(1));
-        } else {
-            clamps = 0;
-        }
-    }
-    out.iterations = it + (converged ? 1 : 0);
+    int iters = 0;
+    const bool converged = newtonIterate<T>(pp, eps, u, v, iters);
+    out.iterations = iters;
     if (!converged) return false;
-    const T tol = T(prm.domainTol);
-    const float uc = std::clamp(float(u), 0.f, 1.f), vc = std::clamp(float(v), 0.f, 1.f);
-    if (u < -tol || u > 1 + tol || v < -tol || v > 1 + tol) {
-        // Outside the domain: accept the clamped point only if it still lies on the ray (a root at a
-        // collapsed edge, where u is free, or within rounding of a shared edge).
-        T bu[4], bv[4];
-        T s = 1 - T(uc), w = T(uc);
-        bu[0] = s * s * s, bu[1] = 3 * w * s * s, bu[2] = 3 * w * w * s, bu[3] = w * w * w;
-        s = 1 - T(vc), w = T(vc);
-        bv[0] = s * s * s, bv[1] = 3 * w * s * s, bv[2] = 3 * w * w * s, bv[3] = w * w * w;
-        T r1 = 0, r2 = 0;
-        for (int j = 0; j < 4; ++j)
-            for (int i = 0; i < 4; ++i)
-                r1 += a1[4 * j + i] * bu[i] * bv[j], r2 += a2[4 * j + i] * bu[i] * bv[j];
-        if (!(std::max(std::fabs(r1), std::fabs(r2)) < 2 * eps)) return false;
-    }
+    float uc, vc;
+    if (!acceptRootDomain<T>(pp, eps, u, v, prm.domainTol, uc, vc)) return false;
     // Point and t along the ray (in the chosen precision).
     SurfacePoint sp = evalPatchDeriv(patch, uc, vc);
     T t;

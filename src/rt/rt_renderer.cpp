@@ -100,7 +100,10 @@ TraceOptions optionsFor(uint8_t kind, uint32_t ignore, float offset, bool cull) 
     return o;
 }
 
-// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates.
+// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Both children of a subpatch
+// node are tested together (they are adjacent in memory) and the nearer one is visited first, so leaves
+// come out nearly sorted. Leaves of the ray's originating patch whose box the ray leaves before the
+// self-intersection distance are not emitted: every root inside such a leaf would be rejected anyway.
 void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
     const size_t n = rays.size();
     const size_t nChunks = (n + kChunk - 1) / kChunk;
@@ -108,27 +111,32 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     const Bvh& bvh = acc.bvh;
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
+    const Vec2* leafCentre = forest.leafCentre.data();
+    const float ignoreT = 8.f * acc.offset;
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         Chunk& ch = chunks[ci];
         ch.cand.clear();
         ch.segEnd.clear();
         ch.c = Counters();
+        uint64_t boxTests = 0;
         const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
         for (size_t r = r0; r < r1; ++r) {
             const size_t segBegin = ch.cand.size();
             const Vec3 o = rays.o[r], d = rays.d[r];
             const Vec3 inv = safeInverse(d);
+            const PairRay pr(o, inv);
             const float tmin = rays.tmin[r], tmax = rays.tmax[r];
             const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
+            const uint32_t ignore = rays.ignore[r];
             uint32_t stack[64];
             int sp = 0;
             if (!bvh.nodes.empty()) stack[sp++] = 0;
             while (sp > 0) {
-                const BvhNode& node = bvh.nodes[stack[--sp]];
-                const uint32_t ni = uint32_t(&node - bvh.nodes.data());
-                float te;
-                ++ch.c.boxTests;
-                if (!rayBox(node.box, o, inv, tmin, tmax, te)) continue;
+                const uint32_t ni = stack[--sp];
+                const BvhNode& node = bvh.nodes[ni];
+                float te, tx;
+                ++boxTests;
+                if (!rayBoxInterval(node.box, o, inv, tmin, tmax, te, tx)) continue;
                 if (node.count == 0) {
                     // Visit the near child first (pushed last).
                     if (d[node.axis] < 0.f) {
@@ -144,42 +152,87 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                     const uint32_t patch = bvh.prims[node.offset + k];
                     const Bounds3* tree = forest.tree(patch);
                     const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                    const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
+                    ++boxTests;
+                    if (!rayBoxInterval(tree[0], o, inv, tmin, tmax, te, tx) || tx < selfT ||
+                        (back && back[0]))
+                        continue;
+                    if (firstLeaf == 0) {
+                        ch.cand.push_back({uint32_t(r), patch, leafCentre[0].x, leafCentre[0].y, te});
+                        continue;
+                    }
+                    // Stack of nodes whose box the ray hits; their children are tested as a pair.
                     uint32_t st[32];
                     int s2 = 0;
                     st[s2++] = 0;
                     while (s2 > 0) {
-                        const uint32_t m = st[--s2];
-                        ++ch.c.boxTests;
-                        if (!rayBox(tree[m], o, inv, tmin, tmax, te)) continue;
-                        if (back && back[m]) continue;
+                        const uint32_t m = 2 * st[--s2] + 1;
+                        float tn[2], tf[2];
+                        const int mask = rayBoxPair(tree + m, pr, tmin, tmax, tn, tf);
+                        const float ta = tn[0], tb = tn[1];
+                        const bool ha = (mask & 1) && tf[0] >= selfT && !(back && back[m]);
+                        const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
+                        boxTests += 2;
                         if (m >= firstLeaf) {
-                            const Vec2 c = forest.leafCentre[m - firstLeaf];
-                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, te});
-                        } else {
-                            st[s2++] = 2 * m + 2;
-                            st[s2++] = 2 * m + 1;
+                            // Leaves: emit the nearer first.
+                            const bool swap = hb && (!ha || tb < ta);
+                            if (swap) {
+                                const Vec2 c = leafCentre[m + 1 - firstLeaf];
+                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
+                            }
+                            if (ha) {
+                                const Vec2 c = leafCentre[m - firstLeaf];
+                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, ta});
+                            }
+                            if (hb && !swap) {
+                                const Vec2 c = leafCentre[m + 1 - firstLeaf];
+                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
+                            }
+                            continue;
+                        }
+                        // Push the far child first so that the near one is expanded first.
+                        if (ha && hb) {
+                            if (ta <= tb) {
+                                st[s2++] = m + 1;
+                                st[s2++] = m;
+                            } else {
+                                st[s2++] = m;
+                                st[s2++] = m + 1;
+                            }
+                        } else if (ha) {
+                            st[s2++] = m;
+                        } else if (hb) {
+                            st[s2++] = m + 1;
                         }
                     }
                 }
             }
-            // Sort the ray's candidates by entry distance (stable insertion sort: short segments).
-            for (size_t i = segBegin + 1; i < ch.cand.size(); ++i) {
-                Candidate x = ch.cand[i];
+            // Sort the ray's candidates by entry distance (stable insertion sort: short, nearly sorted).
+            Candidate* cd = ch.cand.data();
+            const size_t segEnd = ch.cand.size();
+            for (size_t i = segBegin + 1; i < segEnd; ++i) {
+                if (!(cd[i - 1].tEnter > cd[i].tEnter)) continue;
+                const Candidate x = cd[i];
                 size_t j = i;
-                while (j > segBegin && ch.cand[j - 1].tEnter > x.tEnter) {
-                    ch.cand[j] = ch.cand[j - 1];
+                while (j > segBegin && cd[j - 1].tEnter > x.tEnter) {
+                    cd[j] = cd[j - 1];
                     --j;
                 }
-                ch.cand[j] = x;
+                cd[j] = x;
             }
-            ch.segEnd.push_back(uint32_t(ch.cand.size()));
+            ch.segEnd.push_back(uint32_t(segEnd));
         }
         ch.c.candidates = ch.cand.size();
+        ch.c.boxTests = boxTests;
     });
 }
 
 // Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
 // sorted candidates; candidates whose box starts beyond the best hit so far cannot win and are skipped).
+// The projection of a patch on the ray's planes is computed once per (ray, patch) run of candidates; a
+// candidate whose leaf rectangle contains a root already found on the same patch for this ray is skipped
+// (its start would converge to that root again); the surface derivatives are evaluated once per ray, at
+// the closest hit.
 void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks,
                 std::vector<RayHit>& hits, bool cull) {
     const size_t n = rays.size();
@@ -187,10 +240,14 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     hits.assign(n, RayHit());
     float hu, hv;
     leafHalfSize(acc.forest.depth, hu, hv);
+    // A root within this margin of a leaf counts as inside it (Newton from the leaf centre finds it).
+    const float du = 1.01f * hu, dv = 1.01f * hv;
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         Chunk& ch = chunks[ci];
         const size_t r0 = ci * kChunk;
         uint32_t begin = 0;
+        uint64_t runs = 0, iterTotal = 0;
+        ProjectedPatch<float> pp;
         for (size_t k = 0; k < ch.segEnd.size(); ++k) {
             const uint32_t end = ch.segEnd[k];
             const size_t r = r0 + k;
@@ -198,28 +255,62 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             Ray ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
             const TraceOptions opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
             const RayPlanes pl = makeRayPlanes(ray.o, ray.d);
-            RayHit& best = hits[r];
+            const float invDD = 1.f / dot(ray.d, ray.d);
+            uint32_t projected = kNone, bestPatch = kNone;
+            float eps = 0.f, bestU = 0.f, bestV = 0.f;
+            // Last converged root (accepted or not) per patch run, for the duplicate-start test.
+            uint32_t rootPatch = kNone;
+            float rootU = 0.f, rootV = 0.f;
             for (uint32_t i = begin; i < end; ++i) {
                 const Candidate& c = ch.cand[i];
                 if (c.tEnter > ray.tmax) break;
-                NewtonParams prm{newtonTolerance(acc.forest.tree(c.patch)[0], ray.o)};
-                PatchHit h;
-                uint32_t runs = 0, iters = 0;
-                bool ok =
-                    solveLeaf<float>(acc.patches[c.patch], pl, ray, c.u0, c.v0, hu, hv, prm, h, runs, iters);
-                ch.c.newtonRuns += runs;
-                ch.c.newtonIterations += iters;
-                ++ch.c.hist[std::min(int(iters), kHistBins - 1)];
-                if (ok && h.t < ray.tmax && acceptHit(acc, ray, opt, c.patch, h)) {
-                    best.hit = true;
-                    best.patch = c.patch;
-                    best.h = h;
-                    ray.tmax = h.t;
-                    if (opt.anyHit) break;
+                if (c.patch == rootPatch && std::fabs(rootU - c.u0) <= du && std::fabs(rootV - c.v0) <= dv)
+                    continue;
+                const BezierPatch& patch = acc.patches[c.patch];
+                if (c.patch != projected) {
+                    projectPatch(patch, pl, pp);
+                    eps = newtonTolerance(acc.forest.tree(c.patch)[0], ray.o);
+                    projected = c.patch;
                 }
+                float u = c.u0, v = c.v0;
+                int iters = 0;
+                const bool conv = newtonIterate<float>(pp, eps, u, v, iters);
+                ++runs;
+                iterTotal += uint32_t(iters);
+                ++ch.c.hist[std::min(iters, kHistBins - 1)];
+                float uc, vc;
+                if (!conv || !acceptRootDomain<float>(pp, eps, u, v, 1e-4f, uc, vc)) continue;
+                rootPatch = c.patch, rootU = uc, rootV = vc;
+                const float t = dot(evalPatch(patch, uc, vc) - ray.o, ray.d) * invDD;
+                if (!(t > ray.tmin && t < ray.tmax)) continue;
+                if (c.patch == opt.ignorePatch && t < opt.ignoreT) continue;
+                if (opt.respectSides && !acc.twoSided[c.patch]) {
+                    const SurfacePoint sp = evalPatchDeriv(patch, uc, vc);
+                    Vec3 N = cross(sp.dpdu, sp.dpdv);
+                    if (acc.flip[c.patch]) N = -N;
+                    if (dot(N, ray.d) > 0.f) continue;  // back face of a one-sided surface
+                }
+                bestPatch = c.patch, bestU = uc, bestV = vc;
+                ray.tmax = t;
+                if (opt.anyHit) break;
+            }
+            if (bestPatch != kNone) {
+                RayHit& best = hits[r];
+                const SurfacePoint sp = evalPatchDeriv(acc.patches[bestPatch], bestU, bestV);
+                best.hit = true;
+                best.patch = bestPatch;
+                best.h.hit = true;
+                best.h.t = ray.tmax;
+                best.h.u = bestU;
+                best.h.v = bestV;
+                best.h.p = sp.p;
+                best.h.dpdu = sp.dpdu;
+                best.h.dpdv = sp.dpdv;
             }
             begin = end;
         }
+        ch.c.newtonRuns = runs;
+        ch.c.newtonIterations = iterTotal;
     });
 }
 
