@@ -43,43 +43,6 @@ bool looksLikeObj(const std::string& text) {
     return false;
 }
 
-// Camera and lights for a scene without its own: the bounding box seen from the front-right and above,
-// with `up` as the vertical axis. frameSceneDefault() is the z-up case; models from polygon modellers
-// (OBJ, Big Guy) are y-up.
-void frameSceneYUp(Scene& scene, int width, int height) {
-    frameSceneDefault(scene, width, height);  // image options, clipping and the light set-up
-    Bounds3 b = scene.worldBounds();
-    if (b.empty()) return;
-    Vec3 c = b.center();
-    float radius = 0.5f * length(b.diagonal());
-    if (!(radius > 0)) radius = 1;
-    Camera& cam = scene.camera;
-    float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 1.05f;
-    Vec3 dir = normalize(Vec3{-0.45f, -0.3f, -0.84f});  // looking at the model's front (+z) from right, above
-    Vec3 eye = c - dir * dist;
-    Vec3 up{0, 1, 0};
-    // Camera space is left-handed (x right, y up, z forward): x = z x up keeps the picture unmirrored.
-    Vec3 zc = dir;
-    Vec3 xc = normalize(cross(zc, up));
-    Vec3 yc = cross(xc, zc);
-    Mat4 m;
-    const Vec3 axes[3] = {xc, yc, zc};
-    for (int r = 0; r < 3; ++r) {
-        m.m[r][0] = axes[r].x;
-        m.m[r][1] = axes[r].y;
-        m.m[r][2] = axes[r].z;
-        m.m[r][3] = -dot(axes[r], eye);
-    }
-    cam.cameraFromWorld = m;
-    cam.nearClip = dist * 1e-3f;
-    cam.farClip = dist * 100.f;
-    scene.lights.clear();
-    scene.lights.push_back({LightType::Ambient, {0.08f, 0.08f, 0.08f}, {}, {}});
-    scene.lights.push_back(
-        {LightType::Distant, {0.9f, 0.88f, 0.85f}, eye + xc * dist * -0.6f + yc * dist * 0.8f, c});
-    scene.lights.push_back({LightType::Distant, {0.25f, 0.27f, 0.3f}, eye + xc * dist, c});
-}
-
 // Patches without a scene around them: one object, one plastic material, a synthesised camera.
 Scene patchScene(const std::string& path, std::vector<BezierPatch> patches, bool yUp) {
     Scene scene;
@@ -89,7 +52,7 @@ Scene patchScene(const std::string& path, std::vector<BezierPatch> patches, bool
     scene.attributes.assign(scene.patches.size(), PatchAttributes{});
     scene.objectCount = 1;
     if (yUp)
-        frameSceneYUp(scene, 800, 600);
+        frameSceneDefault(scene, 800, 600, UpAxis::Y);  // models from polygon modellers
     else
         frameSceneDefault(scene, 800, 600);
     return scene;

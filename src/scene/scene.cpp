@@ -10,7 +10,7 @@ Bounds3 Scene::worldBounds() const {
     return b;
 }
 
-void frameSceneDefault(Scene& scene, int width, int height) {
+void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
     Bounds3 b = scene.worldBounds();
     if (b.empty()) b = Bounds3{{-1, -1, -1}, {1, 1, 1}};
     Vec3 c = b.center();
@@ -20,12 +20,13 @@ void frameSceneDefault(Scene& scene, int width, int height) {
     cam.width = width;
     cam.height = height;
     cam.fovDegrees = 30.f;
-    // Look at the centre from the (+x, -y, +z) octant (z is up, as in the teapot data).
-    Vec3 dir = normalize(Vec3{-0.55f, 0.75f, -0.38f});  // viewing direction
+    // Viewing direction: towards the model's front from the right and above.
+    const bool zUp = upAxis == UpAxis::Z;
+    Vec3 dir = zUp ? normalize(Vec3{-0.55f, 0.75f, -0.38f}) : normalize(Vec3{-0.45f, -0.3f, -0.84f});
     // The bounding sphere of the box is conservative (about 1.3x for typical models): pull in a little.
     float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 0.85f;
     Vec3 eye = c - dir * dist;
-    Vec3 up{0, 0, 1};
+    Vec3 up = zUp ? Vec3{0, 0, 1} : Vec3{0, 1, 0};
     Vec3 zc = dir;                          // camera +z: into the screen
     // Right-handed world to left-handed camera: right = forward x up, up = right x forward.
     Vec3 xc = normalize(cross(zc, up));

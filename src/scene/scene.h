@@ -64,9 +64,12 @@ struct Scene {
     Bounds3 worldBounds() const;
 };
 
-// For inputs without a camera (.bpt): frame the bounding box from a default viewpoint and add a
-// default key/fill light so that any patch file renders something sensible.
-void frameSceneDefault(Scene& scene, int width, int height);
+enum class UpAxis { Y, Z };
+
+// For inputs without a camera (.bpt, OBJ, Micropolis): frame the bounding box from the front-right and
+// above, with `up` vertical (the teapot data is z-up, models from polygon modellers y-up), and add an
+// ambient, a key and a fill light so that any patch file renders something sensible.
+void frameSceneDefault(Scene& scene, int width, int height, UpAxis up = UpAxis::Z);
 
 }  // namespace tessera
 
