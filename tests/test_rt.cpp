@@ -564,3 +564,61 @@ TEST(RtCulling, CullBackfacesKeepsAClosedSurfaceImage) {
                 (unsigned long long)b.stats["candidates"].get<uint64_t>());
     EXPECT_LT(b.stats["candidates"].get<uint64_t>(), a.stats["candidates"].get<uint64_t>());
 }
+
+TEST(RtHierarchy, SubpatchBoxesNestAndContainTheSurfaceAndWideBvhCoversEveryPatch) {
+    // Leaf boxes come from the subdivided control grid, inner boxes are unions of their children: every
+    // node must contain its children and the surface of its (u,v) rectangle, for odd and even depths.
+    Scene s = loadTeapotBpt();
+    for (int depth : {0, 1, 5, 6}) {
+        SubpatchForest f;
+        buildSubpatchForest(s.patches, depth, f);
+        const uint32_t firstLeaf = f.firstLeaf();
+        for (uint32_t p = 0; p < s.patches.size(); ++p) {
+            const Bounds3* tree = f.tree(p);
+            for (uint32_t i = 0; i < firstLeaf; ++i)
+                for (uint32_t c : {2 * i + 1, 2 * i + 2})
+                    for (int k = 0; k < 3; ++k) {
+                        EXPECT_LE(tree[i].lo[k], tree[c].lo[k]);
+                        EXPECT_GE(tree[i].hi[k], tree[c].hi[k]);
+                    }
+            for (uint32_t l = 0; l <= firstLeaf; ++l) {
+                float u0, u1, v0, v1;
+                subpatchLeafRect(depth, l, u0, u1, v0, v1);
+                const Bounds3& b = tree[firstLeaf + l];
+                for (int j = 0; j <= 4; ++j)
+                    for (int i = 0; i <= 4; ++i) {
+                        const Vec3 q =
+                            evalPatch(s.patches[p], u0 + (u1 - u0) * i / 4, v0 + (v1 - v0) * j / 4);
+                        for (int k = 0; k < 3; ++k) {
+                            EXPECT_LE(b.lo[k], q[k]) << "depth " << depth << " patch " << p << " leaf " << l;
+                            EXPECT_GE(b.hi[k], q[k]) << "depth " << depth << " patch " << p << " leaf " << l;
+                        }
+                    }
+            }
+        }
+    }
+    // The 4-wide BVH references every patch exactly once, with its root box.
+    RtAccel acc;
+    buildRtAccel(s, Mat4::identity(), 6, false, acc);
+    std::vector<int> seen(s.patches.size(), 0);
+    ASSERT_FALSE(acc.bvh.wide.empty());
+    for (const Bvh4Node& nd : acc.bvh.wide) {
+        ASSERT_GE(nd.count, 1u);
+        ASSERT_LE(nd.count, 4u);
+        for (uint32_t i = 0; i < nd.count; ++i) {
+            if (!(nd.child[i] & kBvh4Patch)) {
+                EXPECT_LT(nd.child[i], acc.bvh.wide.size());
+                continue;
+            }
+            const uint32_t p = nd.child[i] & ~kBvh4Patch;
+            ASSERT_LT(p, s.patches.size());
+            ++seen[p];
+            const Bounds3& root = acc.forest.tree(p)[0];
+            for (int k = 0; k < 3; ++k) {
+                EXPECT_EQ(nd.lo[k][i], root.lo[k]);
+                EXPECT_EQ(nd.hi[k][i], root.hi[k]);
+            }
+        }
+    }
+    for (int c : seen) EXPECT_EQ(c, 1);
+}

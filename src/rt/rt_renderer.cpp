@@ -10,6 +10,9 @@
 #include <cmath>
 #include <memory>
 #include <mutex>
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
 
 namespace tessera {
 namespace {
@@ -100,6 +103,59 @@ TraceOptions optionsFor(uint8_t kind, uint32_t ignore, float offset, bool cull) 
     return o;
 }
 
+// Stack for the 4-wide BVH: each level pushes at most 3 more nodes than it pops.
+constexpr int kBvh4Stack = 3 * 64 + 1;
+
+// A ray for the 4-wide BVH test (origin, reciprocal direction and interval in all four lanes).
+struct Ray4 {
+#if defined(__SSE2__)
+    __m128 ox, oy, oz, ix, iy, iz, t0, t1;
+    Ray4(Vec3 o, Vec3 inv, float tmin, float tmax)
+        : ox(_mm_set1_ps(o.x)),
+          oy(_mm_set1_ps(o.y)),
+          oz(_mm_set1_ps(o.z)),
+          ix(_mm_set1_ps(inv.x)),
+          iy(_mm_set1_ps(inv.y)),
+          iz(_mm_set1_ps(inv.z)),
+          t0(_mm_set1_ps(tmin)),
+          t1(_mm_set1_ps(tmax)) {}
+#else
+    Vec3 o, inv;
+    float tmin, tmax;
+    Ray4(Vec3 o_, Vec3 inv_, float tmin_, float tmax_) : o(o_), inv(inv_), tmin(tmin_), tmax(tmax_) {}
+#endif
+};
+
+// Slab test of the four child boxes of a 4-wide node: bit i set when the ray hits child i (< count), with
+// the entry and exit distances in te[i], tx[i] (same values as rayBoxInterval: no NaNs can occur, so the
+// min/max are order independent).
+inline int rayBox4(const Bvh4Node& nd, const Ray4& r, float te[4], float tx[4]) {
+#if defined(__SSE2__)
+    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.lo[0]), r.ox), r.ix);
+    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.hi[0]), r.ox), r.ix);
+    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.lo[1]), r.oy), r.iy);
+    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.hi[1]), r.oy), r.iy);
+    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.lo[2]), r.oz), r.iz);
+    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.hi[2]), r.oz), r.iz);
+    const __m128 n =
+        _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
+    const __m128 f =
+        _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
+    _mm_storeu_ps(te, n);
+    _mm_storeu_ps(tx, f);
+    return _mm_movemask_ps(_mm_cmple_ps(n, f)) & ((1 << nd.count) - 1);
+#else
+    int mask = 0;
+    for (uint32_t i = 0; i < nd.count; ++i) {
+        Bounds3 b;
+        b.lo = {nd.lo[0][i], nd.lo[1][i], nd.lo[2][i]};
+        b.hi = {nd.hi[0][i], nd.hi[1][i], nd.hi[2][i]};
+        if (rayBoxInterval(b, r.o, r.inv, r.tmin, r.tmax, te[i], tx[i])) mask |= 1 << i;
+    }
+    return mask;
+#endif
+}
+
 // Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Both children of a subpatch
 // node are tested together (they are adjacent in memory) and the nearer one is visited first, so leaves
 // come out nearly sorted. Leaves of the ray's originating patch whose box the ray leaves before the
@@ -128,83 +184,90 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
             const float tmin = rays.tmin[r], tmax = rays.tmax[r];
             const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
             const uint32_t ignore = rays.ignore[r];
-            uint32_t stack[64];
-            int sp = 0;
-            if (!bvh.nodes.empty()) stack[sp++] = 0;
-            while (sp > 0) {
-                const uint32_t ni = stack[--sp];
-                const BvhNode& node = bvh.nodes[ni];
-                float te, tx;
-                ++boxTests;
-                if (!rayBoxInterval(node.box, o, inv, tmin, tmax, te, tx)) continue;
-                if (node.count == 0) {
-                    // Visit the near child first (pushed last).
-                    if (d[node.axis] < 0.f) {
-                        stack[sp++] = ni + 1;
-                        stack[sp++] = node.offset;
-                    } else {
-                        stack[sp++] = node.offset;
-                        stack[sp++] = ni + 1;
-                    }
-                    continue;
+            // One patch whose root box the ray enters at te and leaves at tx: its subpatch tree.
+            auto visitPatch = [&](uint32_t patch, float te, float tx) {
+                const Bounds3* tree = forest.tree(patch);
+                const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
+                if (tx < selfT || (back && back[0])) return;
+                if (firstLeaf == 0) {
+                    ch.cand.push_back({uint32_t(r), patch, leafCentre[0].x, leafCentre[0].y, te});
+                    return;
                 }
-                for (uint32_t k = 0; k < node.count; ++k) {
-                    const uint32_t patch = bvh.prims[node.offset + k];
-                    const Bounds3* tree = forest.tree(patch);
-                    const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
-                    const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
-                    ++boxTests;
-                    if (!rayBoxInterval(tree[0], o, inv, tmin, tmax, te, tx) || tx < selfT ||
-                        (back && back[0]))
-                        continue;
-                    if (firstLeaf == 0) {
-                        ch.cand.push_back({uint32_t(r), patch, leafCentre[0].x, leafCentre[0].y, te});
+                // Stack of nodes whose box the ray hits; their children are tested as a pair.
+                uint32_t st[32];
+                int s2 = 0;
+                st[s2++] = 0;
+                while (s2 > 0) {
+                    const uint32_t m = 2 * st[--s2] + 1;
+                    float tn[2], tf[2];
+                    const int mask = rayBoxPair(tree + m, pr, tmin, tmax, tn, tf);
+                    const float ta = tn[0], tb = tn[1];
+                    const bool ha = (mask & 1) && tf[0] >= selfT && !(back && back[m]);
+                    const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
+                    boxTests += 2;
+                    if (m >= firstLeaf) {
+                        // Leaves: emit the nearer first.
+                        const bool swap = hb && (!ha || tb < ta);
+                        if (swap) {
+                            const Vec2 c = leafCentre[m + 1 - firstLeaf];
+                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
+                        }
+                        if (ha) {
+                            const Vec2 c = leafCentre[m - firstLeaf];
+                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, ta});
+                        }
+                        if (hb && !swap) {
+                            const Vec2 c = leafCentre[m + 1 - firstLeaf];
+                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
+                        }
                         continue;
                     }
-                    // Stack of nodes whose box the ray hits; their children are tested as a pair.
-                    uint32_t st[32];
-                    int s2 = 0;
-                    st[s2++] = 0;
-                    while (s2 > 0) {
-                        const uint32_t m = 2 * st[--s2] + 1;
-                        float tn[2], tf[2];
-                        const int mask = rayBoxPair(tree + m, pr, tmin, tmax, tn, tf);
-                        const float ta = tn[0], tb = tn[1];
-                        const bool ha = (mask & 1) && tf[0] >= selfT && !(back && back[m]);
-                        const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
-                        boxTests += 2;
-                        if (m >= firstLeaf) {
-                            // Leaves: emit the nearer first.
-                            const bool swap = hb && (!ha || tb < ta);
-                            if (swap) {
-                                const Vec2 c = leafCentre[m + 1 - firstLeaf];
-                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
-                            }
-                            if (ha) {
-                                const Vec2 c = leafCentre[m - firstLeaf];
-                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, ta});
-                            }
-                            if (hb && !swap) {
-                                const Vec2 c = leafCentre[m + 1 - firstLeaf];
-                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
-                            }
-                            continue;
-                        }
-                        // Push the far child first so that the near one is expanded first.
-                        if (ha && hb) {
-                            if (ta <= tb) {
-                                st[s2++] = m + 1;
-                                st[s2++] = m;
-                            } else {
-                                st[s2++] = m;
-                                st[s2++] = m + 1;
-                            }
-                        } else if (ha) {
+                    // Push the far child first so that the near one is expanded first.
+                    if (ha && hb) {
+                        if (ta <= tb) {
+                            st[s2++] = m + 1;
                             st[s2++] = m;
-                        } else if (hb) {
+                        } else {
+                            st[s2++] = m;
                             st[s2++] = m + 1;
                         }
+                    } else if (ha) {
+                        st[s2++] = m;
+                    } else if (hb) {
+                        st[s2++] = m + 1;
                     }
+                }
+            };
+            // 4-wide BVH: the hit children in order of entry; inner nodes are pushed far first, patches
+            // are visited at once (near first).
+            const Ray4 r4(o, inv, tmin, tmax);
+            uint32_t stack[kBvh4Stack];
+            int sp = 0;
+            if (!bvh.wide.empty()) stack[sp++] = 0;
+            while (sp > 0) {
+                const Bvh4Node& nd = bvh.wide[stack[--sp]];
+                float te[4], tx[4];
+                int mask = rayBox4(nd, r4, te, tx);
+                boxTests += nd.count;
+                int order[4], k = 0;
+                while (mask) {
+                    const int i = __builtin_ctz(unsigned(mask));
+                    mask &= mask - 1;
+                    int j = k++;
+                    while (j > 0 && te[order[j - 1]] > te[i]) {
+                        order[j] = order[j - 1];
+                        --j;
+                    }
+                    order[j] = i;
+                }
+                for (int q = k - 1; q >= 0; --q) {
+                    const uint32_t c = nd.child[order[q]];
+                    if (!(c & kBvh4Patch)) stack[sp++] = c;
+                }
+                for (int q = 0; q < k; ++q) {
+                    const uint32_t c = nd.child[order[q]];
+                    if (c & kBvh4Patch) visitPatch(c & ~kBvh4Patch, te[order[q]], tx[order[q]]);
                 }
             }
             // Sort the ray's candidates by entry distance (stable insertion sort: short, nearly sorted).
@@ -536,6 +599,9 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     }
     buildBvh(roots, acc.bvh);
     for (uint32_t& p : acc.bvh.prims) p = ids[p];
+    std::vector<Bounds3> patchBox(n);
+    for (size_t i = 0; i < n; ++i) patchBox[i] = acc.forest.tree(uint32_t(i))[0];
+    collapseBvh4(acc.bvh, patchBox);
     acc.bvhMs = msSince(t1);
     float mag = 0.f;
     if (!all.empty())

@@ -4,6 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
 
 namespace tessera {
 namespace {
@@ -31,22 +34,171 @@ bool facesAwayFromOrigin(const BezierPatch& p, const Bounds3& box, float sign) {
     return true;
 }
 
-void buildNode(const BezierPatch& p, int level, int depth, uint32_t node, Bounds3* boxes, uint8_t* back,
-               float sign) {
-    boxes[node] = enlargedHull(p);
-    if (level == depth) {
-        if (back) back[node] = facesAwayFromOrigin(p, boxes[node], sign);
-        return;
+// One de Casteljau split at 1/2 of `width` cubics at once (one float of each per array): the control
+// points a, p1, p2, p3 become the 7 points a, q1, p1, q3, p2, q5, p3 of the two halves. The seven arrays
+// are disjoint (restrict parameters, so the loop vectorizes).
+__attribute__((noinline)) void halfSplit(const float* __restrict a, float* __restrict p1,
+                                         float* __restrict p2, const float* __restrict p3,
+                                         float* __restrict q1, float* __restrict q3, float* __restrict q5,
+                                         size_t width) {
+    for (size_t w = 0; w < width; ++w) {
+        const float x0 = a[w], x1 = p1[w], x2 = p2[w], x3 = p3[w];
+        const float m01 = 0.5f * (x0 + x1), m12 = 0.5f * (x1 + x2), m23 = 0.5f * (x2 + x3);
+        const float m012 = 0.5f * (m01 + m12), m123 = 0.5f * (m12 + m23);
+        q1[w] = m01;
+        p1[w] = m012;
+        q3[w] = 0.5f * (m012 + m123);
+        p2[w] = m123;
+        q5[w] = m23;
     }
-    BezierPatch lo, hi;
-    if ((level & 1) == 0)
-        splitPatchU(p, 0.5f, lo, hi);
-    else
-        splitPatchV(p, 0.5f, lo, hi);
-    buildNode(lo, level + 1, depth, 2 * node + 1, boxes, back, sign);
-    buildNode(hi, level + 1, depth, 2 * node + 2, boxes, back, sign);
-    if (back) back[node] = back[2 * node + 1] & back[2 * node + 2];
 }
+
+// Uniform subdivision of a cubic into 2^m pieces by repeated halving (de Casteljau at 1/2), in place:
+// point k of the result (k = 0 .. 3 * 2^m) starts at base + k * stride and has `width` floats (width <=
+// stride); the four control points must be at k = 0, 2^m, 2 * 2^m, 3 * 2^m. Every point is a vector of
+// `width` floats, so one call subdivides many curves at once (a whole row of the grid below).
+void subdivideUniform(float* base, size_t stride, size_t width, int m) {
+    for (int level = 0; level < m; ++level) {
+        const size_t h = size_t(1) << (m - level - 1);  // new spacing (in points)
+        const size_t segs = size_t(1) << level;
+        for (size_t s = 0; s < segs; ++s) {
+            float* a = base + (6 * h * s) * stride;
+            halfSplit(a, a + 2 * h * stride, a + 4 * h * stride, a + 6 * h * stride, a + h * stride,
+                      a + 3 * h * stride, a + 5 * h * stride, width);
+        }
+    }
+}
+
+// Min and max over 4 arrays (elementwise), and over 4 floats 3 apart (windows of 4 points along a row).
+// n is rounded up to a multiple of 4: the arrays must be readable / writable that far (padded).
+void minMax4(const float* r0, const float* r1, const float* r2, const float* r3, float* lo, float* hi,
+             size_t n) {
+#if defined(__SSE2__)
+    for (size_t f = 0; f < n; f += 4) {
+        const __m128 a0 = _mm_loadu_ps(r0 + f), a1 = _mm_loadu_ps(r1 + f), a2 = _mm_loadu_ps(r2 + f),
+                     a3 = _mm_loadu_ps(r3 + f);
+        _mm_storeu_ps(lo + f, _mm_min_ps(_mm_min_ps(a0, a1), _mm_min_ps(a2, a3)));
+        _mm_storeu_ps(hi + f, _mm_max_ps(_mm_max_ps(a0, a1), _mm_max_ps(a2, a3)));
+    }
+#else
+    for (size_t f = 0; f < n; ++f) {
+        lo[f] = std::min(std::min(r0[f], r1[f]), std::min(r2[f], r3[f]));
+        hi[f] = std::max(std::max(r0[f], r1[f]), std::max(r2[f], r3[f]));
+    }
+#endif
+}
+void windowMinMax(const float* lo, const float* hi, float* wl, float* wh, size_t n) {
+#if defined(__SSE2__)
+    for (size_t f = 0; f < n; f += 4) {
+        _mm_storeu_ps(wl + f, _mm_min_ps(_mm_min_ps(_mm_loadu_ps(lo + f), _mm_loadu_ps(lo + f + 3)),
+                                         _mm_min_ps(_mm_loadu_ps(lo + f + 6), _mm_loadu_ps(lo + f + 9))));
+        _mm_storeu_ps(wh + f, _mm_max_ps(_mm_max_ps(_mm_loadu_ps(hi + f), _mm_loadu_ps(hi + f + 3)),
+                                         _mm_max_ps(_mm_loadu_ps(hi + f + 6), _mm_loadu_ps(hi + f + 9))));
+    }
+#else
+    for (size_t f = 0; f < n; ++f) {
+        wl[f] = std::min(std::min(lo[f], lo[f + 3]), std::min(lo[f + 6], lo[f + 9]));
+        wh[f] = std::max(std::max(hi[f], hi[f + 3]), std::max(hi[f + 6], hi[f + 9]));
+    }
+#endif
+}
+
+// Enlarge a box by the relative and absolute margin of enlargedHull.
+Bounds3 enlarge(Bounds3 b) {
+    auto mx = [](float x, float y) { return x < y ? y : x; };
+    const float mag =
+        mx(mx(mx(std::fabs(b.lo.x), std::fabs(b.hi.x)), mx(std::fabs(b.lo.y), std::fabs(b.hi.y))),
+           mx(std::fabs(b.lo.z), std::fabs(b.hi.z)));
+    const float ext = mx(mx(b.hi.x - b.lo.x, b.hi.y - b.lo.y), b.hi.z - b.lo.z);
+    const float eps = 1e-5f * ext + 4e-7f * mag + 1e-30f;
+    b.lo -= Vec3{eps, eps, eps};
+    b.hi += Vec3{eps, eps, eps};
+    return b;
+}
+
+// One patch's tree. The leaves form a grid of nu x nv subpatches (nu = 2^ceil(D/2) in u, nv = 2^floor(D/2)
+// in v); their control points are the (3 nu + 1) x (3 nv + 1) grid made by subdividing the rows in u,
+// then all columns at once in v (de Casteljau at 1/2, the same splits as the tree, in another order).
+// Leaf boxes are the enlarged hulls of their 4x4 windows of the grid; every inner box is the union of
+// its two children (conservative: the children's hulls contain the subpatch).
+struct TreeBuilder {
+    int depth, mu, mv;  // mu + mv = depth
+    size_t nu, nv, cols, rows;
+    std::vector<float> grid;           // rows x cols points, xyz interleaved
+    std::vector<float> rowLo, rowHi;   // scratch: min/max over the 4 grid rows of one leaf row
+    std::vector<float> winLo, winHi;   // per leaf row: min/max over the 4x4 window starting at each float
+    std::vector<uint32_t> leafOfCell;  // cell b * nu + a -> leaf index in the tree's numbering
+
+    explicit TreeBuilder(int d) : depth(d), mu((d + 1) / 2), mv(d / 2) {
+        nu = size_t(1) << mu, nv = size_t(1) << mv;
+        cols = 3 * nu + 1, rows = 3 * nv + 1;
+        grid.resize(rows * cols * 3 + 16);  // padded: the min/max passes run 4 floats at a time
+        rowLo.resize(3 * cols + 16), rowHi.resize(3 * cols + 16);
+        winLo.resize(nv * 3 * cols + 16), winHi.resize(nv * 3 * cols + 16);
+        leafOfCell.resize(nu * nv);
+        for (uint32_t l = 0; l < (1u << d); ++l) {
+            uint32_t a = 0, b = 0;
+            for (int k = 0; k < d; ++k) {
+                const uint32_t bit = (l >> (d - 1 - k)) & 1u;
+                if ((k & 1) == 0)
+                    a = (a << 1) | bit;
+                else
+                    b = (b << 1) | bit;
+            }
+            leafOfCell[b * nu + a] = l;
+        }
+    }
+
+    void build(const BezierPatch& p, Bounds3* boxes, uint8_t* back, float sign) {
+        float* g = grid.data();
+        const size_t rowFloats = 3 * cols;
+        for (int j = 0; j < 4; ++j) {
+            float* row = g + size_t(j) * nv * rowFloats;
+            for (int i = 0; i < 4; ++i) {
+                const Vec3& c = p.cp[4 * j + i];
+                float* q = row + 3 * size_t(i) * nu;
+                q[0] = c.x, q[1] = c.y, q[2] = c.z;
+            }
+            subdivideUniform(row, 3, 3, mu);
+        }
+        subdivideUniform(g, rowFloats, rowFloats, mv);
+        // Leaf bounds, elementwise over the grid (vectorizes): for each leaf row b, the min/max over its
+        // 4 grid rows, then over 4 consecutive points (3 floats apart) along u.
+        const size_t span = rowFloats - 9;  // windows of 4 points start at float f < span
+        for (size_t b = 0; b < nv; ++b) {
+            const float* r0 = g + 3 * b * rowFloats;
+            minMax4(r0, r0 + rowFloats, r0 + 2 * rowFloats, r0 + 3 * rowFloats, rowLo.data(), rowHi.data(),
+                    rowFloats);
+            windowMinMax(rowLo.data(), rowHi.data(), winLo.data() + b * rowFloats,
+                         winHi.data() + b * rowFloats, span);
+        }
+        const uint32_t firstLeaf = (1u << depth) - 1u;
+        for (size_t b = 0; b < nv; ++b)
+            for (size_t a = 0; a < nu; ++a) {
+                const float* wl = winLo.data() + b * rowFloats + 9 * a;
+                const float* wh = winHi.data() + b * rowFloats + 9 * a;
+                Bounds3 bb;
+                bb.lo = {wl[0], wl[1], wl[2]};
+                bb.hi = {wh[0], wh[1], wh[2]};
+                const uint32_t node = firstLeaf + leafOfCell[b * nu + a];
+                boxes[node] = enlarge(bb);
+                if (back) {
+                    BezierPatch leaf;
+                    for (int j = 0; j < 4; ++j)
+                        for (int i = 0; i < 4; ++i) {
+                            const float* q = g + (3 * b + j) * rowFloats + 3 * (3 * a + i);
+                            leaf.cp[4 * j + i] = {q[0], q[1], q[2]};
+                        }
+                    back[node] = facesAwayFromOrigin(leaf, boxes[node], sign);
+                }
+            }
+        for (uint32_t i = firstLeaf; i-- > 0;) {
+            boxes[i] = boxes[2 * i + 1];
+            boxes[i].extend(boxes[2 * i + 2]);
+            if (back) back[i] = back[2 * i + 1] & back[2 * i + 2];
+        }
+    }
+};
 
 }  // namespace
 
@@ -68,14 +220,7 @@ void subpatchLeafRect(int depth, uint32_t leaf, float& u0, float& u1, float& v0,
 }
 
 Bounds3 enlargedHull(const BezierPatch& p) {
-    Bounds3 b = hullBounds(p);
-    float mag = 0.f;
-    for (int k = 0; k < 3; ++k) mag = std::max({mag, std::fabs(b.lo[k]), std::fabs(b.hi[k])});
-    const float ext = maxComponent(b.diagonal());
-    const float eps = 1e-5f * ext + 4e-7f * mag + 1e-30f;
-    b.lo -= Vec3{eps, eps, eps};
-    b.hi += Vec3{eps, eps, eps};
-    return b;
+    return enlarge(hullBounds(p));
 }
 
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
@@ -95,10 +240,11 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     }
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+            TreeBuilder tb(depth);  // scratch grid, reused over the range
             for (size_t i = r.begin(); i != r.end(); ++i) {
                 uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
                 float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
-                buildNode(patches[i], 0, depth, 0, f.boxes.data() + i * f.nodesPerPatch, back, sign);
+                tb.build(patches[i], f.boxes.data() + i * f.nodesPerPatch, back, sign);
             }
         });
 }
