@@ -35,16 +35,17 @@ struct RayList {
     std::vector<uint32_t> owner;   // primary/secondary: sample index in the tile; shadow: unused
     std::vector<Color> weight;     // throughput to the sample
     std::vector<uint32_t> ignore;  // originating patch (self-intersection guard)
+    std::vector<Vec2> ignoreUV;    // (u,v) of the ray's origin on `ignore` (x < 0: unknown)
     std::vector<uint8_t> kind, depth;
     size_t size() const { return o.size(); }
     void clear() {
         o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
-        kind.clear(), depth.clear();
+        ignoreUV.clear(), kind.clear(), depth.clear();
     }
     void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k,
-              uint8_t dep) {
+              uint8_t dep, Vec2 uv = {-1.f, -1.f}) {
         o.push_back(o_), d.push_back(d_), tmin.push_back(t0), tmax.push_back(t1), owner.push_back(own);
-        weight.push_back(w), ignore.push_back(ign), kind.push_back(k), depth.push_back(dep);
+        weight.push_back(w), ignore.push_back(ign), ignoreUV.push_back(uv), kind.push_back(k), depth.push_back(dep);
     }
 };
 
@@ -126,34 +127,56 @@ struct Ray4 {
 #endif
 };
 
-// Slab test of the four child boxes of a 4-wide node: bit i set when the ray hits child i (< count), with
-// the entry and exit distances in te[i], tx[i] (same values as rayBoxInterval: no NaNs can occur, so the
-// min/max are order independent).
-inline int rayBox4(const Bvh4Node& nd, const Ray4& r, float te[4], float tx[4]) {
+// Slab test of four boxes in structure-of-arrays form (16-byte aligned): bit i set when the ray hits box
+// i, with the entry and exit distances in te[i], tx[i] (same values as rayBoxInterval: no NaNs can occur,
+// so the min/max are order independent).
+inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ray4& r, float te[4],
+                      float tx[4]) {
 #if defined(__SSE2__)
-    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.lo[0]), r.ox), r.ix);
-    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.hi[0]), r.ox), r.ix);
-    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.lo[1]), r.oy), r.iy);
-    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.hi[1]), r.oy), r.iy);
-    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.lo[2]), r.oz), r.iz);
-    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(nd.hi[2]), r.oz), r.iz);
+    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[0]), r.ox), r.ix);
+    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[0]), r.ox), r.ix);
+    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[1]), r.oy), r.iy);
+    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[1]), r.oy), r.iy);
+    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[2]), r.oz), r.iz);
+    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[2]), r.oz), r.iz);
     const __m128 n =
         _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
     const __m128 f =
         _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
     _mm_storeu_ps(te, n);
     _mm_storeu_ps(tx, f);
-    return _mm_movemask_ps(_mm_cmple_ps(n, f)) & ((1 << nd.count) - 1);
+    return _mm_movemask_ps(_mm_cmple_ps(n, f));
 #else
     int mask = 0;
-    for (uint32_t i = 0; i < nd.count; ++i) {
+    for (int i = 0; i < 4; ++i) {
         Bounds3 b;
-        b.lo = {nd.lo[0][i], nd.lo[1][i], nd.lo[2][i]};
-        b.hi = {nd.hi[0][i], nd.hi[1][i], nd.hi[2][i]};
+        b.lo = {lo[0][i], lo[1][i], lo[2][i]};
+        b.hi = {hi[0][i], hi[1][i], hi[2][i]};
         if (rayBoxInterval(b, r.o, r.inv, r.tmin, r.tmax, te[i], tx[i])) mask |= 1 << i;
     }
     return mask;
 #endif
+}
+
+// The four children of a 4-wide BVH node (bits >= count cleared).
+inline int rayBox4(const Bvh4Node& nd, const Ray4& r, float te[4], float tx[4]) {
+    return rayBox4Soa(nd.lo, nd.hi, r, te, tx) & ((1 << nd.count) - 1);
+}
+
+// Indices of the bits of `mask` in increasing order of key[] (stable); returns their number.
+inline int sortHits(int mask, const float key[4], int order[4]) {
+    int k = 0;
+    while (mask) {
+        const int i = __builtin_ctz(unsigned(mask));
+        mask &= mask - 1;
+        int j = k++;
+        while (j > 0 && key[order[j - 1]] > key[i]) {
+            order[j] = order[j - 1];
+            --j;
+        }
+        order[j] = i;
+    }
+    return k;
 }
 
 // Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Both children of a subpatch
@@ -167,6 +190,7 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     const Bvh& bvh = acc.bvh;
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
+    const uint32_t depth = uint32_t(forest.depth);
     const Vec2* leafCentre = forest.leafCentre.data();
     const float ignoreT = 8.f * acc.offset;
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
@@ -184,6 +208,7 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
             const float tmin = rays.tmin[r], tmax = rays.tmax[r];
             const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
             const uint32_t ignore = rays.ignore[r];
+            const Ray4 r4(o, inv, tmin, tmax);
             // One patch whose root box the ray enters at te and leaves at tx: its subpatch tree.
             auto visitPatch = [&](uint32_t patch, float te, float tx) {
                 const Bounds3* tree = forest.tree(patch);
@@ -194,73 +219,79 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                     ch.cand.push_back({uint32_t(r), patch, leafCentre[0].x, leafCentre[0].y, te});
                     return;
                 }
-                // Stack of nodes whose box the ray hits; their children are tested as a pair.
-                uint32_t st[32];
+                // Stack of (node | level << 24) whose box the ray hits. From an even level the four
+                // grandchildren are tested at once (the odd level in between only contributes its backface
+                // bit: a grandchild's box lies inside its parent's, so the hit set is the same); from the
+                // last level above the leaves of an odd depth, the two children as a pair.
+                const SubpatchQuad* quads = forest.quadTree(patch);
+                uint32_t st[64];
                 int s2 = 0;
                 st[s2++] = 0;
                 while (s2 > 0) {
-                    const uint32_t m = 2 * st[--s2] + 1;
+                    const uint32_t e = st[--s2];
+                    const uint32_t node = e & 0xffffffu, lvl = e >> 24;
+                    if (lvl + 2 <= depth) {
+                        const uint32_t levelFirst = (1u << lvl) - 1u;  // 4^k - 1 for lvl = 2k
+                        const SubpatchQuad& q = quads[levelFirst / 3 + node - levelFirst];
+                        float te[4], tx[4];
+                        int mask = rayBox4Soa(q.lo, q.hi, r4, te, tx);
+                        boxTests += 4;
+                        const uint32_t g0 = 4 * node + 3;
+                        for (int bits = mask; bits;) {
+                            const int i = __builtin_ctz(unsigned(bits));
+                            bits &= bits - 1;
+                            if (tx[i] < selfT || (back && (back[g0 + i] || back[2 * node + 1 + (i >> 1)])))
+                                mask &= ~(1 << i);
+                        }
+                        int order[4];
+                        const int k = sortHits(mask, te, order);
+                        if (g0 >= firstLeaf) {
+                            for (int j = 0; j < k; ++j) {
+                                const Vec2 c = leafCentre[g0 + order[j] - firstLeaf];
+                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, te[order[j]]});
+                            }
+                        } else {
+                            // Far first, so that the near one is expanded first.
+                            const uint32_t l2 = (lvl + 2) << 24;
+                            for (int j = k - 1; j >= 0; --j) st[s2++] = (g0 + order[j]) | l2;
+                        }
+                        continue;
+                    }
+                    // Odd depth: the pair of leaves below a node of level depth - 1.
+                    const uint32_t m = 2 * node + 1;
                     float tn[2], tf[2];
                     const int mask = rayBoxPair(tree + m, pr, tmin, tmax, tn, tf);
                     const float ta = tn[0], tb = tn[1];
                     const bool ha = (mask & 1) && tf[0] >= selfT && !(back && back[m]);
                     const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
                     boxTests += 2;
-                    if (m >= firstLeaf) {
-                        // Leaves: emit the nearer first.
-                        const bool swap = hb && (!ha || tb < ta);
-                        if (swap) {
-                            const Vec2 c = leafCentre[m + 1 - firstLeaf];
-                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
-                        }
-                        if (ha) {
-                            const Vec2 c = leafCentre[m - firstLeaf];
-                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, ta});
-                        }
-                        if (hb && !swap) {
-                            const Vec2 c = leafCentre[m + 1 - firstLeaf];
-                            ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
-                        }
-                        continue;
+                    const bool swap = hb && (!ha || tb < ta);
+                    if (swap) {
+                        const Vec2 c = leafCentre[m + 1 - firstLeaf];
+                        ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
                     }
-                    // Push the far child first so that the near one is expanded first.
-                    if (ha && hb) {
-                        if (ta <= tb) {
-                            st[s2++] = m + 1;
-                            st[s2++] = m;
-                        } else {
-                            st[s2++] = m;
-                            st[s2++] = m + 1;
-                        }
-                    } else if (ha) {
-                        st[s2++] = m;
-                    } else if (hb) {
-                        st[s2++] = m + 1;
+                    if (ha) {
+                        const Vec2 c = leafCentre[m - firstLeaf];
+                        ch.cand.push_back({uint32_t(r), patch, c.x, c.y, ta});
+                    }
+                    if (hb && !swap) {
+                        const Vec2 c = leafCentre[m + 1 - firstLeaf];
+                        ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
                     }
                 }
             };
             // 4-wide BVH: the hit children in order of entry; inner nodes are pushed far first, patches
             // are visited at once (near first).
-            const Ray4 r4(o, inv, tmin, tmax);
             uint32_t stack[kBvh4Stack];
             int sp = 0;
             if (!bvh.wide.empty()) stack[sp++] = 0;
             while (sp > 0) {
                 const Bvh4Node& nd = bvh.wide[stack[--sp]];
                 float te[4], tx[4];
-                int mask = rayBox4(nd, r4, te, tx);
+                const int mask = rayBox4(nd, r4, te, tx);
                 boxTests += nd.count;
-                int order[4], k = 0;
-                while (mask) {
-                    const int i = __builtin_ctz(unsigned(mask));
-                    mask &= mask - 1;
-                    int j = k++;
-                    while (j > 0 && te[order[j - 1]] > te[i]) {
-                        order[j] = order[j - 1];
-                        --j;
-                    }
-                    order[j] = i;
-                }
+                int order[4];
+                const int k = sortHits(mask, te, order);
                 for (int q = k - 1; q >= 0; --q) {
                     const uint32_t c = nd.child[order[q]];
                     if (!(c & kBvh4Patch)) stack[sp++] = c;
@@ -321,9 +352,13 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             const float invDD = 1.f / dot(ray.d, ray.d);
             uint32_t projected = kNone, bestPatch = kNone;
             float eps = 0.f, bestU = 0.f, bestV = 0.f;
-            // Last converged root (accepted or not) per patch run, for the duplicate-start test.
+            // Last converged root (accepted or not) per patch run, for the duplicate-start test. A
+            // secondary ray starts (offset) on its originating patch at a known (u,v): that is the root a
+            // start near it converges to (rejected by the self-intersection rules), so it seeds the test.
             uint32_t rootPatch = kNone;
             float rootU = 0.f, rootV = 0.f;
+            if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
+                rootPatch = rays.ignore[r], rootU = rays.ignoreUV[r].x, rootV = rays.ignoreUV[r].y;
             for (uint32_t i = begin; i < end; ++i) {
                 const Candidate& c = ch.cand[i];
                 if (c.tEnter > ray.tmax) break;
@@ -436,7 +471,8 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
             if (dot(Nf, L) <= 0.f) continue;
             const float tmax = std::isfinite(dist) ? dist - acc.offset : dist;
             ws.shadowIdx[r * nL + l] = uint32_t(ws.shadow.size());
-            ws.shadow.push(hi.P + Nf * acc.offset, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0);
+            ws.shadow.push(hi.P + Nf * acc.offset, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0,
+                           Vec2{rh.h.u, rh.h.v});
         }
     }
     ws.c.shadeMs += msSince(ts);
@@ -509,10 +545,12 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
         const uint8_t f = ws.secondaryFlags[r];
         if (f & 1)
             ws.next.push(ws.secO[2 * r], ws.secD[2 * r], 0.f, std::numeric_limits<float>::infinity(), s,
-                         ws.secW[2 * r], ws.hits[r].patch, kReflection, uint8_t(rays.depth[r] + 1));
+                         ws.secW[2 * r], ws.hits[r].patch, kReflection, uint8_t(rays.depth[r] + 1),
+                         Vec2{ws.hits[r].h.u, ws.hits[r].h.v});
         if (f & 2)
             ws.next.push(ws.secO[2 * r + 1], ws.secD[2 * r + 1], 0.f, std::numeric_limits<float>::infinity(),
-                         s, ws.secW[2 * r + 1], ws.hits[r].patch, kRefraction, uint8_t(rays.depth[r] + 1));
+                         s, ws.secW[2 * r + 1], ws.hits[r].patch, kRefraction, uint8_t(rays.depth[r] + 1),
+                         Vec2{ws.hits[r].h.u, ws.hits[r].h.v});
     }
     ws.c.shadeMs += msSince(ts);
 }

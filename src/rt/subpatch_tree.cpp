@@ -231,6 +231,8 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     f.boxes.resize(patches.size() * f.nodesPerPatch);
     f.backfacing.clear();
     if (backfaceFromOrigin) f.backfacing.assign(f.boxes.size(), 0);
+    f.quadsPerPatch = ((1u << (2 * (depth / 2))) - 1u) / 3u;
+    f.quads.resize(patches.size() * f.quadsPerPatch);
     const uint32_t leaves = 1u << depth;
     f.leafCentre.resize(leaves);
     for (uint32_t l = 0; l < leaves; ++l) {
@@ -245,6 +247,15 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                 uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
                 float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
                 tb.build(patches[i], f.boxes.data() + i * f.nodesPerPatch, back, sign);
+                const Bounds3* bx = f.boxes.data() + i * f.nodesPerPatch;
+                SubpatchQuad* q = f.quads.data() + i * f.quadsPerPatch;
+                for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
+                    for (uint32_t n = first; n <= 2 * first; ++n, ++q)  // the 4^k nodes of level 2k
+                        for (int c = 0; c < 4; ++c)
+                            for (int a = 0; a < 3; ++a) {
+                                q->lo[a][c] = bx[4 * n + 3 + c].lo[a];
+                                q->hi[a][c] = bx[4 * n + 3 + c].hi[a];
+                            }
             }
         });
 }

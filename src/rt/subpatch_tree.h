@@ -12,20 +12,33 @@
 
 namespace tessera {
 
+// The four grandchildren 4i+3 .. 4i+6 of a node i at an even level, structure of arrays, for one 4-wide
+// slab test (the traversal goes two levels per step; the odd levels are only needed for the backface bits).
+struct alignas(16) SubpatchQuad {
+    float lo[3][4], hi[3][4];  // [axis][grandchild]
+};
+static_assert(sizeof(SubpatchQuad) == 96);
+
 struct SubpatchForest {
     int depth = 6;
     uint32_t nodesPerPatch = 127;     // 2^(depth+1) - 1
     std::vector<Bounds3> boxes;       // patchCount * nodesPerPatch, enlarged for robustness
     std::vector<uint8_t> backfacing;  // optional, one per node: every point faces away from the eye at 0
     std::vector<Vec2> leafCentre;     // per leaf (shared by all patches): centre of its (u,v) rectangle
+    // Per patch, quadsPerPatch = (4^floor(depth/2) - 1) / 3 grandchild groups: node i at level 2k has
+    // group (4^k - 1) / 3 + i - (4^k - 1). A copy of `boxes` (levels 2, 4, ...) for the 4-wide traversal.
+    std::vector<SubpatchQuad> quads;
+    uint32_t quadsPerPatch = 21;
 
     const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
     const uint8_t* backfaceBits(uint32_t patch) const {
         return backfacing.empty() ? nullptr : backfacing.data() + size_t(patch) * nodesPerPatch;
     }
     uint32_t firstLeaf() const { return (1u << depth) - 1; }
+    const SubpatchQuad* quadTree(uint32_t patch) const { return quads.data() + size_t(patch) * quadsPerPatch; }
     size_t memoryBytes() const {
-        return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2);
+        return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
+               quads.size() * sizeof(SubpatchQuad);
     }
 };
 
