@@ -622,3 +622,81 @@ TEST(RtHierarchy, SubpatchBoxesNestAndContainTheSurfaceAndWideBvhCoversEveryPatc
     }
     for (int c : seen) EXPECT_EQ(c, 1);
 }
+
+TEST(RtHierarchy, QuadCopyLeafHullTestAndOddDepthWavefront) {
+    // The 4-wide copy of the subpatch tree (levels 2, 4, ...) holds the grandchildren's boxes; the leaf
+    // and quarter bases give sub-patches whose ray-frame hull never rejects a leaf holding a root; the
+    // wavefront (4-wide steps plus a final pair step for odd depths, hull test) finds every surface point
+    // a ray is aimed at, like the scalar path.
+    Scene s = loadTeapotBpt();
+    const double size = length(s.worldBounds().diagonal());
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> U(0.f, 1.f), S(-1.f, 1.f);
+    for (int depth : {0, 1, 2, 5, 6, 7}) {
+        RtAccel acc;
+        buildRtAccel(s, Mat4::identity(), depth, false, acc);
+        const SubpatchForest& f = acc.forest;
+        ASSERT_EQ(f.quadsPerPatch, ((1u << (2 * (depth / 2))) - 1u) / 3u);
+        for (uint32_t p = 0; p < s.patches.size(); ++p) {
+            const Bounds3* tree = f.tree(p);
+            const SubpatchQuad* q = f.quadTree(p);
+            for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
+                for (uint32_t n = first; n <= 2 * first; ++n, ++q)
+                    for (int c = 0; c < 4; ++c)
+                        for (int a = 0; a < 3; ++a) {
+                            EXPECT_EQ(q->lo[a][c], tree[4 * n + 3 + c].lo[a]);
+                            EXPECT_EQ(q->hi[a][c], tree[4 * n + 3 + c].hi[a]);
+                        }
+        }
+        std::vector<Ray> rays;
+        std::vector<float> targetT;
+        int hullMisses = 0;
+        for (uint32_t p = 0; p < s.patches.size(); ++p)
+            for (int rep = 0; rep < 40; ++rep) {
+                const float u = U(rng), v = U(rng);
+                const Vec3 target = evalPatch(s.patches[p], u, v);
+                const Vec3 dir = normalize(Vec3{S(rng), S(rng), S(rng)});
+                const float dist = float(2 * size);
+                Ray ray{target + dir * dist, -dir, 0.f, 1e30f};
+                rays.push_back(ray);
+                targetT.push_back(dist);
+                // The leaf holding (u, v) and its quarter must pass the hull test.
+                uint32_t leaf = 0;
+                for (; leaf < (1u << depth); ++leaf) {
+                    float u0, u1, v0, v1;
+                    subpatchLeafRect(depth, leaf, u0, u1, v0, v1);
+                    if (u >= u0 && u <= u1 && v >= v0 && v <= v1) break;
+                }
+                ASSERT_LT(leaf, 1u << depth);
+                float u0, u1, v0, v1;
+                subpatchLeafRect(depth, leaf, u0, u1, v0, v1);
+                const int qd = (u >= 0.5f * (u0 + u1) ? 1 : 0) | (v >= 0.5f * (v0 + v1) ? 2 : 0);
+                ProjectedPatch<float> pp;
+                projectPatch(s.patches[p], makeRayPlanes(ray.o, ray.d), pp);
+                const float eps = newtonTolerance(f.tree(p)[0], ray.o);
+                if (!leafMayHit(pp, f.leafBasis[leaf], 4.f * eps)) ++hullMisses;
+                if (!leafMayHit(pp, f.quarterBasis[4 * leaf + qd], 4.f * eps)) ++hullMisses;
+            }
+        EXPECT_EQ(hullMisses, 0) << "depth " << depth;
+        std::vector<RayHit> batch;
+        traceBatch(acc, rays, TraceOptions{}, batch);
+        int missScalar = 0, missBatch = 0;
+        const float tol = 1e-4f * float(size);
+        for (size_t i = 0; i < rays.size(); ++i) {
+            RayHit h;
+            if (!traceRayScalar(acc, rays[i], TraceOptions{}, h) || !(h.h.t <= targetT[i] + tol))
+                ++missScalar;
+            if (!batch[i].hit || !(batch[i].h.t <= targetT[i] + tol)) ++missBatch;
+        }
+        std::printf("depth %d: %zu rays, scalar misses %d, wavefront misses %d\n", depth, rays.size(),
+                    missScalar, missBatch);
+        // Shallow trees start Newton too far from the folded roots of the lid and knob patches (both paths
+        // alike); from depth 5 on the wavefront misses nothing the scalar path finds.
+        if (depth >= 5) {
+            EXPECT_LE(missBatch, missScalar) << "depth " << depth;
+        }
+        if (depth >= 7) {
+            EXPECT_EQ(missBatch, 0) << "depth " << depth;
+        }
+    }
+}

@@ -7,6 +7,9 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
 
 #include "core/bezier.h"
 #include "rt/subpatch_tree.h"
@@ -231,6 +234,60 @@ inline void evalProjected(const ProjectedPatch<float>& pp, float u, float v, flo
     j12 = B[0], j22 = B[1];
 }
 #endif
+
+// Ray-frame hull test of one leaf: the leaf sub-patch's projected Bernstein coefficients (pp mapped by the
+// leaf's change of basis) bound R over the leaf (convex hull property). Returns false when r1 or r2 keeps
+// one sign beyond `margin` on all 16 coefficients: then |R| > margin on the whole leaf and no Newton
+// iterate inside it can converge (|R| < eps <= margin). Exact up to float rounding of the coefficients,
+// which the margin covers (a few ulps of the coefficients; the caller passes 4 eps).
+inline bool leafMayHit(const ProjectedPatch<float>& pp, const LeafBasis& lb, float margin) {
+#if defined(__SSE2__)
+    // Rows first (mv, stored splatted), then columns (mu rows times lane splats of the row).
+    auto mv = [&](int j, int k) { return _mm_load_ps(lb.mvSplat[j][k]); };
+    const __m128 mu0 = _mm_load_ps(lb.mu[0]), mu1 = _mm_load_ps(lb.mu[1]), mu2 = _mm_load_ps(lb.mu[2]),
+                 mu3 = _mm_load_ps(lb.mu[3]);
+    auto plane = [&](const float* a, __m128& lo, __m128& hi) {
+        const __m128 a0 = _mm_load_ps(a), a1 = _mm_load_ps(a + 4), a2 = _mm_load_ps(a + 8),
+                     a3 = _mm_load_ps(a + 12);
+        for (int j = 0; j < 4; ++j) {
+            const __m128 r = _mm_add_ps(_mm_add_ps(_mm_mul_ps(mv(j, 0), a0), _mm_mul_ps(mv(j, 1), a1)),
+                                        _mm_add_ps(_mm_mul_ps(mv(j, 2), a2), _mm_mul_ps(mv(j, 3), a3)));
+            const __m128 c = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0x00), mu0),
+                                                   _mm_mul_ps(_mm_shuffle_ps(r, r, 0x55), mu1)),
+                                        _mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0xaa), mu2),
+                                                   _mm_mul_ps(_mm_shuffle_ps(r, r, 0xff), mu3)));
+            lo = j == 0 ? c : _mm_min_ps(lo, c);
+            hi = j == 0 ? c : _mm_max_ps(hi, c);
+        }
+    };
+    // One plane at a time: most rejected leaves are rejected by the first.
+    auto rejects = [&](const float* a) {
+        __m128 lo, hi;
+        plane(a, lo, hi);
+        // (min lo, -max hi) > margin in either: the plane separates the leaf from the ray.
+        const __m128 x = _mm_unpacklo_ps(lo, _mm_xor_ps(hi, _mm_set1_ps(-0.f)));  // lo0 -hi0 lo1 -hi1
+        const __m128 y = _mm_unpackhi_ps(lo, _mm_xor_ps(hi, _mm_set1_ps(-0.f)));  // lo2 -hi2 lo3 -hi3
+        const __m128 m1 = _mm_min_ps(x, y);
+        const __m128 m = _mm_min_ps(m1, _mm_movehl_ps(m1, m1));  // lanes 0, 1: min lo, -max hi
+        return (_mm_movemask_ps(_mm_cmpgt_ps(m, _mm_set1_ps(margin))) & 3) != 0;
+    };
+    return !rejects(pp.a1) && !rejects(pp.a2);
+#else
+    float min1 = INFINITY, min2 = INFINITY, max1 = -INFINITY, max2 = -INFINITY;
+    for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+            float c1 = 0, c2 = 0;
+            for (int jj = 0; jj < 4; ++jj)
+                for (int ii = 0; ii < 4; ++ii) {
+                    const float w = lb.mv[j][jj] * lb.mu[ii][i];
+                    c1 += w * pp.a1[4 * jj + ii], c2 += w * pp.a2[4 * jj + ii];
+                }
+            min1 = std::min(min1, c1), max1 = std::max(max1, c1);
+            min2 = std::min(min2, c2), max2 = std::max(max2, c2);
+        }
+    return !(min1 > margin || min2 > margin || max1 < -margin || max2 < -margin);
+#endif
+}
 
 // Newton iteration on the projected patch from (u, v) (updated in place). Stops on convergence
 // (|R|inf < eps, then one free step), leaving the domain, divergence, or 16 iterations. A singular

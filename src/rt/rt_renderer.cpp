@@ -45,25 +45,26 @@ struct RayList {
     void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k,
               uint8_t dep, Vec2 uv = {-1.f, -1.f}) {
         o.push_back(o_), d.push_back(d_), tmin.push_back(t0), tmax.push_back(t1), owner.push_back(own);
-        weight.push_back(w), ignore.push_back(ign), ignoreUV.push_back(uv), kind.push_back(k), depth.push_back(dep);
+        weight.push_back(w), ignore.push_back(ign), ignoreUV.push_back(uv), kind.push_back(k),
+            depth.push_back(dep);
     }
 };
 
 // Traversal output: Newton's starting points, grouped by ray (segments sorted by box entry distance).
 struct Candidate {
-    uint32_t ray, patch;
-    float u0, v0, tEnter;
+    uint32_t ray, patch, leaf;  // leaf: 0 .. 2^depth - 1 (its centre is Newton's start)
+    float tEnter;
 };
 
 struct Counters {
     uint64_t rays[kKinds] = {}, hits[kKinds] = {};
-    uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0;
+    uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
     std::array<uint64_t, kHistBins> hist{};
     double traversalMs = 0, newtonMs = 0, shadeMs = 0, filterMs = 0;
     void add(const Counters& c) {
         for (int k = 0; k < kKinds; ++k) rays[k] += c.rays[k], hits[k] += c.hits[k];
         candidates += c.candidates, newtonRuns += c.newtonRuns, newtonIterations += c.newtonIterations;
-        boxTests += c.boxTests;
+        boxTests += c.boxTests, hullCulled += c.hullCulled;
         for (int i = 0; i < kHistBins; ++i) hist[i] += c.hist[i];
         traversalMs += c.traversalMs, newtonMs += c.newtonMs, shadeMs += c.shadeMs, filterMs += c.filterMs;
     }
@@ -191,7 +192,6 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
     const uint32_t depth = uint32_t(forest.depth);
-    const Vec2* leafCentre = forest.leafCentre.data();
     const float ignoreT = 8.f * acc.offset;
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         Chunk& ch = chunks[ci];
@@ -216,7 +216,7 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                 const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
                 if (tx < selfT || (back && back[0])) return;
                 if (firstLeaf == 0) {
-                    ch.cand.push_back({uint32_t(r), patch, leafCentre[0].x, leafCentre[0].y, te});
+                    ch.cand.push_back({uint32_t(r), patch, 0, te});
                     return;
                 }
                 // Stack of (node | level << 24) whose box the ray hits. From an even level the four
@@ -246,10 +246,9 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                         int order[4];
                         const int k = sortHits(mask, te, order);
                         if (g0 >= firstLeaf) {
-                            for (int j = 0; j < k; ++j) {
-                                const Vec2 c = leafCentre[g0 + order[j] - firstLeaf];
-                                ch.cand.push_back({uint32_t(r), patch, c.x, c.y, te[order[j]]});
-                            }
+                            for (int j = 0; j < k; ++j)
+                                ch.cand.push_back(
+                                    {uint32_t(r), patch, g0 + order[j] - firstLeaf, te[order[j]]});
                         } else {
                             // Far first, so that the near one is expanded first.
                             const uint32_t l2 = (lvl + 2) << 24;
@@ -266,18 +265,9 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                     const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
                     boxTests += 2;
                     const bool swap = hb && (!ha || tb < ta);
-                    if (swap) {
-                        const Vec2 c = leafCentre[m + 1 - firstLeaf];
-                        ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
-                    }
-                    if (ha) {
-                        const Vec2 c = leafCentre[m - firstLeaf];
-                        ch.cand.push_back({uint32_t(r), patch, c.x, c.y, ta});
-                    }
-                    if (hb && !swap) {
-                        const Vec2 c = leafCentre[m + 1 - firstLeaf];
-                        ch.cand.push_back({uint32_t(r), patch, c.x, c.y, tb});
-                    }
+                    if (swap) ch.cand.push_back({uint32_t(r), patch, m + 1 - firstLeaf, tb});
+                    if (ha) ch.cand.push_back({uint32_t(r), patch, m - firstLeaf, ta});
+                    if (hb && !swap) ch.cand.push_back({uint32_t(r), patch, m + 1 - firstLeaf, tb});
                 }
             };
             // 4-wide BVH: the hit children in order of entry; inner nodes are pushed far first, patches
@@ -336,11 +326,14 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     leafHalfSize(acc.forest.depth, hu, hv);
     // A root within this margin of a leaf counts as inside it (Newton from the leaf centre finds it).
     const float du = 1.01f * hu, dv = 1.01f * hv;
+    const Vec2* leafCentre = acc.forest.leafCentre.data();
+    const LeafBasis* leafBasis = acc.forest.leafBasis.data();
+    const LeafBasis* quarterBasis = acc.forest.quarterBasis.data();
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         Chunk& ch = chunks[ci];
         const size_t r0 = ci * kChunk;
         uint32_t begin = 0;
-        uint64_t runs = 0, iterTotal = 0;
+        uint64_t runs = 0, iterTotal = 0, culled = 0;
         ProjectedPatch<float> pp;
         for (size_t k = 0; k < ch.segEnd.size(); ++k) {
             const uint32_t end = ch.segEnd[k];
@@ -362,7 +355,8 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             for (uint32_t i = begin; i < end; ++i) {
                 const Candidate& c = ch.cand[i];
                 if (c.tEnter > ray.tmax) break;
-                if (c.patch == rootPatch && std::fabs(rootU - c.u0) <= du && std::fabs(rootV - c.v0) <= dv)
+                const Vec2 c0 = leafCentre[c.leaf];
+                if (c.patch == rootPatch && std::fabs(rootU - c0.x) <= du && std::fabs(rootV - c0.y) <= dv)
                     continue;
                 const BezierPatch& patch = acc.patches[c.patch];
                 if (c.patch != projected) {
@@ -370,14 +364,36 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     eps = newtonTolerance(acc.forest.tree(c.patch)[0], ray.o);
                     projected = c.patch;
                 }
-                float u = c.u0, v = c.v0;
-                int iters = 0;
-                const bool conv = newtonIterate<float>(pp, eps, u, v, iters);
-                ++runs;
-                iterTotal += uint32_t(iters);
-                ++ch.c.hist[std::min(iters, kHistBins - 1)];
-                float uc, vc;
-                if (!conv || !acceptRootDomain<float>(pp, eps, u, v, 1e-4f, uc, vc)) continue;
+                // On the ray's originating patch, leaves next to its origin converge to the origin itself
+                // (rejected as self-intersection): there the ray-frame hull test of the leaf sub-patch
+                // (exact: a leaf whose hull stays off the ray cannot hold a root) removes most of them. On
+                // other patches it costs more than the Newton runs it saves (measured, docs/rt.md).
+                const bool self = c.patch == opt.ignorePatch;
+                if (self && !leafMayHit(pp, leafBasis[c.leaf], 4.f * eps)) {
+                    ++culled;
+                    continue;
+                }
+                // Newton from the leaf centre. On the originating patch, where the hull test removed the
+                // neighbouring starts that could also reach a root of this leaf, a failed start (a fold, a
+                // seam root just outside the domain) is retried from the centres of the leaf's quarters
+                // whose own hull passes the test.
+                float uc = 0.f, vc = 0.f;
+                bool found = false;
+                for (int attempt = 0; attempt < (self ? 5 : 1) && !found; ++attempt) {
+                    float u = c0.x, v = c0.y;
+                    if (attempt > 0) {
+                        const int q = attempt - 1;  // quarter: bit 0 high u, bit 1 high v
+                        if (!leafMayHit(pp, quarterBasis[4 * c.leaf + q], 4.f * eps)) continue;
+                        u += (q & 1 ? 0.5f : -0.5f) * hu, v += (q & 2 ? 0.5f : -0.5f) * hv;
+                    }
+                    int iters = 0;
+                    const bool conv = newtonIterate<float>(pp, eps, u, v, iters);
+                    ++runs;
+                    iterTotal += uint32_t(iters);
+                    ++ch.c.hist[std::min(iters, kHistBins - 1)];
+                    found = conv && acceptRootDomain<float>(pp, eps, u, v, 1e-4f, uc, vc);
+                }
+                if (!found) continue;
                 rootPatch = c.patch, rootU = uc, rootV = vc;
                 const float t = dot(evalPatch(patch, uc, vc) - ray.o, ray.d) * invDD;
                 if (!(t > ray.tmin && t < ray.tmax)) continue;
@@ -408,6 +424,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             begin = end;
         }
         ch.c.newtonRuns = runs;
+        ch.c.hullCulled = culled;
         ch.c.newtonIterations = iterTotal;
     });
 }
@@ -424,6 +441,7 @@ void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vect
         const Counters& c = ws.chunks[ci].c;
         ws.c.candidates += c.candidates, ws.c.newtonRuns += c.newtonRuns;
         ws.c.newtonIterations += c.newtonIterations, ws.c.boxTests += c.boxTests;
+        ws.c.hullCulled += c.hullCulled;
         for (int i = 0; i < kHistBins; ++i) ws.c.hist[i] += c.hist[i];
     }
     for (size_t r = 0; r < rays.size(); ++r) {
@@ -797,7 +815,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     size_t wsBytes = 0;
     for (const auto& w : all) {
         total.add(w->c);
-        wsBytes += w->tile.sampleCount() * 30 + w->rays.o.capacity() * 56;
+        wsBytes += w->tile.sampleCount() * 30 + w->rays.o.capacity() * 64;
         for (const Chunk& ch : w->chunks) wsBytes += ch.cand.capacity() * sizeof(Candidate);
     }
     result.cancelled = cancelled.load();
@@ -818,6 +836,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["candidates_per_ray"] = totalRays ? double(total.candidates) / double(totalRays) : 0.0;
     s["box_tests"] = total.boxTests;
     s["newton_runs"] = total.newtonRuns;
+    s["hull_culled"] = total.hullCulled;
     s["newton_iterations"] = {
         {"total", total.newtonIterations},
         {"mean", total.newtonRuns ? double(total.newtonIterations) / double(total.newtonRuns) : 0.0},

@@ -223,6 +223,24 @@ Bounds3 enlargedHull(const BezierPatch& p) {
     return enlarge(hullBounds(p));
 }
 
+namespace {
+void splatRows(LeafBasis& b) {
+    for (int j = 0; j < 4; ++j)
+        for (int k = 0; k < 4; ++k)
+            for (int lane = 0; lane < 4; ++lane) b.mvSplat[j][k][lane] = b.mv[j][k];
+}
+
+// Four consecutive boxes (lo.xyz hi.xyz each, 24 floats) into structure-of-arrays form.
+void transposeQuad(const float* b, SubpatchQuad& q) {
+    static_assert(sizeof(Bounds3) == 6 * sizeof(float));
+    for (int c = 0; c < 4; ++c)
+        for (int a = 0; a < 3; ++a) {
+            q.lo[a][c] = b[6 * c + a];
+            q.hi[a][c] = b[6 * c + 3 + a];
+        }
+}
+}  // namespace
+
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
                          bool backfaceFromOrigin, std::span<const uint8_t> flip) {
     depth = std::clamp(depth, 0, 12);
@@ -235,10 +253,36 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     f.quads.resize(patches.size() * f.quadsPerPatch);
     const uint32_t leaves = 1u << depth;
     f.leafCentre.resize(leaves);
+    f.leafBasis.resize(leaves);
+    f.quarterBasis.resize(4 * size_t(leaves));
     for (uint32_t l = 0; l < leaves; ++l) {
         float u0, u1, v0, v1;
         subpatchLeafRect(depth, l, u0, u1, v0, v1);
         f.leafCentre[l] = {0.5f * (u0 + u1), 0.5f * (v0 + v1)};
+        // Control point k of the cubic on [a, b] is the blossom f(a, .., b, ..) with 3 - k a's: de
+        // Casteljau of each unit basis vector with the parameters a^(3-k) b^k (exact in double).
+        auto basis = [](double a, double b, float m[4][4], bool rows) {
+            for (int src = 0; src < 4; ++src)
+                for (int k = 0; k < 4; ++k) {
+                    double c[4] = {0, 0, 0, 0};
+                    c[src] = 1;
+                    for (int s = 0; s < 3; ++s) {
+                        const double t = s < 3 - k ? a : b;
+                        for (int q = 0; q < 3 - s; ++q) c[q] = (1 - t) * c[q] + t * c[q + 1];
+                    }
+                    (rows ? m[k][src] : m[src][k]) = float(c[0]);
+                }
+        };
+        basis(u0, u1, f.leafBasis[l].mu, false);
+        basis(v0, v1, f.leafBasis[l].mv, true);
+        splatRows(f.leafBasis[l]);
+        const double um = 0.5 * (double(u0) + u1), vm = 0.5 * (double(v0) + v1);
+        for (int q = 0; q < 4; ++q) {
+            LeafBasis& b = f.quarterBasis[4 * l + q];
+            basis((q & 1) ? um : u0, (q & 1) ? u1 : um, b.mu, false);
+            basis((q & 2) ? vm : v0, (q & 2) ? v1 : vm, b.mv, true);
+            splatRows(b);
+        }
     }
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
@@ -251,11 +295,7 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                 SubpatchQuad* q = f.quads.data() + i * f.quadsPerPatch;
                 for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
                     for (uint32_t n = first; n <= 2 * first; ++n, ++q)  // the 4^k nodes of level 2k
-                        for (int c = 0; c < 4; ++c)
-                            for (int a = 0; a < 3; ++a) {
-                                q->lo[a][c] = bx[4 * n + 3 + c].lo[a];
-                                q->hi[a][c] = bx[4 * n + 3 + c].hi[a];
-                            }
+                        transposeQuad(&bx[4 * n + 3].lo.x, *q);
             }
         });
 }

@@ -5,7 +5,10 @@
 // A leaf that a ray hits gives Newton's initial guess: the centre of the leaf's (u,v) rectangle.
 #pragma once
 #include <cstdint>
+#include <memory>
 #include <span>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "core/bezier.h"
@@ -19,15 +22,49 @@ struct alignas(16) SubpatchQuad {
 };
 static_assert(sizeof(SubpatchQuad) == 96);
 
+// Bernstein change of basis from a patch to one leaf sub-patch: leaf coefficient (row j, column i) =
+// sum over (j', i') of mv[j][j'] * patch(j', i') * mu[i'][i] (so the rows of `mu` are 4-vectors over the
+// leaf's u index). Shared by all patches; used for the ray-frame hull test before Newton.
+struct alignas(16) LeafBasis {
+    float mu[4][4];          // mu[i'][i]: weight of patch column i' in leaf column i
+    float mv[4][4];          // mv[j][j']: weight of patch row j' in leaf row j
+    float mvSplat[4][4][4];  // mv[j][j'] in all four lanes (the SSE test multiplies whole rows by it)
+};
+
+// Allocator that default-initializes (no zeroing on resize): the build overwrites every element, in
+// parallel, so a serial memset of the whole array would only add time and memory traffic.
+template <class T>
+struct DefaultInitAllocator : std::allocator<T> {
+    template <class U>
+    struct rebind {
+        using other = DefaultInitAllocator<U>;
+    };
+    DefaultInitAllocator() = default;
+    template <class U>
+    DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        std::allocator_traits<std::allocator<T>>::construct(static_cast<std::allocator<T>&>(*this), p,
+                                                            std::forward<Args>(args)...);
+    }
+};
+
 struct SubpatchForest {
     int depth = 6;
-    uint32_t nodesPerPatch = 127;     // 2^(depth+1) - 1
-    std::vector<Bounds3> boxes;       // patchCount * nodesPerPatch, enlarged for robustness
-    std::vector<uint8_t> backfacing;  // optional, one per node: every point faces away from the eye at 0
-    std::vector<Vec2> leafCentre;     // per leaf (shared by all patches): centre of its (u,v) rectangle
+    uint32_t nodesPerPatch = 127;      // 2^(depth+1) - 1
+    std::vector<Bounds3> boxes;        // patchCount * nodesPerPatch, enlarged for robustness
+    std::vector<uint8_t> backfacing;   // optional, one per node: every point faces away from the eye at 0
+    std::vector<Vec2> leafCentre;      // per leaf (shared by all patches): centre of its (u,v) rectangle
+    std::vector<LeafBasis> leafBasis;  // per leaf (shared by all patches)
+    // Per leaf, its four quarters (index 4 * leaf + q; q bit 0: high u half, bit 1: high v half).
+    std::vector<LeafBasis> quarterBasis;
     // Per patch, quadsPerPatch = (4^floor(depth/2) - 1) / 3 grandchild groups: node i at level 2k has
     // group (4^k - 1) / 3 + i - (4^k - 1). A copy of `boxes` (levels 2, 4, ...) for the 4-wide traversal.
-    std::vector<SubpatchQuad> quads;
+    std::vector<SubpatchQuad, DefaultInitAllocator<SubpatchQuad>> quads;
     uint32_t quadsPerPatch = 21;
 
     const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
@@ -35,10 +72,13 @@ struct SubpatchForest {
         return backfacing.empty() ? nullptr : backfacing.data() + size_t(patch) * nodesPerPatch;
     }
     uint32_t firstLeaf() const { return (1u << depth) - 1; }
-    const SubpatchQuad* quadTree(uint32_t patch) const { return quads.data() + size_t(patch) * quadsPerPatch; }
+    const SubpatchQuad* quadTree(uint32_t patch) const {
+        return quads.data() + size_t(patch) * quadsPerPatch;
+    }
     size_t memoryBytes() const {
         return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
-               quads.size() * sizeof(SubpatchQuad);
+               quads.size() * sizeof(SubpatchQuad) +
+               (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis);
     }
 };
 
