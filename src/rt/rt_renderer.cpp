@@ -729,7 +729,11 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     for (const Light& l : scene.lights) fr.lights.push_back(prepareLight(l, cam.cameraFromWorld));
     const Projector proj(cam);
 
-    const int bs = std::max(settings.bucketSize, 64);
+    // Tiles of about 16k samples (64x64 pixels at 4 spp): the wavefront's ray and candidate lists scale
+    // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory.
+    const int spp = nx * ny;
+    const int bs = std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16,
+                              std::max(settings.bucketSize, 64));
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int nbx = (W + bs - 1) / bs, nby = (H + bs - 1) / bs, nb = nbx * nby;
 
