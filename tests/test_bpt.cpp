@@ -6,6 +6,7 @@
 #include <string>
 
 #include "io/scene_loader.h"
+#include "test_support.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -13,12 +14,7 @@ namespace fs = std::filesystem;
 namespace {
 
 std::string writeBpt(const std::string& text) {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    fs::path d = fs::temp_directory_path() / ("tessera_bpt_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    fs::path p = d / (std::string(info->name()) + ".bpt");
-    std::ofstream(p) << text;
-    return p.string();
+    return tessera::test::writeTestFile("input.bpt", text);
 }
 
 // Error text of loading `text` as a .bpt file; checks the "<file>:<line>: error:" prefix.
@@ -42,16 +38,6 @@ std::string patchText(int degreeU = 3, int degreeV = 3) {
     return s;
 }
 
-// Removes this process' temporary files after the last test.
-class TempCleanup : public ::testing::Environment {
-  public:
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(fs::temp_directory_path() / ("tessera_bpt_" + std::to_string(::getpid())), ec);
-    }
-};
-[[maybe_unused]] ::testing::Environment* const kTempCleanup =
-    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 }  // namespace
 

@@ -12,6 +12,7 @@
 
 #include "core/nurbs.h"
 #include "io/scene_loader.h"
+#include "test_support.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -19,11 +20,7 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path testDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    fs::path d = fs::temp_directory_path() / ("tessera_nurbs_" + std::to_string(::getpid())) /
-                 (std::string(info->test_suite_name()) + "." + info->name());
-    fs::create_directories(d);
-    return d;
+    return tessera::test::testScratchDir();
 }
 
 std::string writeFile(const std::string& name, const std::string& text) {
@@ -32,15 +29,6 @@ std::string writeFile(const std::string& name, const std::string& text) {
     return p.string();
 }
 
-class TempCleanup : public ::testing::Environment {
-  public:
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(fs::temp_directory_path() / ("tessera_nurbs_" + std::to_string(::getpid())), ec);
-    }
-};
-[[maybe_unused]] ::testing::Environment* const kTempCleanup =
-    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 // Random knot vector of n + order values: clamped or not, with some repeated interior knots.
 std::vector<double> randomKnots(std::mt19937& rng, int n, int order, bool clamped) {

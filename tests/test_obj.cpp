@@ -8,6 +8,7 @@
 
 #include "io/obj_reader.h"
 #include "io/scene_loader.h"
+#include "test_support.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -15,24 +16,9 @@ namespace fs = std::filesystem;
 namespace {
 
 std::string writeObj(const std::string& text, const std::string& name = "mesh.obj") {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    fs::path d = fs::temp_directory_path() / ("tessera_obj_" + std::to_string(::getpid())) /
-                 (std::string(info->test_suite_name()) + "." + info->name());
-    fs::create_directories(d);
-    fs::path p = d / name;
-    std::ofstream(p, std::ios::binary) << text;
-    return p.string();
+    return tessera::test::writeTestFile(name, text);
 }
 
-class TempCleanup : public ::testing::Environment {
-  public:
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(fs::temp_directory_path() / ("tessera_obj_" + std::to_string(::getpid())), ec);
-    }
-};
-[[maybe_unused]] ::testing::Environment* const kTempCleanup =
-    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 const char* kCubeVerts =
     "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n";

@@ -10,6 +10,7 @@
 #include "core/basis.h"
 #include "io/rib_lexer.h"
 #include "io/scene_loader.h"
+#include "test_support.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -18,11 +19,7 @@ namespace {
 
 // A fresh directory per test so parallel test processes never share files.
 fs::path testDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    fs::path d = fs::temp_directory_path() / ("tessera_rib_" + std::to_string(::getpid())) /
-                 (std::string(info->test_suite_name()) + "." + info->name());
-    fs::create_directories(d);
-    return d;
+    return tessera::test::testScratchDir();
 }
 
 std::string writeFile(const fs::path& path, const std::string& text) {
@@ -92,16 +89,6 @@ int countWarnings(const std::vector<std::string>& ws, const std::string& part) {
     return n;
 }
 
-// Removes this process' temporary files after the last test.
-class TempCleanup : public ::testing::Environment {
-  public:
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(fs::temp_directory_path() / ("tessera_rib_" + std::to_string(::getpid())), ec);
-    }
-};
-[[maybe_unused]] ::testing::Environment* const kTempCleanup =
-    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 }  // namespace
 

@@ -10,6 +10,7 @@
 
 #include "io/rib_writer.h"
 #include "io/scene_loader.h"
+#include "test_support.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -17,22 +18,9 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path testDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    fs::path d = fs::temp_directory_path() / ("tessera_ribw_" + std::to_string(::getpid())) /
-                 (std::string(info->test_suite_name()) + "." + info->name());
-    fs::create_directories(d);
-    return d;
+    return tessera::test::testScratchDir();
 }
 
-class TempCleanup : public ::testing::Environment {
-  public:
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(fs::temp_directory_path() / ("tessera_ribw_" + std::to_string(::getpid())), ec);
-    }
-};
-[[maybe_unused]] ::testing::Environment* const kTempCleanup =
-    ::testing::AddGlobalTestEnvironment(new TempCleanup);
 
 void expectSameScene(const Scene& a, const Scene& b) {
     ASSERT_EQ(a.patches.size(), b.patches.size());

@@ -7,8 +7,10 @@
 
 #include "io/scene_loader.h"
 #include "render/render.h"
+#include "test_util.h"
 
 using namespace tessera;
+using tessera::test::countPinholes;
 
 namespace {
 
@@ -19,24 +21,6 @@ struct SceneCase {
 };
 
 class ShippedScenes : public ::testing::TestWithParam<SceneCase> {};
-
-int countPinholes(const Image& img) {
-    auto covered = [&](int x, int y) { return img.pixel(x, y)[3] >= 0.999f; };
-    int holes = 0;
-    for (int y = 1; y + 1 < img.height; ++y)
-        for (int x = 1; x + 1 < img.width; ++x) {
-            if (covered(x, y)) continue;
-            bool surrounded = true;
-            for (int dy = -1; dy <= 1 && surrounded; ++dy)
-                for (int dx = -1; dx <= 1; ++dx)
-                    if ((dx || dy) && !covered(x + dx, y + dy)) {
-                        surrounded = false;
-                        break;
-                    }
-            holes += surrounded;
-        }
-    return holes;
-}
 
 }  // namespace
 

@@ -17,6 +17,7 @@
 #include "io/obj_reader.h"
 #include "io/rib_lexer.h"
 #include "io/scene_loader.h"
+#include "test_support.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -442,24 +443,7 @@ TEST(Subdivision, BigGuyObjIsWatertightAndClose) {
 
 namespace {
 
-std::string writeRibFile(const std::string& text) {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    fs::path d = fs::temp_directory_path() / ("tessera_subdiv_" + std::to_string(::getpid())) / info->name();
-    fs::create_directories(d);
-    fs::path p = d / "scene.rib";
-    std::ofstream(p) << text;
-    return p.string();
-}
-
-class TempCleanup : public ::testing::Environment {
-  public:
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(fs::temp_directory_path() / ("tessera_subdiv_" + std::to_string(::getpid())), ec);
-    }
-};
-[[maybe_unused]] ::testing::Environment* const kTempCleanup =
-    ::testing::AddGlobalTestEnvironment(new TempCleanup);
+std::string writeRibFile(const std::string& text) { return tessera::test::writeTestFile("scene.rib", text); }
 
 const char* kCubeMesh = "[4 4 4 4 4 4] [0 3 2 1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]";
 const char* kCubeP = "\"P\" [-1 -1 -1 1 -1 -1 1 1 -1 -1 1 -1 -1 -1 1 1 -1 1 1 1 1 -1 1 1]";

@@ -74,6 +74,25 @@ inline std::vector<BezierPatch> octantSphere(float radius, Vec3 centre) {
 
 inline float alphaAt(const Image& img, int x, int y) { return img.pixel(x, y)[3]; }
 
+// Pinholes: pixels not fully covered (alpha below `covered`) whose eight neighbours all are.
+inline int countPinholes(const Image& img, float covered = 0.999f) {
+    auto isCovered = [&](int x, int y) { return img.pixel(x, y)[3] >= covered; };
+    int holes = 0;
+    for (int y = 1; y + 1 < img.height; ++y)
+        for (int x = 1; x + 1 < img.width; ++x) {
+            if (isCovered(x, y)) continue;
+            bool surrounded = true;
+            for (int dy = -1; dy <= 1 && surrounded; ++dy)
+                for (int dx = -1; dx <= 1; ++dx)
+                    if ((dx || dy) && !isCovered(x + dx, y + dy)) {
+                        surrounded = false;
+                        break;
+                    }
+            holes += surrounded;
+        }
+    return holes;
+}
+
 inline double alphaSum(const Image& img) {
     double s = 0;
     for (int y = 0; y < img.height; ++y)

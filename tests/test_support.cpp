@@ -1,0 +1,42 @@
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <fstream>
+
+namespace tessera::test {
+namespace fs = std::filesystem;
+
+namespace {
+fs::path processRoot() {
+    return fs::temp_directory_path() / ("tessera_tests_" + std::to_string(::getpid()));
+}
+
+class ScratchCleanup : public ::testing::Environment {
+  public:
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(processRoot(), ec);
+    }
+};
+[[maybe_unused]] ::testing::Environment* const kScratchCleanup =
+    ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
+}  // namespace
+
+fs::path testScratchDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    fs::path d =
+        processRoot() / (info ? std::string(info->test_suite_name()) + "." + info->name() : "global");
+    fs::create_directories(d);
+    return d;
+}
+
+std::string writeTestFile(const std::string& name, const std::string& text) {
+    fs::path p = testScratchDir() / name;
+    fs::create_directories(p.parent_path());
+    std::ofstream(p, std::ios::binary) << text;
+    return p.string();
+}
+
+}  // namespace tessera::test
