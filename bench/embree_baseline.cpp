@@ -92,9 +92,7 @@ int main(int argc, char** argv) {
     }
     if (!res.empty() && std::sscanf(res.c_str(), "%dx%d", &scene.camera.width, &scene.camera.height) != 2) return 2;
     int nx = 1, ny = 1;
-    for (int d = 1; d * d <= spp; ++d)
-        if (spp % d == 0) nx = d;
-    ny = spp / nx;
+    splitSamplesPerPixel(spp, nx, ny);
     const Camera& cam = scene.camera;
     const Projector proj(cam);
     const Mat4 worldFromCamera = cam.cameraFromWorld.inverse();

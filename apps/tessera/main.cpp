@@ -66,14 +66,6 @@ Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatN
     }
 }
 
-// Split N samples per pixel into an nx x ny stratified pattern, as square as N allows.
-void splitSpp(int n, int& nx, int& ny) {
-    nx = 1;
-    for (int d = 1; d * d <= n; ++d)
-        if (n % d == 0) nx = d;
-    ny = n / nx;
-}
-
 // Default output name: the RIB Display name (with a .png/.exr extension), else SCENE's stem + .png.
 std::string defaultOutput(const Scene& scene, const std::string& scenePath) {
     if (!scene.image.displayName.empty()) {
@@ -141,7 +133,7 @@ int runRender(const RenderArgs& a) {
         scene.camera.height > kMaxResolution)
         fail(fmt::format("{}: error: resolution {}x{} outside 1..{} per axis", a.scene, scene.camera.width,
                          scene.camera.height, kMaxResolution));
-    if (a.spp > 0) splitSpp(a.spp, scene.image.pixelSamplesX, scene.image.pixelSamplesY);
+    if (a.spp > 0) splitSamplesPerPixel(a.spp, scene.image.pixelSamplesX, scene.image.pixelSamplesY);
     if (a.shadingRate > 0)
         for (auto& attr : scene.attributes) attr.shadingRate = float(a.shadingRate);
     if (scene.patches.empty()) fail(fmt::format("{}: error: the scene has no geometry", a.scene));

@@ -43,6 +43,15 @@ inline Vec2 samplePosition(int px, int py, int s, int nx, int ny, uint32_t seed)
     return {float(x) / kSubpixelScale, float(y) / kSubpixelScale};
 }
 
+// Split N samples per pixel into an nx x ny stratified pattern, as square as N allows (16 -> 4x4,
+// 8 -> 2x4, a prime -> 1xN).
+inline void splitSamplesPerPixel(int n, int& nx, int& ny) {
+    nx = 1;
+    for (int d = 1; d * d <= n; ++d)
+        if (n % d == 0) nx = d;
+    ny = n / nx;
+}
+
 struct Rect {
     int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // half-open [x0,x1) x [y0,y1)
     int width() const { return x1 - x0; }
