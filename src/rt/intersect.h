@@ -27,7 +27,7 @@ struct RayPlanes {
 };
 
 // Two orthogonal unit planes whose intersection is the ray's line.
-inline RayPlanes makeRayPlanes(Vec3 o, Vec3 d) {
+__attribute__((always_inline)) inline RayPlanes makeRayPlanes(Vec3 o, Vec3 d) {
     RayPlanes p;
     Vec3 n1 = (std::fabs(d.x) > std::fabs(d.y) && std::fabs(d.x) > std::fabs(d.z)) ? Vec3{d.y, -d.x, 0.f}
                                                                                    : Vec3{0.f, d.z, -d.y};

@@ -8,8 +8,11 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <mutex>
+
+#include "rt/newton_lanes.h"
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -313,10 +316,13 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 
 // Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
 // sorted candidates; candidates whose box starts beyond the best hit so far cannot win and are skipped).
-// The projection of a patch on the ray's planes is computed once per (ray, patch) run of candidates; a
-// candidate whose leaf rectangle contains a root already found on the same patch for this ray is skipped
-// (its start would converge to that root again); the surface derivatives are evaluated once per ray, at
-// the closest hit.
+// The starts run kNewtonLanes at a time (rt/newton_lanes.h): each lane works through one ray's candidates
+// in order and takes the next ray of the chunk when that ray is done, so a ray's candidates are still
+// handled one after another (its early exit stays exact) while the iterations of eight rays share one
+// vector step. The projection of a patch on the ray's planes is computed once per (ray, patch) run of
+// candidates; a candidate whose leaf rectangle contains a root already found on the same patch for this
+// ray is skipped (its start would converge to that root again); the surface derivatives are evaluated
+// once per ray, at the closest hit. Results do not depend on which lane a ray runs in.
 void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks,
                 std::vector<RayHit>& hits, bool cull) {
     const size_t n = rays.size();
@@ -329,99 +335,200 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     const Vec2* leafCentre = acc.forest.leafCentre.data();
     const LeafBasis* leafBasis = acc.forest.leafBasis.data();
     const LeafBasis* quarterBasis = acc.forest.quarterBasis.data();
+
+    // The ray a lane is working on.
+    struct LaneRay {
+        uint32_t r = kNone;         // ray index (kNone: the lane looks for the next ray)
+        uint32_t cur = 0, end = 0;  // cursor in the chunk's candidates, end of the ray's segment
+        Ray ray;
+        TraceOptions opt;
+        RayPlanes pl;
+        float invDD = 0.f, eps = 0.f, bestU = 0.f, bestV = 0.f;
+        uint32_t projected = kNone, bestPatch = kNone;
+        // Last converged root (accepted or not) per patch run, for the duplicate-start test. A secondary
+        // ray starts (offset) on its originating patch at a known (u,v): that is the root a start near it
+        // converges to (rejected by the self-intersection rules), so it seeds the test.
+        uint32_t rootPatch = kNone;
+        float rootU = 0.f, rootV = 0.f;
+        int attempt = 0;            // 0: leaf centre; 1..4: quarter centres (originating patch only)
+        bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
+        SurfacePoint bestSp;
+        ProjectedPatch<float> pp;
+    };
+
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         Chunk& ch = chunks[ci];
         const size_t r0 = ci * kChunk;
-        uint32_t begin = 0;
+        const uint32_t nRays = uint32_t(ch.segEnd.size());
         uint64_t runs = 0, iterTotal = 0, culled = 0;
-        ProjectedPatch<float> pp;
-        for (size_t k = 0; k < ch.segEnd.size(); ++k) {
-            const uint32_t end = ch.segEnd[k];
-            const size_t r = r0 + k;
-            if (begin == end) continue;
-            Ray ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
-            const TraceOptions opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
-            const RayPlanes pl = makeRayPlanes(ray.o, ray.d);
-            const float invDD = 1.f / dot(ray.d, ray.d);
-            uint32_t projected = kNone, bestPatch = kNone;
-            float eps = 0.f, bestU = 0.f, bestV = 0.f;
-            // Last converged root (accepted or not) per patch run, for the duplicate-start test. A
-            // secondary ray starts (offset) on its originating patch at a known (u,v): that is the root a
-            // start near it converges to (rejected by the self-intersection rules), so it seeds the test.
-            uint32_t rootPatch = kNone;
-            float rootU = 0.f, rootV = 0.f;
-            if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
-                rootPatch = rays.ignore[r], rootU = rays.ignoreUV[r].x, rootV = rays.ignoreUV[r].y;
-            for (uint32_t i = begin; i < end; ++i) {
-                const Candidate& c = ch.cand[i];
-                if (c.tEnter > ray.tmax) break;
-                const Vec2 c0 = leafCentre[c.leaf];
-                if (c.patch == rootPatch && std::fabs(rootU - c0.x) <= du && std::fabs(rootV - c0.y) <= dv)
+        NewtonLanes lanes;
+        LaneRay lane[kNewtonLanes];
+        uint32_t nextRay = 0;
+
+        // The patch projected on the ray's planes (as projectPatch, 4 control points at a time) into the
+        // lane's column and the ray's own copy; the Newton tolerance as newtonTolerance.
+        auto projectLane = [](const PatchSoa& ps, LaneRay& s, NewtonLanes& L, int l) {
+            const RayPlanes& pl = s.pl;
+#if defined(__SSE2__)
+            const __m128 n1x = _mm_set1_ps(pl.n1.x), n1y = _mm_set1_ps(pl.n1.y), n1z = _mm_set1_ps(pl.n1.z),
+                         n2x = _mm_set1_ps(pl.n2.x), n2y = _mm_set1_ps(pl.n2.y), n2z = _mm_set1_ps(pl.n2.z),
+                         d1 = _mm_set1_ps(pl.d1), d2 = _mm_set1_ps(pl.d2);
+            for (int q = 0; q < 16; q += 4) {
+                const __m128 x = _mm_load_ps(ps.x + q), y = _mm_load_ps(ps.y + q), z = _mm_load_ps(ps.z + q);
+                const __m128 a1 = _mm_add_ps(
+                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(n1x, x), _mm_mul_ps(n1y, y)), _mm_mul_ps(n1z, z)), d1);
+                const __m128 a2 = _mm_add_ps(
+                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(n2x, x), _mm_mul_ps(n2y, y)), _mm_mul_ps(n2z, z)), d2);
+                _mm_store_ps(s.pp.a1 + q, a1);
+                _mm_store_ps(s.pp.a2 + q, a2);
+            }
+#else
+            for (int k = 0; k < 16; ++k) {
+                s.pp.a1[k] = pl.n1.x * ps.x[k] + pl.n1.y * ps.y[k] + pl.n1.z * ps.z[k] + pl.d1;
+                s.pp.a2[k] = pl.n2.x * ps.x[k] + pl.n2.y * ps.y[k] + pl.n2.z * ps.z[k] + pl.d2;
+            }
+#endif
+            for (int k = 0; k < 16; ++k) L.a1[k][l] = s.pp.a1[k], L.a2[k][l] = s.pp.a2[k];
+            const Vec3 o = s.ray.o;
+            const float mag = std::max({ps.boxMagnitude, std::fabs(o.x), std::fabs(o.y), std::fabs(o.z)});
+            s.eps = 2e-6f * mag + 1e-6f * ps.boxExtent + 1e-30f;
+        };
+        auto finishRay = [&](LaneRay& s) {
+            if (s.bestPatch != kNone) {
+                RayHit& best = hits[s.r];
+                const SurfacePoint sp =
+                    s.bestHasDeriv ? s.bestSp : evalPatchDeriv(acc.patches[s.bestPatch], s.bestU, s.bestV);
+                best.hit = true;
+                best.patch = s.bestPatch;
+                best.h.hit = true;
+                best.h.t = s.ray.tmax;
+                best.h.u = s.bestU;
+                best.h.v = s.bestV;
+                best.h.p = sp.p;
+                best.h.dpdu = sp.dpdu;
+                best.h.dpdv = sp.dpdv;
+            }
+            s.r = kNone;
+        };
+        auto beginRay = [&](LaneRay& s) -> bool {
+            for (; nextRay < nRays; ++nextRay) {
+                const uint32_t begin = nextRay == 0 ? 0 : ch.segEnd[nextRay - 1];
+                if (begin == ch.segEnd[nextRay]) continue;
+                const size_t r = r0 + nextRay;
+                s.r = uint32_t(r);
+                s.cur = begin;
+                s.end = ch.segEnd[nextRay++];
+                s.ray = Ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
+                s.opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
+                s.pl = makeRayPlanes(s.ray.o, s.ray.d);
+                s.invDD = 1.f / dot(s.ray.d, s.ray.d);
+                s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false;
+                s.rootPatch = kNone;
+                if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
+                    s.rootPatch = rays.ignore[r], s.rootU = rays.ignoreUV[r].x, s.rootV = rays.ignoreUV[r].y;
+                return true;
+            }
+            return false;
+        };
+        // Finds lane l's next Newton start (finishing rays and taking new ones as needed) and starts it;
+        // false when the chunk has no work left for the lane.
+        auto startNext = [&](int l) -> bool {
+            LaneRay& s = lane[l];
+            for (;;) {
+                if (s.r == kNone && !beginRay(s)) return false;
+                if (s.cur >= s.end) {
+                    finishRay(s);
                     continue;
-                const BezierPatch& patch = acc.patches[c.patch];
-                if (c.patch != projected) {
-                    projectPatch(patch, pl, pp);
-                    eps = newtonTolerance(acc.forest.tree(c.patch)[0], ray.o);
-                    projected = c.patch;
+                }
+                const Candidate& c = ch.cand[s.cur];
+                if (c.tEnter > s.ray.tmax) {
+                    finishRay(s);
+                    continue;
+                }
+                const Vec2 c0 = leafCentre[c.leaf];
+                if (c.patch == s.rootPatch && std::fabs(s.rootU - c0.x) <= du &&
+                    std::fabs(s.rootV - c0.y) <= dv) {
+                    ++s.cur;
+                    continue;
+                }
+                if (c.patch != s.projected) {
+                    projectLane(acc.patchSoa[c.patch], s, lanes, l);
+                    s.projected = c.patch;
                 }
                 // On the ray's originating patch, leaves next to its origin converge to the origin itself
                 // (rejected as self-intersection): there the ray-frame hull test of the leaf sub-patch
                 // (exact: a leaf whose hull stays off the ray cannot hold a root) removes most of them. On
                 // other patches it costs more than the Newton runs it saves (measured, docs/rt.md).
-                const bool self = c.patch == opt.ignorePatch;
-                if (self && !leafMayHit(pp, leafBasis[c.leaf], 4.f * eps)) {
+                if (c.patch == s.opt.ignorePatch && !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps)) {
                     ++culled;
+                    ++s.cur;
                     continue;
                 }
-                // Newton from the leaf centre. On the originating patch, where the hull test removed the
-                // neighbouring starts that could also reach a root of this leaf, a failed start (a fold, a
-                // seam root just outside the domain) is retried from the centres of the leaf's quarters
-                // whose own hull passes the test.
-                float uc = 0.f, vc = 0.f;
-                bool found = false;
-                for (int attempt = 0; attempt < (self ? 5 : 1) && !found; ++attempt) {
-                    float u = c0.x, v = c0.y;
-                    if (attempt > 0) {
-                        const int q = attempt - 1;  // quarter: bit 0 high u, bit 1 high v
-                        if (!leafMayHit(pp, quarterBasis[4 * c.leaf + q], 4.f * eps)) continue;
-                        u += (q & 1 ? 0.5f : -0.5f) * hu, v += (q & 2 ? 0.5f : -0.5f) * hv;
-                    }
-                    int iters = 0;
-                    const bool conv = newtonIterate<float>(pp, eps, u, v, iters);
-                    ++runs;
-                    iterTotal += uint32_t(iters);
-                    ++ch.c.hist[std::min(iters, kHistBins - 1)];
-                    found = conv && acceptRootDomain<float>(pp, eps, u, v, 1e-4f, uc, vc);
+                s.attempt = 0;
+                lanes.start(l, c0.x, c0.y, s.eps);
+                return true;
+            }
+        };
+        // Lane l's start has finished: take its root (or retry), then move the lane on. Returns whether
+        // the lane still has work.
+        auto finishStart = [&](int l) -> bool {
+            LaneRay& s = lane[l];
+            const Candidate& c = ch.cand[s.cur];
+            const int iters = int(lanes.evals[l]);
+            ++runs;
+            iterTotal += uint32_t(iters);
+            ++ch.c.hist[std::min(iters, kHistBins - 1)];
+            float uc = 0.f, vc = 0.f;
+            const bool found = lanes.status[l] == kLaneConverged &&
+                               acceptRootDomain<float>(s.pp, s.eps, lanes.u[l], lanes.v[l], 1e-4f, uc, vc);
+            if (!found && c.patch == s.opt.ignorePatch) {
+                // On the originating patch, where the hull test removed the neighbouring starts that could
+                // also reach a root of this leaf, a failed start (a fold, a seam root just outside the
+                // domain) is retried from the centres of the leaf's quarters whose own hull passes the test.
+                for (int q = s.attempt; q < 4; ++q) {  // quarter q: bit 0 high u, bit 1 high v
+                    if (!leafMayHit(s.pp, quarterBasis[4 * c.leaf + q], 4.f * s.eps)) continue;
+                    const Vec2 c0 = leafCentre[c.leaf];
+                    s.attempt = q + 1;
+                    lanes.start(l, c0.x + (q & 1 ? 0.5f : -0.5f) * hu, c0.y + (q & 2 ? 0.5f : -0.5f) * hv,
+                                s.eps);
+                    return true;
                 }
-                if (!found) continue;
-                rootPatch = c.patch, rootU = uc, rootV = vc;
-                const float t = dot(evalPatch(patch, uc, vc) - ray.o, ray.d) * invDD;
-                if (!(t > ray.tmin && t < ray.tmax)) continue;
-                if (c.patch == opt.ignorePatch && t < opt.ignoreT) continue;
-                if (opt.respectSides && !acc.twoSided[c.patch]) {
-                    const SurfacePoint sp = evalPatchDeriv(patch, uc, vc);
-                    Vec3 N = cross(sp.dpdu, sp.dpdv);
+            }
+            if (found) {
+                s.rootPatch = c.patch, s.rootU = uc, s.rootV = vc;
+                const BezierPatch& patch = acc.patches[c.patch];
+                const float t = dot(evalPatch(patch, uc, vc) - s.ray.o, s.ray.d) * s.invDD;
+                bool ok =
+                    t > s.ray.tmin && t < s.ray.tmax && !(c.patch == s.opt.ignorePatch && t < s.opt.ignoreT);
+                bool haveDeriv = false;
+                if (ok && s.opt.respectSides && !acc.twoSided[c.patch]) {
+                    s.bestSp = evalPatchDeriv(patch, uc, vc);
+                    haveDeriv = true;
+                    Vec3 N = cross(s.bestSp.dpdu, s.bestSp.dpdv);
                     if (acc.flip[c.patch]) N = -N;
-                    if (dot(N, ray.d) > 0.f) continue;  // back face of a one-sided surface
+                    ok = dot(N, s.ray.d) <= 0.f;  // back face of a one-sided surface: rejected
                 }
-                bestPatch = c.patch, bestU = uc, bestV = vc;
-                ray.tmax = t;
-                if (opt.anyHit) break;
+                if (ok) {
+                    s.bestPatch = c.patch, s.bestU = uc, s.bestV = vc, s.bestHasDeriv = haveDeriv;
+                    s.ray.tmax = t;
+                    if (s.opt.anyHit) s.cur = s.end - 1;  // shadow rays stop at the first hit
+                }
             }
-            if (bestPatch != kNone) {
-                RayHit& best = hits[r];
-                const SurfacePoint sp = evalPatchDeriv(acc.patches[bestPatch], bestU, bestV);
-                best.hit = true;
-                best.patch = bestPatch;
-                best.h.hit = true;
-                best.h.t = ray.tmax;
-                best.h.u = bestU;
-                best.h.v = bestV;
-                best.h.p = sp.p;
-                best.h.dpdu = sp.dpdu;
-                best.h.dpdv = sp.dpdv;
+            ++s.cur;
+            return startNext(l);
+        };
+
+        unsigned active = 0;
+        for (int l = 0; l < kNewtonLanes; ++l) {
+            for (int k = 0; k < 16; ++k) lanes.a1[k][l] = lanes.a2[k][l] = 0.f;
+            lanes.start(l, 0.5f, 0.5f, 0.f);
+            if (startNext(l)) active |= 1u << l;
+        }
+        while (active) {
+            for (unsigned done = newtonLanesStep(lanes) & active; done; done &= done - 1) {
+                const int l = __builtin_ctz(done);
+                if (!finishStart(l)) active &= ~(1u << l);
             }
-            begin = end;
         }
         ch.c.newtonRuns = runs;
         ch.c.hullCulled = culled;
@@ -640,6 +747,18 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     auto t0 = Clock::now();
     buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip);
     acc.subpatchMs = msSince(t0);
+    acc.patchSoa.resize(n);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        PatchSoa& ps = acc.patchSoa[i];
+        for (int k = 0; k < 16; ++k)
+            ps.x[k] = acc.patches[i].cp[k].x, ps.y[k] = acc.patches[i].cp[k].y,
+            ps.z[k] = acc.patches[i].cp[k].z;
+        const Bounds3& b = acc.forest.tree(uint32_t(i))[0];
+        float mag = 0.f;
+        for (int k = 0; k < 3; ++k) mag = std::max({mag, std::fabs(b.lo[k]), std::fabs(b.hi[k])});
+        ps.boxMagnitude = mag;
+        ps.boxExtent = maxComponent(b.diagonal());
+    });
     auto t1 = Clock::now();
     // Patches with non-finite control points (possible in scenes built in code; the loaders reject them)
     // are left out of the BVH, so no ray ever reaches them.
@@ -732,8 +851,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     // Tiles of about 16k samples (64x64 pixels at 4 spp): the wavefront's ray and candidate lists scale
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory.
     const int spp = nx * ny;
-    const int bs = std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16,
-                              std::max(settings.bucketSize, 64));
+    const int bs =
+        std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16, std::max(settings.bucketSize, 64));
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int nbx = (W + bs - 1) / bs, nby = (H + bs - 1) / bs, nb = nbx * nby;
 

@@ -16,9 +16,18 @@
 
 namespace tessera {
 
+// A patch's control points as coordinate arrays (the projection on a ray's planes runs 4 points at a
+// time), with what the Newton tolerance needs from its box.
+struct alignas(16) PatchSoa {
+    float x[16], y[16], z[16];
+    float boxMagnitude;  // largest |coordinate| of the patch's root box
+    float boxExtent;     // largest side of the root box
+};
+
 // Scene prepared for tracing in one space (the renderer uses camera space: eye at the origin).
 struct RtAccel {
     std::vector<BezierPatch> patches;
+    std::vector<PatchSoa> patchSoa;  // the same patches, for the wavefront's Newton stage
     std::vector<uint8_t> flip, twoSided;
     std::vector<uint32_t> material;
     Bvh bvh;

@@ -1,0 +1,45 @@
+// Newton iteration on many (ray, patch) starts at once: one start per lane, kNewtonLanes lanes, structure
+// of arrays. One call of the step function advances every lane by one iteration with exactly the
+// arithmetic and stop rules of newtonIterate<float> (intersect.h: same basis expressions, same summation
+// order as its 4-wide evaluation, no fused multiply-add), so a start gives bit-identical roots either way.
+// The caller refills a lane as soon as its start finishes (converged or failed), so lanes do not wait for
+// the slowest start of a group. Plain data, no globals: the step is a pure function of the lane arrays.
+#pragma once
+#include <cstdint>
+
+namespace tessera {
+
+constexpr int kNewtonLanes = 8;
+
+enum NewtonLaneStatus : int32_t { kLaneRunning = 0, kLaneConverged = 1, kLaneFailed = 2 };
+
+struct alignas(32) NewtonLanes {
+    // The 16 control points projected on the ray's two planes, [control point][lane], control points
+    // row-major like BezierPatch::cp (index 4 * j + i, u index i).
+    float a1[16][kNewtonLanes], a2[16][kNewtonLanes];
+    float u[kNewtonLanes], v[kNewtonLanes];  // current iterate; the root once converged
+    float eps[kNewtonLanes];                 // residual tolerance
+    float prevNorm[kNewtonLanes];            // |R| of the previous iteration (+inf at the start)
+    float evals[kNewtonLanes];               // evaluations so far; the reported iteration count at the end
+    float clamps[kNewtonLanes];              // consecutive clamps back into the domain
+    int32_t status[kNewtonLanes];            // NewtonLaneStatus after a step
+
+    // Start lane `l` at (u0, v0); the caller has filled its a1/a2 column.
+    void start(int l, float u0, float v0, float tolerance) {
+        u[l] = u0, v[l] = v0, eps[l] = tolerance;
+        prevNorm[l] = __builtin_inff();
+        evals[l] = 0.f, clamps[l] = 0.f;
+        status[l] = kLaneRunning;
+    }
+};
+
+// One Newton iteration on every lane (lanes already finished, or idle, compute values nobody reads).
+// After the call, status[l] tells whether lane l converged (u, v hold the root after the free final
+// step), failed (left the domain twice, diverged, NaN, or 16 iterations) or runs on; evals[l] is the
+// iteration count newtonIterate would report. Returns the lanes whose status is not kLaneRunning (bit l
+// for lane l). Uses AVX2 when the processor has it, SSE2 otherwise (the same results).
+unsigned newtonLanesStep(NewtonLanes& lanes);
+// The SSE2 build of the same step, whatever the processor (tests compare the two).
+unsigned newtonLanesStepBaseline(NewtonLanes& lanes);
+
+}  // namespace tessera
