@@ -1,11 +1,46 @@
 #include "core/bezier.h"
 
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
 namespace tessera {
 
+#if defined(__SSE2__)
+namespace {
+// A control point in lanes 0..2 (lane 3 zero), without reading past the Vec3.
+inline __m128 loadVec3(const Vec3& p) {
+    const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&p.x)));
+    return _mm_movelh_ps(xy, _mm_load_ss(&p.z));
+}
+inline Vec3 storeVec3(__m128 v) {
+    alignas(16) float f[4];
+    _mm_store_ps(f, v);
+    return {f[0], f[1], f[2]};
+}
+}  // namespace
+#endif
+
+// The SSE paths evaluate x, y, z in the lanes of one vector with the scalar code's operations in the
+// same order, so both give identical results.
 Vec3 evalPatch(const BezierPatch& patch, float u, float v) {
     float bu[4], bv[4];
     bernstein3(u, bu);
     bernstein3(v, bv);
+#if defined(__SSE2__)
+    const __m128 b0 = _mm_set1_ps(bu[0]), b1 = _mm_set1_ps(bu[1]), b2 = _mm_set1_ps(bu[2]),
+                 b3 = _mm_set1_ps(bu[3]);
+    __m128 r = _mm_setzero_ps();
+    for (int j = 0; j < 4; ++j) {
+        const Vec3* row = &patch.cp[j * 4];
+        const __m128 c = _mm_add_ps(
+            _mm_add_ps(_mm_add_ps(_mm_mul_ps(loadVec3(row[0]), b0), _mm_mul_ps(loadVec3(row[1]), b1)),
+                       _mm_mul_ps(loadVec3(row[2]), b2)),
+            _mm_mul_ps(loadVec3(row[3]), b3));
+        r = _mm_add_ps(r, _mm_mul_ps(c, _mm_set1_ps(bv[j])));
+    }
+    return storeVec3(r);
+#else
     Vec3 r;
     for (int j = 0; j < 4; ++j) {
         Vec3 row = patch.cp[j * 4] * bu[0] + patch.cp[j * 4 + 1] * bu[1] + patch.cp[j * 4 + 2] * bu[2] +
@@ -13,6 +48,7 @@ Vec3 evalPatch(const BezierPatch& patch, float u, float v) {
         r += row * bv[j];
     }
     return r;
+#endif
 }
 
 SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
@@ -22,6 +58,29 @@ SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
     bernstein3Deriv(u, du);
     bernstein3Deriv(v, dv);
     SurfacePoint s;
+#if defined(__SSE2__)
+    const __m128 b0 = _mm_set1_ps(bu[0]), b1 = _mm_set1_ps(bu[1]), b2 = _mm_set1_ps(bu[2]),
+                 b3 = _mm_set1_ps(bu[3]);
+    const __m128 d0 = _mm_set1_ps(du[0]), d1 = _mm_set1_ps(du[1]), d2 = _mm_set1_ps(du[2]),
+                 d3 = _mm_set1_ps(du[3]);
+    __m128 p = _mm_setzero_ps(), pu = _mm_setzero_ps(), pv = _mm_setzero_ps();
+    for (int j = 0; j < 4; ++j) {
+        const Vec3* row = &patch.cp[j * 4];
+        const __m128 r0 = loadVec3(row[0]), r1 = loadVec3(row[1]), r2 = loadVec3(row[2]),
+                     r3 = loadVec3(row[3]);
+        const __m128 cu =
+            _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r0, b0), _mm_mul_ps(r1, b1)), _mm_mul_ps(r2, b2)),
+                       _mm_mul_ps(r3, b3));
+        const __m128 cdu =
+            _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r0, d0), _mm_mul_ps(r1, d1)), _mm_mul_ps(r2, d2)),
+                       _mm_mul_ps(r3, d3));
+        const __m128 bvj = _mm_set1_ps(bv[j]);
+        p = _mm_add_ps(p, _mm_mul_ps(cu, bvj));
+        pv = _mm_add_ps(pv, _mm_mul_ps(cu, _mm_set1_ps(dv[j])));
+        pu = _mm_add_ps(pu, _mm_mul_ps(cdu, bvj));
+    }
+    s.p = storeVec3(p), s.dpdu = storeVec3(pu), s.dpdv = storeVec3(pv);
+#else
     for (int j = 0; j < 4; ++j) {
         const Vec3* row = &patch.cp[j * 4];
         Vec3 cu = row[0] * bu[0] + row[1] * bu[1] + row[2] * bu[2] + row[3] * bu[3];
@@ -30,6 +89,7 @@ SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
         s.dpdv += cu * dv[j];
         s.dpdu += cdu * bv[j];
     }
+#endif
     return s;
 }
 
@@ -108,10 +168,18 @@ Bounds3 hullBounds(const BezierPatch& p) {
 void patchEdge(const BezierPatch& p, int e, Vec3 out[4]) {
     for (int k = 0; k < 4; ++k) {
         switch (e) {
-            case 0: out[k] = p.cp[k]; break;
-            case 1: out[k] = p.cp[k * 4 + 3]; break;
-            case 2: out[k] = p.cp[12 + k]; break;
-            default: out[k] = p.cp[k * 4]; break;
+            case 0:
+                out[k] = p.cp[k];
+                break;
+            case 1:
+                out[k] = p.cp[k * 4 + 3];
+                break;
+            case 2:
+                out[k] = p.cp[12 + k];
+                break;
+            default:
+                out[k] = p.cp[k * 4];
+                break;
         }
     }
 }

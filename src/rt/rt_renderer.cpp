@@ -41,6 +41,10 @@ struct RayList {
     std::vector<Vec2> ignoreUV;    // (u,v) of the ray's origin on `ignore` (x < 0: unknown)
     std::vector<uint8_t> kind, depth;
     size_t size() const { return o.size(); }
+    void resize(size_t n) {
+        o.resize(n), d.resize(n), tmin.resize(n), tmax.resize(n), owner.resize(n), weight.resize(n);
+        ignore.resize(n), ignoreUV.resize(n), kind.resize(n), depth.resize(n);
+    }
     void clear() {
         o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
         ignoreUV.clear(), kind.clear(), depth.clear();
@@ -882,17 +886,23 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
                     std::min(H, target.y1 + ry)};
         ws.tile.reset(region, nx, ny, settings.seed, std::numeric_limits<float>::infinity());
         auto ts = Clock::now();
-        ws.rays.clear();
+        // Camera rays, one per sample (written in place: this runs for every sample of the frame).
         const size_t ns = ws.tile.sampleCount();
+        RayList& rl = ws.rays;
+        rl.resize(ns);
+        std::fill(rl.tmin.begin(), rl.tmin.end(), proj.nearClip);
+        std::fill(rl.tmax.begin(), rl.tmax.end(), proj.farClip);
+        std::fill(rl.weight.begin(), rl.weight.end(), Color{1, 1, 1});
+        std::fill(rl.ignore.begin(), rl.ignore.end(), kNone);
+        std::fill(rl.ignoreUV.begin(), rl.ignoreUV.end(), Vec2{-1.f, -1.f});
+        std::fill(rl.kind.begin(), rl.kind.end(), uint8_t(kPrimary));
+        std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
         for (size_t i = 0; i < ns; ++i) {
             const float x = float(ws.tile.sx[i]) / kSubpixelScale, y = float(ws.tile.sy[i]) / kSubpixelScale;
             const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
-            if (proj.perspective)
-                ws.rays.push({0, 0, 0}, {cx, cy, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1},
-                             kNone, kPrimary, 0);
-            else
-                ws.rays.push({cx, cy, 0}, {0, 0, 1.f}, proj.nearClip, proj.farClip, uint32_t(i), {1, 1, 1},
-                             kNone, kPrimary, 0);
+            rl.o[i] = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
+            rl.d[i] = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
+            rl.owner[i] = uint32_t(i);
         }
         ws.c.shadeMs += msSince(ts);
         while (ws.rays.size() > 0) {
