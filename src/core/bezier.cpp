@@ -13,10 +13,8 @@ inline __m128 loadVec3(const Vec3& p) {
     const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&p.x)));
     return _mm_movelh_ps(xy, _mm_load_ss(&p.z));
 }
-inline Vec3 storeVec3(__m128 v) {
-    alignas(16) float f[4];
-    _mm_store_ps(f, v);
-    return {f[0], f[1], f[2]};
+inline Vec3 storeVec3(__m128 v) {  // lanes extracted in registers (no store and reload)
+    return {_mm_cvtss_f32(v), _mm_cvtss_f32(_mm_shuffle_ps(v, v, 0x55)), _mm_cvtss_f32(_mm_movehl_ps(v, v))};
 }
 }  // namespace
 #endif

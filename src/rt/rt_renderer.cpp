@@ -781,6 +781,7 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     std::vector<Bounds3> patchBox(n);
     for (size_t i = 0; i < n; ++i) patchBox[i] = acc.forest.tree(uint32_t(i))[0];
     collapseBvh4(acc.bvh, patchBox);
+    acc.bounds = all;
     acc.bvhMs = msSince(t1);
     float mag = 0.f;
     if (!all.empty())
@@ -856,7 +857,26 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory.
     const int spp = nx * ny;
     const int bs =
-        std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16, std::max(settings.bucketSize, 64));
+        std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16, std::max(settings.bucketSize, 128));
+    // Raster rectangle holding the projection of the whole scene (the bounding rectangle of its box's
+    // projected corners, which contains the projection of the box when the box lies in front of the eye),
+    // grown by a pixel for rounding: a camera ray outside it cannot hit anything, so it is not traced.
+    float sceneX0 = -INFINITY, sceneX1 = INFINITY, sceneY0 = -INFINITY, sceneY1 = INFINITY;
+    if (acc.bounds.empty()) {
+        sceneX0 = sceneY0 = INFINITY, sceneX1 = sceneY1 = -INFINITY;  // nothing to hit
+    } else {
+        bool inFront = true;
+        float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 p{c & 1 ? acc.bounds.hi.x : acc.bounds.lo.x, c & 2 ? acc.bounds.hi.y : acc.bounds.lo.y,
+                         c & 4 ? acc.bounds.hi.z : acc.bounds.lo.z};
+            if (proj.perspective && !(p.z > 0.f)) inFront = false;
+            const Vec3 r = proj.toRaster(p);
+            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+        }
+        if (inFront && std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))
+            sceneX0 = x0 - 1.f, sceneX1 = x1 + 1.f, sceneY0 = y0 - 1.f, sceneY1 = y1 + 1.f;
+    }
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int nbx = (W + bs - 1) / bs, nby = (H + bs - 1) / bs, nb = nbx * nby;
 
@@ -897,13 +917,16 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         std::fill(rl.ignoreUV.begin(), rl.ignoreUV.end(), Vec2{-1.f, -1.f});
         std::fill(rl.kind.begin(), rl.kind.end(), uint8_t(kPrimary));
         std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
+        size_t m = 0;
         for (size_t i = 0; i < ns; ++i) {
             const float x = float(ws.tile.sx[i]) / kSubpixelScale, y = float(ws.tile.sy[i]) / kSubpixelScale;
+            if (!(x >= sceneX0 && x <= sceneX1 && y >= sceneY0 && y <= sceneY1)) continue;  // sure miss
             const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
-            rl.o[i] = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
-            rl.d[i] = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
-            rl.owner[i] = uint32_t(i);
+            rl.o[m] = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
+            rl.d[m] = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
+            rl.owner[m++] = uint32_t(i);
         }
+        rl.resize(m);
         ws.c.shadeMs += msSince(ts);
         while (ws.rays.size() > 0) {
             traceList(acc, ws.rays, ws, ws.hits, fr.cull);

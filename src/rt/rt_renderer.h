@@ -32,6 +32,7 @@ struct RtAccel {
     std::vector<uint32_t> material;
     Bvh bvh;
     SubpatchForest forest;
+    Bounds3 bounds;        // of all traced patches (their root boxes)
     float offset = 1e-4f;  // self-intersection offset along the normal for secondary ray origins
     double bvhMs = 0, subpatchMs = 0;
 };
