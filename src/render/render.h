@@ -3,9 +3,8 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "film/film.h"
 #include "scene/scene.h"
@@ -22,6 +21,7 @@ struct RenderSettings {
     int subpatchDepth = 6;
     int maxDepth = 4;
     bool cullBackfaces = false;
+    bool cameraRayBinning = true;  // camera rays find their candidates by screen-space binning (not per ray)
     // Progress: called with (buckets done, total) from worker threads; must be thread-safe.
     std::function<void(int, int)> progress;
     // Set to true (e.g. by a SIGINT handler) to stop the render early.

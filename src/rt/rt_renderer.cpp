@@ -88,6 +88,17 @@ struct HitInfo {
     Vec3 P, N, I;
 };
 
+struct CameraBinning {
+    const Projector* proj = nullptr;
+    const SampleTile* tile = nullptr;
+    std::vector<uint32_t> rayOfSample;  // per tile sample: its ray in the camera ray list (kNone: none)
+    // Per tile sample (padded by 4): raster position, and its camera ray's origin (x, y; z is 0) and
+    // reciprocal direction (safeInverse).
+    std::vector<float> sampleX, sampleY, originX, originY, invX, invY, invZ;
+    std::vector<Candidate> found;       // scratch: candidates in the order found
+    std::vector<uint32_t> start, next;  // scratch: grouping by ray
+};
+
 struct Workspace {
     SampleTile tile;
     RayList rays, next, shadow;
@@ -99,6 +110,7 @@ struct Workspace {
     std::vector<uint8_t> secondaryFlags;
     std::vector<Vec3> secO, secD;
     std::vector<Color> secW;
+    CameraBinning bin;
     Counters c;
 };
 
@@ -316,6 +328,225 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
         ch.c.candidates = ch.cand.size();
         ch.c.boxTests = boxTests;
     });
+}
+
+// Camera rays: the traversal stage by screen-space binning. A camera ray passes through its sample's
+// raster position, so it can only hit a box whose projection contains that position. The tile's region is
+// tested against the projected bounding rectangles of the 4-wide BVH's boxes and of the subpatch boxes,
+// top down, and each leaf box is slab-tested (the traversal's arithmetic) only against the rays of the
+// samples inside its rectangle. A ray hits a leaf box only if it hits every box above it (they contain
+// it), so the candidates are exactly the traversal's, found once per tile and box instead of once per
+// ray and box; ties in entry distance keep this stage's order instead of the traversal's.
+
+// Raster rectangle containing the projection of box b, grown for rounding (the rays' own raster
+// positions are rounded too); false when the box reaches behind the eye (no finite rectangle).
+// For each 4-bit mask, its set lanes in increasing order, then the unset ones (a compress table).
+constexpr std::array<std::array<uint8_t, 4>, 16> makeCompressLanes() {
+    std::array<std::array<uint8_t, 4>, 16> t{};
+    for (int m = 0; m < 16; ++m) {
+        int k = 0;
+        for (int l = 0; l < 4; ++l)
+            if (m & (1 << l)) t[m][k++] = uint8_t(l);
+        for (int l = 0; l < 4; ++l)
+            if (!(m & (1 << l))) t[m][k++] = uint8_t(l);
+    }
+    return t;
+}
+constexpr std::array<std::array<uint8_t, 4>, 16> kCompressLanes = makeCompressLanes();
+
+inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
+    x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
+    for (int c = 0; c < 8; ++c) {
+        const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
+        if (proj.perspective && !(p.z > 0.f)) return false;
+        const Vec3 r = proj.toRaster(p);
+        x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+    }
+    const float m = 1e-2f + 1e-5f * std::max({std::fabs(x0), std::fabs(x1), std::fabs(y0), std::fabs(y1)});
+    x0 -= m, x1 += m, y0 -= m, y1 += m;
+    return std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1);
+}
+
+void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, std::vector<Chunk>& chunks,
+                   bool cull) {
+    const Projector& proj = *bin.proj;
+    const SampleTile& tile = *bin.tile;
+    const Rect reg = tile.region;
+    const int tw = reg.width(), spp = tile.spp;
+    const float rx0 = float(reg.x0), rx1 = float(reg.x1), ry0 = float(reg.y0), ry1 = float(reg.y1);
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    const bool useBack = cull && !forest.backfacing.empty();
+    std::vector<Candidate>& found = bin.found;
+    found.clear();
+    uint64_t boxTests = 0;
+
+    // Whether the rectangle of box b can hold a sample of the tile; r* receive the rectangle clipped to the
+    // region (the whole region when the box reaches behind the eye).
+    auto overlaps = [&](const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
+        if (!screenRect(proj, b, x0, x1, y0, y1)) {
+            x0 = rx0, x1 = rx1, y0 = ry0, y1 = ry1;
+            return true;
+        }
+        x0 = std::max(x0, rx0), x1 = std::min(x1, rx1), y0 = std::max(y0, ry0), y1 = std::min(y1, ry1);
+        return x0 <= x1 && y0 <= y1;
+    };
+    // The rays of the samples inside [x0, x1] x [y0, y1] against one leaf box, four samples of a row at a
+    // time (per-sample structure of arrays; lane for lane the arithmetic of rayBoxInterval).
+    const float tmin = proj.nearClip, tmax = proj.farClip;
+    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, float x0, float x1, float y0,
+                        float y1) {
+        const int px0 = std::max(reg.x0, int(std::floor(x0))),
+                  px1 = std::min(reg.x1 - 1, int(std::floor(x1)));
+        const int py0 = std::max(reg.y0, int(std::floor(y0))),
+                  py1 = std::min(reg.y1 - 1, int(std::floor(y1)));
+        if (px0 > px1 || py0 > py1) return;
+        const uint32_t leaf = node - firstLeaf;
+        // Room for every sample of the rectangle's rows plus a full group of 4 (trimmed at the end).
+        size_t k = found.size();
+        found.resize(k + size_t(px1 - px0 + 1) * size_t(py1 - py0 + 1) * size_t(spp) + 4);
+#if defined(__SSE2__)
+        const __m128 lox = _mm_set1_ps(box.lo.x), loy = _mm_set1_ps(box.lo.y), loz = _mm_set1_ps(box.lo.z);
+        const __m128 hix = _mm_set1_ps(box.hi.x), hiy = _mm_set1_ps(box.hi.y), hiz = _mm_set1_ps(box.hi.z);
+        const __m128 vx0 = _mm_set1_ps(x0), vx1 = _mm_set1_ps(x1), vy0 = _mm_set1_ps(y0),
+                     vy1 = _mm_set1_ps(y1);
+        const __m128 t0 = _mm_set1_ps(tmin), t1 = _mm_set1_ps(tmax);
+#endif
+        for (int py = py0; py <= py1; ++py) {
+            const size_t rowBase = (size_t(py - reg.y0) * tw + size_t(px0 - reg.x0)) * spp;
+            const size_t rowEnd = rowBase + size_t(px1 - px0 + 1) * spp;
+            boxTests += rowEnd - rowBase;
+#if defined(__SSE2__)
+            for (size_t i = rowBase; i < rowEnd; i += 4) {
+                const __m128 x = _mm_loadu_ps(&bin.sampleX[i]), y = _mm_loadu_ps(&bin.sampleY[i]);
+                const __m128 ox = _mm_loadu_ps(&bin.originX[i]), oy = _mm_loadu_ps(&bin.originY[i]);
+                const __m128 ix = _mm_loadu_ps(&bin.invX[i]), iy = _mm_loadu_ps(&bin.invY[i]),
+                             iz = _mm_loadu_ps(&bin.invZ[i]);
+                const __m128 ax = _mm_mul_ps(_mm_sub_ps(lox, ox), ix),
+                             bx = _mm_mul_ps(_mm_sub_ps(hix, ox), ix);
+                const __m128 ay = _mm_mul_ps(_mm_sub_ps(loy, oy), iy),
+                             by = _mm_mul_ps(_mm_sub_ps(hiy, oy), iy);
+                const __m128 az = _mm_mul_ps(loz, iz), bz = _mm_mul_ps(hiz, iz);  // origin z is 0
+                const __m128 te = _mm_max_ps(_mm_max_ps(_mm_min_ps(ax, bx), _mm_min_ps(ay, by)),
+                                             _mm_max_ps(_mm_min_ps(az, bz), t0));
+                const __m128 tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(ax, bx), _mm_max_ps(ay, by)),
+                                             _mm_min_ps(_mm_max_ps(az, bz), t1));
+                const __m128 inside = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(x, vx0), _mm_cmple_ps(x, vx1)),
+                                                 _mm_and_ps(_mm_cmpge_ps(y, vy0), _mm_cmple_ps(y, vy1)));
+                int mask = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(te, tx), inside));
+                if (rowEnd - i < 4) mask &= (1 << (rowEnd - i)) - 1;
+                if (!mask) continue;
+                // Compress: the hit lanes' candidates to the front (4 written, popcount kept).
+                alignas(16) float tev[4];
+                _mm_store_ps(tev, te);
+                Candidate* out = found.data() + k;
+                for (int j = 0; j < 4; ++j) {
+                    const int l = kCompressLanes[mask][j];
+                    out[j] = {bin.rayOfSample[i + l], patch, leaf, tev[l]};
+                }
+                k += size_t(__builtin_popcount(unsigned(mask)));
+            }
+#else
+            for (size_t i = rowBase; i < rowEnd; ++i) {
+                const uint32_t ray = bin.rayOfSample[i];
+                const float x = bin.sampleX[i], y = bin.sampleY[i];
+                if (ray == kNone || !(x >= x0 && x <= x1 && y >= y0 && y <= y1)) continue;
+                float te, tx;
+                if (rayBoxInterval(box, rays.o[ray], safeInverse(rays.d[ray]), tmin, tmax, te, tx))
+                    found[k++] = {ray, patch, leaf, te};
+            }
+#endif
+        }
+        found.resize(k);
+    };
+    auto visitPatch = [&](uint32_t patch) {
+        const Bounds3* tree = forest.tree(patch);
+        const uint8_t* back = useBack ? forest.backfaceBits(patch) : nullptr;
+        uint32_t stack[64];
+        int sp = 0;
+        stack[sp++] = 0;
+        while (sp > 0) {
+            const uint32_t n = stack[--sp];
+            if (back && back[n]) continue;
+            float x0, x1, y0, y1;
+            if (!overlaps(tree[n], x0, x1, y0, y1)) continue;
+            if (n >= firstLeaf) {
+                testLeaf(patch, n, tree[n], x0, x1, y0, y1);
+                continue;
+            }
+            // Nearer child (smaller depth) first, so that each ray's candidates come out nearly sorted.
+            const bool lowFirst = tree[2 * n + 1].lo.z <= tree[2 * n + 2].lo.z;
+            stack[sp++] = lowFirst ? 2 * n + 2 : 2 * n + 1;
+            stack[sp++] = lowFirst ? 2 * n + 1 : 2 * n + 2;
+        }
+    };
+    // BVH: nodes whose rectangle meets the region.
+    uint32_t stack[kBvh4Stack];
+    int sp = 0;
+    if (!acc.bvh.wide.empty()) stack[sp++] = 0;
+    while (sp > 0) {
+        const Bvh4Node& nd = acc.bvh.wide[stack[--sp]];
+        // Children near first (by depth): patches are visited in this order, inner nodes pushed far first.
+        uint32_t order[4] = {0, 1, 2, 3};
+        for (uint32_t i = 1; i < nd.count; ++i)
+            for (uint32_t j = i; j > 0 && nd.lo[2][order[j]] < nd.lo[2][order[j - 1]]; --j)
+                std::swap(order[j], order[j - 1]);
+        uint32_t inner[4], nInner = 0;
+        for (uint32_t k = 0; k < nd.count; ++k) {
+            const uint32_t c = order[k];
+            Bounds3 b;
+            b.lo = {nd.lo[0][c], nd.lo[1][c], nd.lo[2][c]};
+            b.hi = {nd.hi[0][c], nd.hi[1][c], nd.hi[2][c]};
+            float x0, x1, y0, y1;
+            if (!overlaps(b, x0, x1, y0, y1)) continue;
+            if (nd.child[c] & kBvh4Patch)
+                visitPatch(nd.child[c] & ~kBvh4Patch);
+            else
+                inner[nInner++] = nd.child[c];
+        }
+        while (nInner > 0) stack[sp++] = inner[--nInner];
+    }
+
+    // Group by ray (counting sort, stable), each ray's candidates sorted by entry distance (stable), in
+    // the chunks of kChunk rays the Newton stage expects.
+    const size_t n = rays.size();
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    if (chunks.size() < nChunks) chunks.resize(nChunks);
+    std::vector<uint32_t>& start = bin.start;  // start[r]: first candidate of ray r; start[n]: total
+    start.assign(n + 1, 0);
+    for (const Candidate& c : found) ++start[c.ray + 1];
+    for (size_t r = 0; r < n; ++r) start[r + 1] += start[r];
+    bin.next.assign(start.begin(), start.end() - 1);
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        Chunk& ch = chunks[ci];
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        ch.cand.resize(start[r1] - start[r0]);
+        ch.segEnd.resize(r1 - r0);
+        for (size_t r = r0; r < r1; ++r) ch.segEnd[r - r0] = start[r + 1] - start[r0];
+        ch.c = Counters();
+        ch.c.candidates = ch.cand.size();
+    }
+    if (nChunks > 0) chunks[0].c.boxTests = boxTests;
+    for (const Candidate& c : found) {
+        const size_t ci = c.ray / kChunk;
+        chunks[ci].cand[bin.next[c.ray]++ - start[ci * kChunk]] = c;
+    }
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        Candidate* cd = chunks[ci].cand.data();
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        for (size_t r = r0; r < r1; ++r) {
+            const size_t b = start[r] - start[r0], e = start[r + 1] - start[r0];
+            for (size_t i = b + 1; i < e; ++i) {
+                const Candidate x = cd[i];
+                size_t j = i;
+                while (j > b && cd[j - 1].tEnter > x.tEnter) {
+                    cd[j] = cd[j - 1];
+                    --j;
+                }
+                cd[j] = x;
+            }
+        }
+    }
 }
 
 // Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
@@ -540,9 +771,14 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     });
 }
 
-void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vector<RayHit>& hits, bool cull) {
+// `bin`: the list holds the camera rays of a tile (traversal by binning, see binCameraRays).
+void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vector<RayHit>& hits, bool cull,
+               CameraBinning* bin = nullptr) {
     auto t0 = Clock::now();
-    traverseList(acc, rays, ws.chunks, cull);
+    if (bin)
+        binCameraRays(acc, rays, *bin, ws.chunks, cull);
+    else
+        traverseList(acc, rays, ws.chunks, cull);
     auto t1 = Clock::now();
     newtonList(acc, rays, ws.chunks, hits, cull);
     ws.c.traversalMs += std::chrono::duration<double, std::milli>(t1 - t0).count();
@@ -917,19 +1153,32 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         std::fill(rl.ignoreUV.begin(), rl.ignoreUV.end(), Vec2{-1.f, -1.f});
         std::fill(rl.kind.begin(), rl.kind.end(), uint8_t(kPrimary));
         std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
+        ws.bin.proj = &proj;
+        ws.bin.tile = &ws.tile;
+        ws.bin.rayOfSample.assign(ns + 4, kNone);
+        for (auto* v : {&ws.bin.originX, &ws.bin.originY, &ws.bin.invX, &ws.bin.invY, &ws.bin.invZ})
+            v->assign(ns + 4, 0.f);
+        // Samples without a camera ray keep a NaN position: never inside a rectangle.
+        ws.bin.sampleX.assign(ns + 4, NAN), ws.bin.sampleY.assign(ns + 4, NAN);
         size_t m = 0;
         for (size_t i = 0; i < ns; ++i) {
             const float x = float(ws.tile.sx[i]) / kSubpixelScale, y = float(ws.tile.sy[i]) / kSubpixelScale;
             if (!(x >= sceneX0 && x <= sceneX1 && y >= sceneY0 && y <= sceneY1)) continue;  // sure miss
+            ws.bin.rayOfSample[i] = uint32_t(m);
+            ws.bin.sampleX[i] = x, ws.bin.sampleY[i] = y;
             const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
             rl.o[m] = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
             rl.d[m] = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
+            const Vec3 inv = safeInverse(rl.d[m]);
+            ws.bin.originX[i] = rl.o[m].x, ws.bin.originY[i] = rl.o[m].y;
+            ws.bin.invX[i] = inv.x, ws.bin.invY[i] = inv.y, ws.bin.invZ[i] = inv.z;
             rl.owner[m++] = uint32_t(i);
         }
         rl.resize(m);
         ws.c.shadeMs += msSince(ts);
-        while (ws.rays.size() > 0) {
-            traceList(acc, ws.rays, ws, ws.hits, fr.cull);
+        for (bool camera = true; ws.rays.size() > 0; camera = false) {
+            traceList(acc, ws.rays, ws, ws.hits, fr.cull,
+                      camera && settings.cameraRayBinning ? &ws.bin : nullptr);
             shadeGeneration(fr, ws);
             std::swap(ws.rays, ws.next);
         }
