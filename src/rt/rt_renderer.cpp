@@ -353,6 +353,7 @@ constexpr std::array<std::array<uint8_t, 4>, 16> makeCompressLanes() {
     return t;
 }
 constexpr std::array<std::array<uint8_t, 4>, 16> kCompressLanes = makeCompressLanes();
+constexpr uint8_t kPopCount[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};  // no popcnt in x86-64 v1
 
 inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
     x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
@@ -444,7 +445,7 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, 
                     const int l = kCompressLanes[mask][j];
                     out[j] = {bin.rayOfSample[i + l], patch, leaf, tev[l]};
                 }
-                k += size_t(__builtin_popcount(unsigned(mask)));
+                k += size_t(kPopCount[mask]);
             }
 #else
             for (size_t i = rowBase; i < rowEnd; ++i) {
@@ -1142,10 +1143,40 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
                     std::min(H, target.y1 + ry)};
         ws.tile.reset(region, nx, ny, settings.seed, std::numeric_limits<float>::infinity());
         auto ts = Clock::now();
-        // Camera rays, one per sample (written in place: this runs for every sample of the frame).
+        // Camera rays, one per sample inside the scene's rectangle (written in place: this runs for every
+        // sample of the frame), and the per-sample arrays of the camera-ray binning.
         const size_t ns = ws.tile.sampleCount();
         RayList& rl = ws.rays;
         rl.resize(ns);
+        CameraBinning& bin = ws.bin;
+        bin.proj = &proj;
+        bin.tile = &ws.tile;
+        for (auto* v :
+             {&bin.sampleX, &bin.sampleY, &bin.originX, &bin.originY, &bin.invX, &bin.invY, &bin.invZ})
+            v->resize(ns + 4);
+        bin.rayOfSample.resize(ns + 4);
+        size_t m = 0;
+        for (size_t i = 0; i < ns + 4; ++i) {
+            const float x = i < ns ? float(ws.tile.sx[i]) / kSubpixelScale : NAN;
+            const float y = i < ns ? float(ws.tile.sy[i]) / kSubpixelScale : NAN;
+            if (!(x >= sceneX0 && x <= sceneX1 && y >= sceneY0 && y <= sceneY1)) {  // sure miss: no ray
+                bin.rayOfSample[i] = kNone;
+                bin.sampleX[i] = bin.sampleY[i] = NAN;  // never inside a rectangle
+                bin.originX[i] = bin.originY[i] = bin.invX[i] = bin.invY[i] = bin.invZ[i] = 0.f;
+                continue;
+            }
+            const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
+            const Vec3 o = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
+            const Vec3 d = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
+            const Vec3 inv = safeInverse(d);
+            rl.o[m] = o, rl.d[m] = d;
+            bin.rayOfSample[i] = uint32_t(m);
+            bin.sampleX[i] = x, bin.sampleY[i] = y;
+            bin.originX[i] = o.x, bin.originY[i] = o.y;
+            bin.invX[i] = inv.x, bin.invY[i] = inv.y, bin.invZ[i] = inv.z;
+            rl.owner[m++] = uint32_t(i);
+        }
+        rl.resize(m);
         std::fill(rl.tmin.begin(), rl.tmin.end(), proj.nearClip);
         std::fill(rl.tmax.begin(), rl.tmax.end(), proj.farClip);
         std::fill(rl.weight.begin(), rl.weight.end(), Color{1, 1, 1});
@@ -1153,28 +1184,6 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         std::fill(rl.ignoreUV.begin(), rl.ignoreUV.end(), Vec2{-1.f, -1.f});
         std::fill(rl.kind.begin(), rl.kind.end(), uint8_t(kPrimary));
         std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
-        ws.bin.proj = &proj;
-        ws.bin.tile = &ws.tile;
-        ws.bin.rayOfSample.assign(ns + 4, kNone);
-        for (auto* v : {&ws.bin.originX, &ws.bin.originY, &ws.bin.invX, &ws.bin.invY, &ws.bin.invZ})
-            v->assign(ns + 4, 0.f);
-        // Samples without a camera ray keep a NaN position: never inside a rectangle.
-        ws.bin.sampleX.assign(ns + 4, NAN), ws.bin.sampleY.assign(ns + 4, NAN);
-        size_t m = 0;
-        for (size_t i = 0; i < ns; ++i) {
-            const float x = float(ws.tile.sx[i]) / kSubpixelScale, y = float(ws.tile.sy[i]) / kSubpixelScale;
-            if (!(x >= sceneX0 && x <= sceneX1 && y >= sceneY0 && y <= sceneY1)) continue;  // sure miss
-            ws.bin.rayOfSample[i] = uint32_t(m);
-            ws.bin.sampleX[i] = x, ws.bin.sampleY[i] = y;
-            const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
-            rl.o[m] = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
-            rl.d[m] = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
-            const Vec3 inv = safeInverse(rl.d[m]);
-            ws.bin.originX[i] = rl.o[m].x, ws.bin.originY[i] = rl.o[m].y;
-            ws.bin.invX[i] = inv.x, ws.bin.invY[i] = inv.y, ws.bin.invZ[i] = inv.z;
-            rl.owner[m++] = uint32_t(i);
-        }
-        rl.resize(m);
         ws.c.shadeMs += msSince(ts);
         for (bool camera = true; ws.rays.size() > 0; camera = false) {
             traceList(acc, ws.rays, ws, ws.hits, fr.cull,
