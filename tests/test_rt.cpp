@@ -685,17 +685,18 @@ TEST(RtHierarchy, QuadCopyLeafHullTestAndOddDepthWavefront) {
     }
 }
 
-TEST(RtCameraBinning, SameCandidatesAndImageAsPerRayTraversal) {
-    // Camera rays find their candidates by screen-space binning of the boxes (binCameraRays); the per-ray
+TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
+    // Camera rays find their candidates by screen-space binning of the boxes (binCameraRays), shadow rays
+    // towards distant lights by binning in the plane orthogonal to the light (binParallelRays); the per-ray
     // traversal must give the same candidate set (hence the same count) and the same image, for a
-    // perspective view of the teapot, a view from inside a scene whose boxes reach behind the eye, and an
-    // orthographic view.
+    // perspective view of the teapot (two distant lights; then a point light, where shadow rays use the
+    // traversal), a view from inside a scene whose boxes reach behind the eye, and an orthographic view.
     auto compare = [](const Scene& s, const char* what) {
         RenderSettings rs;
         rs.engine = "rt";
         rs.threads = 2;
         RenderResult binned = render(s, rs);
-        rs.cameraRayBinning = false;
+        rs.rayBinning = false;
         RenderResult traversed = render(s, rs);
         const ImageDiff d = compareImages(binned.image, traversed.image, 0.1f);
         size_t differing = 0;
@@ -710,12 +711,19 @@ TEST(RtCameraBinning, SameCandidatesAndImageAsPerRayTraversal) {
         // Ties in box entry distance may order two starts differently: roots move by rounding at most.
         EXPECT_TRUE(differing == 0 || d.psnrColor > 60.0) << what;
         EXPECT_GT(binned.stats["hits"]["primary"].get<uint64_t>(), 1000u) << what;
+        EXPECT_EQ(binned.stats["hits"]["shadow"], traversed.stats["hits"]["shadow"]) << what;
     };
     Scene teapot =
         loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/teapot.rib", [](const std::string&) {});
     teapot.camera.width = 240;
     teapot.camera.height = 180;
     compare(teapot, "teapot.rib");
+    Scene twoLights = teapot;
+    twoLights.lights.push_back({LightType::Distant, {0.5f, 0.5f, 0.5f}, {0, 0, 0}, {1.f, -0.3f, 0.2f}});
+    compare(twoLights, "teapot, two distant lights");
+    Scene pointLight = teapot;
+    pointLight.lights.push_back({LightType::Point, {1e4f, 1e4f, 1e4f}, {20.f, 40.f, -10.f}, {}});
+    compare(pointLight, "teapot, distant and point lights");
 
     // The eye inside the scene: a floor under and behind the eye, a bent sheet in front.
     Scene inside = cameraSpaceScene(200, 150, 70.f);

@@ -21,7 +21,9 @@ struct RenderSettings {
     int subpatchDepth = 6;
     int maxDepth = 4;
     bool cullBackfaces = false;
-    bool cameraRayBinning = true;  // camera rays find their candidates by screen-space binning (not per ray)
+    // Camera rays, and shadow rays towards distant lights, find their candidates by binning the boxes in
+    // a projection plane instead of one traversal per ray (same candidates; off: for tests).
+    bool rayBinning = true;
     // Progress: called with (buckets done, total) from worker threads; must be thread-safe.
     std::function<void(int, int)> progress;
     // Set to true (e.g. by a SIGINT handler) to stop the render early.

@@ -99,6 +99,13 @@ struct CameraBinning {
     std::vector<uint32_t> start, next;  // scratch: grouping by ray
 };
 
+struct ParallelBinning {
+    std::vector<uint32_t> cellStart, cellOf;  // grid: rays of cell c are sorted[cellStart[c], cellStart[c+1])
+    // Per sorted ray (padded by 4): its index and its point, origin, interval, originating patch.
+    std::vector<uint32_t> ray, ignore;
+    std::vector<float> px, py, ox, oy, oz, tmin, tmax;
+};
+
 struct Workspace {
     SampleTile tile;
     RayList rays, next, shadow;
@@ -111,6 +118,7 @@ struct Workspace {
     std::vector<Vec3> secO, secD;
     std::vector<Color> secW;
     CameraBinning bin;
+    ParallelBinning parallel;
     Counters c;
 };
 
@@ -330,6 +338,50 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     });
 }
 
+// The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
+// ray's candidates sorted by entry distance (stable), in the chunks of kChunk rays the Newton stage
+// expects (the traversal's output format). `start`, `next`: scratch.
+void groupCandidates(const std::vector<Candidate>& found, size_t n, std::vector<uint32_t>& start,
+                     std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests) {
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    if (chunks.size() < nChunks) chunks.resize(nChunks);
+    // start[r]: first candidate of ray r; start[n]: total
+    start.assign(n + 1, 0);
+    for (const Candidate& c : found) ++start[c.ray + 1];
+    for (size_t r = 0; r < n; ++r) start[r + 1] += start[r];
+    next.assign(start.begin(), start.end() - 1);
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        Chunk& ch = chunks[ci];
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        ch.cand.resize(start[r1] - start[r0]);
+        ch.segEnd.resize(r1 - r0);
+        for (size_t r = r0; r < r1; ++r) ch.segEnd[r - r0] = start[r + 1] - start[r0];
+        ch.c = Counters();
+        ch.c.candidates = ch.cand.size();
+    }
+    if (nChunks > 0) chunks[0].c.boxTests = boxTests;
+    for (const Candidate& c : found) {
+        const size_t ci = c.ray / kChunk;
+        chunks[ci].cand[next[c.ray]++ - start[ci * kChunk]] = c;
+    }
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        Candidate* cd = chunks[ci].cand.data();
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        for (size_t r = r0; r < r1; ++r) {
+            const size_t b = start[r] - start[r0], e = start[r + 1] - start[r0];
+            for (size_t i = b + 1; i < e; ++i) {
+                const Candidate x = cd[i];
+                size_t j = i;
+                while (j > b && cd[j - 1].tEnter > x.tEnter) {
+                    cd[j] = cd[j - 1];
+                    --j;
+                }
+                cd[j] = x;
+            }
+        }
+    }
+}
+
 // Camera rays: the traversal stage by screen-space binning. A camera ray passes through its sample's
 // raster position, so it can only hit a box whose projection contains that position. The tile's region is
 // tested against the projected bounding rectangles of the 4-wide BVH's boxes and of the subpatch boxes,
@@ -508,45 +560,193 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, 
         while (nInner > 0) stack[sp++] = inner[--nInner];
     }
 
-    // Group by ray (counting sort, stable), each ray's candidates sorted by entry distance (stable), in
-    // the chunks of kChunk rays the Newton stage expects.
-    const size_t n = rays.size();
-    const size_t nChunks = (n + kChunk - 1) / kChunk;
-    if (chunks.size() < nChunks) chunks.resize(nChunks);
-    std::vector<uint32_t>& start = bin.start;  // start[r]: first candidate of ray r; start[n]: total
-    start.assign(n + 1, 0);
-    for (const Candidate& c : found) ++start[c.ray + 1];
-    for (size_t r = 0; r < n; ++r) start[r + 1] += start[r];
-    bin.next.assign(start.begin(), start.end() - 1);
-    for (size_t ci = 0; ci < nChunks; ++ci) {
-        Chunk& ch = chunks[ci];
-        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
-        ch.cand.resize(start[r1] - start[r0]);
-        ch.segEnd.resize(r1 - r0);
-        for (size_t r = r0; r < r1; ++r) ch.segEnd[r - r0] = start[r + 1] - start[r0];
-        ch.c = Counters();
-        ch.c.candidates = ch.cand.size();
+    groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests);
+}
+
+// Rays that share one direction (shadow rays towards a distant light): the traversal stage by binning
+// in the plane orthogonal to the direction. A ray projects to a point there, and it can only hit a box
+// whose projection contains that point, so the rays' points are sorted into a grid, the BVH and subpatch
+// boxes are culled top down by their projected bounding rectangles against the points' bounds, and each
+// leaf box is slab-tested (the traversal's arithmetic, with its self-intersection cut) against the rays
+// in the grid cells its rectangle covers. Candidates are the traversal's; appended to `found` unordered.
+
+void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t r1, ParallelBinning& pb,
+                     std::vector<Candidate>& found, uint64_t& boxTests) {
+    const size_t n = r1 - r0;
+    if (n == 0) return;
+    const Vec3 d = rays.d[r0];
+    const Vec3 inv = safeInverse(d);
+    // Frame of the projection plane.
+    const Vec3 w = normalize(d);
+    const Vec3 a = std::fabs(w.x) > 0.9f ? Vec3{0, 1, 0} : Vec3{1, 0, 0};
+    const Vec3 eu = normalize(cross(a, w)), ev = cross(w, eu);
+    // Points and their bounds; the grid: about 4 rays per cell.
+    float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+    for (size_t r = r0; r < r1; ++r) {
+        const float x = dot(eu, rays.o[r]), y = dot(ev, rays.o[r]);
+        x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
     }
-    if (nChunks > 0) chunks[0].c.boxTests = boxTests;
-    for (const Candidate& c : found) {
-        const size_t ci = c.ray / kChunk;
-        chunks[ci].cand[bin.next[c.ray]++ - start[ci * kChunk]] = c;
+    if (!(std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))) return;
+    const int g = std::clamp(int(std::sqrt(double(n) / 4.0)), 1, 256);
+    const float cw = std::max((x1 - x0) / float(g), 1e-30f), ch = std::max((y1 - y0) / float(g), 1e-30f);
+    auto cellX = [&](float x) { return int(std::clamp((x - x0) / cw, 0.f, float(g - 1))); };
+    auto cellY = [&](float y) { return int(std::clamp((y - y0) / ch, 0.f, float(g - 1))); };
+    pb.cellStart.assign(size_t(g) * g + 1, 0);
+    pb.cellOf.resize(n);
+    for (size_t r = r0; r < r1; ++r) {
+        const uint32_t c = uint32_t(cellY(dot(ev, rays.o[r])) * g + cellX(dot(eu, rays.o[r])));
+        pb.cellOf[r - r0] = c;
+        ++pb.cellStart[c + 1];
     }
-    for (size_t ci = 0; ci < nChunks; ++ci) {
-        Candidate* cd = chunks[ci].cand.data();
-        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+    for (size_t c = 0; c < size_t(g) * g; ++c) pb.cellStart[c + 1] += pb.cellStart[c];
+    for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.tmin, &pb.tmax}) v->assign(n + 4, 0.f);
+    std::fill(pb.px.begin() + n, pb.px.end(), NAN);  // padding: never inside a rectangle
+    pb.ray.assign(n + 4, 0), pb.ignore.assign(n + 4, kNone);
+    {
+        std::vector<uint32_t>& next = pb.cellOf;  // reused: cell -> next slot, after reading the cell
+        std::vector<uint32_t> slot(pb.cellStart.begin(), pb.cellStart.end() - 1);
         for (size_t r = r0; r < r1; ++r) {
-            const size_t b = start[r] - start[r0], e = start[r + 1] - start[r0];
-            for (size_t i = b + 1; i < e; ++i) {
-                const Candidate x = cd[i];
-                size_t j = i;
-                while (j > b && cd[j - 1].tEnter > x.tEnter) {
-                    cd[j] = cd[j - 1];
-                    --j;
-                }
-                cd[j] = x;
-            }
+            const uint32_t s = slot[next[r - r0]]++;
+            const Vec3 o = rays.o[r];
+            pb.ray[s] = uint32_t(r), pb.ignore[s] = rays.ignore[r];
+            pb.px[s] = dot(eu, o), pb.py[s] = dot(ev, o);
+            pb.ox[s] = o.x, pb.oy[s] = o.y, pb.oz[s] = o.z;
+            pb.tmin[s] = rays.tmin[r], pb.tmax[s] = rays.tmax[r];
         }
+    }
+    const float ignoreT = 8.f * acc.offset;
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+
+    // Projected bounding rectangle of a box, grown for rounding, clipped to the points' bounds.
+    auto overlaps = [&](const Bounds3& b, float& rx0, float& rx1, float& ry0, float& ry1) {
+        rx0 = ry0 = INFINITY, rx1 = ry1 = -INFINITY;
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
+            const float x = dot(eu, p), y = dot(ev, p);
+            rx0 = std::min(rx0, x), rx1 = std::max(rx1, x), ry0 = std::min(ry0, y), ry1 = std::max(ry1, y);
+        }
+        const float m = 1e-5f * std::max({std::fabs(rx0), std::fabs(rx1), std::fabs(ry0), std::fabs(ry1),
+                                          rx1 - rx0, ry1 - ry0}) +
+                        1e-30f;
+        rx0 -= m, rx1 += m, ry0 -= m, ry1 += m;
+        return rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0;
+    };
+    // Near side of a box along the direction (visit order, so that candidates come out nearly sorted).
+    auto nearDepth = [&](const Bounds3& b) {
+        return (d.x > 0 ? b.lo.x : b.hi.x) * d.x + (d.y > 0 ? b.lo.y : b.hi.y) * d.y +
+               (d.z > 0 ? b.lo.z : b.hi.z) * d.z;
+    };
+    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, float rx0, float rx1, float ry0,
+                        float ry1) {
+        const int cx0 = cellX(rx0), cx1 = cellX(rx1), cy0 = cellY(ry0), cy1 = cellY(ry1);
+        const uint32_t leaf = node - firstLeaf;
+#if defined(__SSE2__)
+        const __m128 lox = _mm_set1_ps(box.lo.x), loy = _mm_set1_ps(box.lo.y), loz = _mm_set1_ps(box.lo.z);
+        const __m128 hix = _mm_set1_ps(box.hi.x), hiy = _mm_set1_ps(box.hi.y), hiz = _mm_set1_ps(box.hi.z);
+        const __m128 ix = _mm_set1_ps(inv.x), iy = _mm_set1_ps(inv.y), iz = _mm_set1_ps(inv.z);
+        const __m128 vx0 = _mm_set1_ps(rx0), vx1 = _mm_set1_ps(rx1), vy0 = _mm_set1_ps(ry0),
+                     vy1 = _mm_set1_ps(ry1);
+        const __m128 vself = _mm_set1_ps(ignoreT);
+        const __m128i vpatch = _mm_set1_epi32(int32_t(patch));
+#endif
+        for (int cy = cy0; cy <= cy1; ++cy) {
+            const size_t b = pb.cellStart[size_t(cy) * g + cx0], e = pb.cellStart[size_t(cy) * g + cx1 + 1];
+            if (b == e) continue;
+            boxTests += e - b;
+            size_t k = found.size();
+            found.resize(k + (e - b) + 4);
+#if defined(__SSE2__)
+            for (size_t i = b; i < e; i += 4) {
+                const __m128 x = _mm_loadu_ps(&pb.px[i]), y = _mm_loadu_ps(&pb.py[i]);
+                const __m128 ox = _mm_loadu_ps(&pb.ox[i]), oy = _mm_loadu_ps(&pb.oy[i]),
+                             oz = _mm_loadu_ps(&pb.oz[i]);
+                const __m128 ax = _mm_mul_ps(_mm_sub_ps(lox, ox), ix),
+                             bx = _mm_mul_ps(_mm_sub_ps(hix, ox), ix);
+                const __m128 ay = _mm_mul_ps(_mm_sub_ps(loy, oy), iy),
+                             by = _mm_mul_ps(_mm_sub_ps(hiy, oy), iy);
+                const __m128 az = _mm_mul_ps(_mm_sub_ps(loz, oz), iz),
+                             bz = _mm_mul_ps(_mm_sub_ps(hiz, oz), iz);
+                const __m128 te = _mm_max_ps(_mm_max_ps(_mm_min_ps(ax, bx), _mm_min_ps(ay, by)),
+                                             _mm_max_ps(_mm_min_ps(az, bz), _mm_loadu_ps(&pb.tmin[i])));
+                const __m128 tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(ax, bx), _mm_max_ps(ay, by)),
+                                             _mm_min_ps(_mm_max_ps(az, bz), _mm_loadu_ps(&pb.tmax[i])));
+                const __m128 inside = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(x, vx0), _mm_cmple_ps(x, vx1)),
+                                                 _mm_and_ps(_mm_cmpge_ps(y, vy0), _mm_cmple_ps(y, vy1)));
+                // The ray's own patch: boxes it leaves before the self-intersection distance are skipped.
+                const __m128 own = _mm_castsi128_ps(_mm_cmpeq_epi32(
+                    _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pb.ignore[i])), vpatch));
+                const __m128 selfCut = _mm_and_ps(own, _mm_cmplt_ps(tx, vself));
+                int mask = _mm_movemask_ps(_mm_andnot_ps(selfCut, _mm_and_ps(_mm_cmple_ps(te, tx), inside)));
+                if (e - i < 4) mask &= (1 << (e - i)) - 1;
+                if (!mask) continue;
+                alignas(16) float tev[4];
+                _mm_store_ps(tev, te);
+                Candidate* out = found.data() + k;
+                for (int j = 0; j < 4; ++j) {
+                    const int l = kCompressLanes[mask][j];
+                    out[j] = {pb.ray[i + l], patch, leaf, tev[l]};
+                }
+                k += size_t(kPopCount[mask]);
+            }
+#else
+            for (size_t i = b; i < e; ++i) {
+                if (!(pb.px[i] >= rx0 && pb.px[i] <= rx1 && pb.py[i] >= ry0 && pb.py[i] <= ry1)) continue;
+                float te, tx;
+                if (!rayBoxInterval(box, {pb.ox[i], pb.oy[i], pb.oz[i]}, inv, pb.tmin[i], pb.tmax[i], te, tx))
+                    continue;
+                if (pb.ignore[i] == patch && tx < ignoreT) continue;
+                found[k++] = {pb.ray[i], patch, leaf, te};
+            }
+#endif
+            found.resize(k);
+        }
+    };
+    auto visitPatch = [&](uint32_t patch) {
+        const Bounds3* tree = forest.tree(patch);
+        uint32_t stack[64];
+        int sp = 0;
+        stack[sp++] = 0;
+        while (sp > 0) {
+            const uint32_t nd = stack[--sp];
+            float rx0, rx1, ry0, ry1;
+            if (!overlaps(tree[nd], rx0, rx1, ry0, ry1)) continue;
+            if (nd >= firstLeaf) {
+                testLeaf(patch, nd, tree[nd], rx0, rx1, ry0, ry1);
+                continue;
+            }
+            const bool lowFirst = nearDepth(tree[2 * nd + 1]) <= nearDepth(tree[2 * nd + 2]);
+            stack[sp++] = lowFirst ? 2 * nd + 2 : 2 * nd + 1;
+            stack[sp++] = lowFirst ? 2 * nd + 1 : 2 * nd + 2;
+        }
+    };
+    uint32_t stack[kBvh4Stack];
+    int sp = 0;
+    if (!acc.bvh.wide.empty()) stack[sp++] = 0;
+    while (sp > 0) {
+        const Bvh4Node& nd = acc.bvh.wide[stack[--sp]];
+        Bounds3 box[4];
+        float depth[4];
+        uint32_t order[4] = {0, 1, 2, 3};
+        for (uint32_t c = 0; c < nd.count; ++c) {
+            box[c].lo = {nd.lo[0][c], nd.lo[1][c], nd.lo[2][c]};
+            box[c].hi = {nd.hi[0][c], nd.hi[1][c], nd.hi[2][c]};
+            depth[c] = nearDepth(box[c]);
+        }
+        for (uint32_t i = 1; i < nd.count; ++i)
+            for (uint32_t j = i; j > 0 && depth[order[j]] < depth[order[j - 1]]; --j)
+                std::swap(order[j], order[j - 1]);
+        uint32_t inner[4], nInner = 0;
+        for (uint32_t k = 0; k < nd.count; ++k) {
+            const uint32_t c = order[k];
+            float rx0, rx1, ry0, ry1;
+            if (!overlaps(box[c], rx0, rx1, ry0, ry1)) continue;
+            if (nd.child[c] & kBvh4Patch)
+                visitPatch(nd.child[c] & ~kBvh4Patch);
+            else
+                inner[nInner++] = nd.child[c];
+        }
+        while (nInner > 0) stack[sp++] = inner[--nInner];
     }
 }
 
@@ -772,14 +972,28 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     });
 }
 
-// `bin`: the list holds the camera rays of a tile (traversal by binning, see binCameraRays).
+// How the traversal stage finds a list's candidates: per ray (traverseList), or by binning the camera rays
+// of a tile (binCameraRays), or by binning runs of rays with one direction (binParallelRays; every ray of
+// the list must belong to such a run: shadow rays towards distant lights, light by light).
+enum class Candidates { kPerRay, kCameraBinning, kParallelBinning };
+
 void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vector<RayHit>& hits, bool cull,
-               CameraBinning* bin = nullptr) {
+               Candidates how = Candidates::kPerRay) {
     auto t0 = Clock::now();
-    if (bin)
-        binCameraRays(acc, rays, *bin, ws.chunks, cull);
-    else
+    if (how == Candidates::kCameraBinning) {
+        binCameraRays(acc, rays, ws.bin, ws.chunks, cull);
+    } else if (how == Candidates::kParallelBinning) {
+        ws.bin.found.clear();
+        uint64_t boxTests = 0;
+        for (size_t r0 = 0, r1; r0 < rays.size(); r0 = r1) {
+            for (r1 = r0 + 1; r1 < rays.size() && rays.d[r1] == rays.d[r0]; ++r1) {
+            }
+            binParallelRays(acc, rays, r0, r1, ws.parallel, ws.bin.found, boxTests);
+        }
+        groupCandidates(ws.bin.found, rays.size(), ws.bin.start, ws.bin.next, ws.chunks, boxTests);
+    } else {
         traverseList(acc, rays, ws.chunks, cull);
+    }
     auto t1 = Clock::now();
     newtonList(acc, rays, ws.chunks, hits, cull);
     ws.c.traversalMs += std::chrono::duration<double, std::milli>(t1 - t0).count();
@@ -804,6 +1018,7 @@ struct Frame {
     std::vector<ShadingLight> lights;
     int maxDepth;
     bool cull;
+    bool rayBinning;
 };
 
 // One wavefront generation: shade the hits of `ws.rays`, trace their shadow rays, accumulate colour into
@@ -824,12 +1039,19 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
         hi.P = rh.h.p;
         hi.N = hitNormal(acc, rh.patch, rh.h);
         hi.I = normalize(rays.d[r]);
-        const Material& m = fr.scene.materials[acc.material[rh.patch]];
-        if (m.type == MaterialType::Constant) continue;
-        const Vec3 Nf = faceForward(hi.N, hi.I);
-        for (size_t l = 0; l < nL; ++l) {
-            const ShadingLight& light = fr.lights[l];
-            if (light.type == LightType::Ambient) continue;
+    }
+    // Shadow rays light by light, so that those towards one distant light (one direction) are contiguous.
+    bool allDistant = true;
+    for (size_t l = 0; l < nL; ++l) {
+        const ShadingLight& light = fr.lights[l];
+        if (light.type == LightType::Ambient) continue;
+        for (size_t r = 0; r < n; ++r) {
+            const RayHit& rh = ws.hits[r];
+            if (!rh.hit) continue;
+            const Material& m = fr.scene.materials[acc.material[rh.patch]];
+            if (m.type == MaterialType::Constant) continue;
+            const HitInfo& hi = ws.info[r];
+            const Vec3 Nf = faceForward(hi.N, hi.I);
             Vec3 L;
             Color Cl;
             float dist;
@@ -839,10 +1061,12 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
             ws.shadowIdx[r * nL + l] = uint32_t(ws.shadow.size());
             ws.shadow.push(hi.P + Nf * acc.offset, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0,
                            Vec2{rh.h.u, rh.h.v});
+            allDistant = allDistant && light.type == LightType::Distant;
         }
     }
     ws.c.shadeMs += msSince(ts);
-    traceList(acc, ws.shadow, ws, ws.shadowHits, fr.cull);
+    traceList(acc, ws.shadow, ws, ws.shadowHits, fr.cull,
+              allDistant && fr.rayBinning ? Candidates::kParallelBinning : Candidates::kPerRay);
 
     ts = Clock::now();
     ws.contrib.assign(n, Color{});
@@ -1086,7 +1310,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     RtAccel acc;
     buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc);
     const double buildMs = msSince(tBuild);
-    Frame fr{scene, acc, {}, std::max(0, settings.maxDepth), settings.cullBackfaces};
+    Frame fr{scene, acc, {}, std::max(0, settings.maxDepth), settings.cullBackfaces, settings.rayBinning};
     for (const Light& l : scene.lights) fr.lights.push_back(prepareLight(l, cam.cameraFromWorld));
     const Projector proj(cam);
 
@@ -1187,7 +1411,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         ws.c.shadeMs += msSince(ts);
         for (bool camera = true; ws.rays.size() > 0; camera = false) {
             traceList(acc, ws.rays, ws, ws.hits, fr.cull,
-                      camera && settings.cameraRayBinning ? &ws.bin : nullptr);
+                      camera && settings.rayBinning ? Candidates::kCameraBinning : Candidates::kPerRay);
             shadeGeneration(fr, ws);
             std::swap(ws.rays, ws.next);
         }
