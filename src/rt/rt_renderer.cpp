@@ -342,7 +342,8 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 // ray's candidates sorted by entry distance (stable), in the chunks of kChunk rays the Newton stage
 // expects (the traversal's output format). `start`, `next`: scratch.
 void groupCandidates(const std::vector<Candidate>& found, size_t n, std::vector<uint32_t>& start,
-                     std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests) {
+                     std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests,
+                     bool sortByEntry = true) {
     const size_t nChunks = (n + kChunk - 1) / kChunk;
     if (chunks.size() < nChunks) chunks.resize(nChunks);
     // start[r]: first candidate of ray r; start[n]: total
@@ -364,6 +365,7 @@ void groupCandidates(const std::vector<Candidate>& found, size_t n, std::vector<
         const size_t ci = c.ray / kChunk;
         chunks[ci].cand[next[c.ray]++ - start[ci * kChunk]] = c;
     }
+    if (!sortByEntry) return;
     for (size_t ci = 0; ci < nChunks; ++ci) {
         Candidate* cd = chunks[ci].cand.data();
         const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
@@ -990,7 +992,12 @@ void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vect
             }
             binParallelRays(acc, rays, r0, r1, ws.parallel, ws.bin.found, boxTests);
         }
-        groupCandidates(ws.bin.found, rays.size(), ws.bin.start, ws.bin.next, ws.chunks, boxTests);
+        // Shadow rays stop at any accepted hit: their candidates need no order (they come out near first
+        // along the light anyway); other rays need them nearest first.
+        const bool anyHitOnly =
+            std::all_of(rays.kind.begin(), rays.kind.end(), [](uint8_t k) { return k == kShadow; });
+        groupCandidates(ws.bin.found, rays.size(), ws.bin.start, ws.bin.next, ws.chunks, boxTests,
+                        /*sortByEntry=*/!anyHitOnly);
     } else {
         traverseList(acc, rays, ws.chunks, cull);
     }
