@@ -289,6 +289,43 @@ inline bool leafMayHit(const ProjectedPatch<float>& pp, const LeafBasis& lb, flo
 #endif
 }
 
+// Largest Bernstein coefficient over one leaf of a scalar function given by its 16 coefficients over the
+// patch (row-major like ProjectedPatch), mapped by the leaf's change of basis: an upper bound of the
+// function on the leaf (convex hull property).
+inline float leafMaxCoefficient(const float a[16], const LeafBasis& lb) {
+#if defined(__SSE2__)
+    const __m128 a0 = _mm_loadu_ps(a), a1 = _mm_loadu_ps(a + 4), a2 = _mm_loadu_ps(a + 8),
+                 a3 = _mm_loadu_ps(a + 12);
+    const __m128 mu0 = _mm_load_ps(lb.mu[0]), mu1 = _mm_load_ps(lb.mu[1]), mu2 = _mm_load_ps(lb.mu[2]),
+                 mu3 = _mm_load_ps(lb.mu[3]);
+    __m128 hi = _mm_set1_ps(-INFINITY);
+    for (int j = 0; j < 4; ++j) {
+        const __m128 r = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(lb.mvSplat[j][0]), a0),
+                                               _mm_mul_ps(_mm_load_ps(lb.mvSplat[j][1]), a1)),
+                                    _mm_add_ps(_mm_mul_ps(_mm_load_ps(lb.mvSplat[j][2]), a2),
+                                               _mm_mul_ps(_mm_load_ps(lb.mvSplat[j][3]), a3)));
+        const __m128 c = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0x00), mu0),
+                                               _mm_mul_ps(_mm_shuffle_ps(r, r, 0x55), mu1)),
+                                    _mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0xaa), mu2),
+                                               _mm_mul_ps(_mm_shuffle_ps(r, r, 0xff), mu3)));
+        hi = _mm_max_ps(hi, c);
+    }
+    hi = _mm_max_ps(hi, _mm_movehl_ps(hi, hi));
+    hi = _mm_max_ss(hi, _mm_shuffle_ps(hi, hi, 0x55));
+    return _mm_cvtss_f32(hi);
+#else
+    float hi = -INFINITY;
+    for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+            float c = 0;
+            for (int jj = 0; jj < 4; ++jj)
+                for (int ii = 0; ii < 4; ++ii) c += lb.mv[j][jj] * lb.mu[ii][i] * a[4 * jj + ii];
+            hi = std::max(hi, c);
+        }
+    return hi;
+#endif
+}
+
 // Newton iteration on the projected patch from (u, v) (updated in place). Stops on convergence
 // (|R|inf < eps, then one free step), leaving the domain, divergence, or 16 iterations. A singular
 // Jacobian (collapsed edge) nudges the iterate towards the domain centre. Returns convergence;

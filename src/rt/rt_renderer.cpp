@@ -39,21 +39,24 @@ struct RayList {
     std::vector<Color> weight;     // throughput to the sample
     std::vector<uint32_t> ignore;  // originating patch (self-intersection guard)
     std::vector<Vec2> ignoreUV;    // (u,v) of the ray's origin on `ignore` (x < 0: unknown)
+    // Secondary rays: the unit normal n the origin was offset along (o = P + offset n, with d.n > 0), so
+    // the ray stays on the far side of the plane through o orthogonal to n; zero when unknown.
+    std::vector<Vec3> originN;
     std::vector<uint8_t> kind, depth;
     size_t size() const { return o.size(); }
     void resize(size_t n) {
         o.resize(n), d.resize(n), tmin.resize(n), tmax.resize(n), owner.resize(n), weight.resize(n);
-        ignore.resize(n), ignoreUV.resize(n), kind.resize(n), depth.resize(n);
+        ignore.resize(n), ignoreUV.resize(n), originN.resize(n), kind.resize(n), depth.resize(n);
     }
     void clear() {
         o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
-        ignoreUV.clear(), kind.clear(), depth.clear();
+        ignoreUV.clear(), originN.clear(), kind.clear(), depth.clear();
     }
     void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k,
-              uint8_t dep, Vec2 uv = {-1.f, -1.f}) {
+              uint8_t dep, Vec2 uv = {-1.f, -1.f}, Vec3 n = {0.f, 0.f, 0.f}) {
         o.push_back(o_), d.push_back(d_), tmin.push_back(t0), tmax.push_back(t1), owner.push_back(own);
-        weight.push_back(w), ignore.push_back(ign), ignoreUV.push_back(uv), kind.push_back(k),
-            depth.push_back(dep);
+        weight.push_back(w), ignore.push_back(ign), ignoreUV.push_back(uv), originN.push_back(n);
+        kind.push_back(k), depth.push_back(dep);
     }
 };
 
@@ -788,7 +791,12 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         // converges to (rejected by the self-intersection rules), so it seeds the test.
         uint32_t rootPatch = kNone;
         float rootU = 0.f, rootV = 0.f;
-        int attempt = 0;            // 0: leaf centre; 1..4: quarter centres (originating patch only)
+        int attempt = 0;  // 0: leaf centre; 1..4: quarter centres (originating patch only)
+        // Originating patch: its control points' heights (X - o).n over the plane through the origin
+        // orthogonal to originN (only when the ray leaves that plane: d.n > 0).
+        Vec3 originN;
+        bool selfPlane = false;
+        float selfHeight[16];
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
         ProjectedPatch<float> pp;
@@ -861,6 +869,8 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 s.pl = makeRayPlanes(s.ray.o, s.ray.d);
                 s.invDD = 1.f / dot(s.ray.d, s.ray.d);
                 s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false;
+                s.originN = rays.originN[r];
+                s.selfPlane = false;
                 s.rootPatch = kNone;
                 if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
                     s.rootPatch = rays.ignore[r], s.rootU = rays.ignoreUV[r].x, s.rootV = rays.ignoreUV[r].y;
@@ -892,12 +902,26 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 if (c.patch != s.projected) {
                     projectLane(acc.patchSoa[c.patch], s, lanes, l);
                     s.projected = c.patch;
+                    if (c.patch == s.opt.ignorePatch && dot(s.originN, s.ray.d) > 0.f) {
+                        const PatchSoa& ps = acc.patchSoa[c.patch];
+                        const Vec3 o = s.ray.o, nrm = s.originN;
+                        for (int k = 0; k < 16; ++k)
+                            s.selfHeight[k] =
+                                (ps.x[k] - o.x) * nrm.x + (ps.y[k] - o.y) * nrm.y + (ps.z[k] - o.z) * nrm.z;
+                        s.selfPlane = true;
+                    }
                 }
                 // On the ray's originating patch, leaves next to its origin converge to the origin itself
                 // (rejected as self-intersection): there the ray-frame hull test of the leaf sub-patch
                 // (exact: a leaf whose hull stays off the ray cannot hold a root) removes most of them. On
                 // other patches it costs more than the Newton runs it saves (measured, docs/rt.md).
-                if (c.patch == s.opt.ignorePatch && !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps)) {
+                // Leaves of the originating patch below the plane through the origin (the ray only moves
+                // away from it: exact, by the convex hull of the leaf's Bernstein coefficients; this
+                // removes the starts that would converge back to the origin on convex and flat parts), or
+                // whose ray-frame hull stays off the ray, cannot hold a root.
+                if (c.patch == s.opt.ignorePatch &&
+                    ((s.selfPlane && leafMaxCoefficient(s.selfHeight, leafBasis[c.leaf]) < -4.f * s.eps) ||
+                     !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps))) {
                     ++culled;
                     ++s.cur;
                     continue;
@@ -1067,7 +1091,7 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
             const float tmax = std::isfinite(dist) ? dist - acc.offset : dist;
             ws.shadowIdx[r * nL + l] = uint32_t(ws.shadow.size());
             ws.shadow.push(hi.P + Nf * acc.offset, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0,
-                           Vec2{rh.h.u, rh.h.v});
+                           Vec2{rh.h.u, rh.h.v}, Nf);
             allDistant = allDistant && light.type == LightType::Distant;
         }
     }
@@ -1143,11 +1167,11 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
         if (f & 1)
             ws.next.push(ws.secO[2 * r], ws.secD[2 * r], 0.f, std::numeric_limits<float>::infinity(), s,
                          ws.secW[2 * r], ws.hits[r].patch, kReflection, uint8_t(rays.depth[r] + 1),
-                         Vec2{ws.hits[r].h.u, ws.hits[r].h.v});
+                         Vec2{ws.hits[r].h.u, ws.hits[r].h.v}, faceForward(ws.info[r].N, ws.info[r].I));
         if (f & 2)
             ws.next.push(ws.secO[2 * r + 1], ws.secD[2 * r + 1], 0.f, std::numeric_limits<float>::infinity(),
                          s, ws.secW[2 * r + 1], ws.hits[r].patch, kRefraction, uint8_t(rays.depth[r] + 1),
-                         Vec2{ws.hits[r].h.u, ws.hits[r].h.v});
+                         Vec2{ws.hits[r].h.u, ws.hits[r].h.v}, -faceForward(ws.info[r].N, ws.info[r].I));
     }
     ws.c.shadeMs += msSince(ts);
 }
@@ -1413,6 +1437,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         std::fill(rl.weight.begin(), rl.weight.end(), Color{1, 1, 1});
         std::fill(rl.ignore.begin(), rl.ignore.end(), kNone);
         std::fill(rl.ignoreUV.begin(), rl.ignoreUV.end(), Vec2{-1.f, -1.f});
+        std::fill(rl.originN.begin(), rl.originN.end(), Vec3{0.f, 0.f, 0.f});
         std::fill(rl.kind.begin(), rl.kind.end(), uint8_t(kPrimary));
         std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
         ws.c.shadeMs += msSince(ts);
