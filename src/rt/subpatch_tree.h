@@ -44,7 +44,10 @@ struct DefaultInitAllocator : std::allocator<T> {
     DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
     template <class U>
     void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-        ::new (static_cast<void*>(p)) U;
+        // Plain aggregates of floats (Bounds3, whose default member initializers would otherwise fill
+        // the array serially) are left for the builder to write; other types are default-initialized.
+        if constexpr (!(std::is_aggregate_v<U> && std::is_trivially_copyable_v<U>))
+            ::new (static_cast<void*>(p)) U;
     }
     template <class U, class... Args>
     void construct(U* p, Args&&... args) {
@@ -55,8 +58,8 @@ struct DefaultInitAllocator : std::allocator<T> {
 
 struct SubpatchForest {
     int depth = 6;
-    uint32_t nodesPerPatch = 127;      // 2^(depth+1) - 1
-    std::vector<Bounds3> boxes;        // patchCount * nodesPerPatch, enlarged for robustness
+    uint32_t nodesPerPatch = 127;                               // 2^(depth+1) - 1
+    std::vector<Bounds3, DefaultInitAllocator<Bounds3>> boxes;  // patchCount * nodesPerPatch, enlarged
     std::vector<uint8_t> backfacing;   // optional, one per node: every point faces away from the eye at 0
     std::vector<Vec2> leafCentre;      // per leaf (shared by all patches): centre of its (u,v) rectangle
     std::vector<LeafBasis> leafBasis;  // per leaf (shared by all patches)
