@@ -746,3 +746,37 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
     ortho.camera.perspective = false;
     compare(ortho, "orthographic teapot");
 }
+
+TEST(RtHierarchy, LeafMaxCoefficientBoundsTheLeaf) {
+    // leafMaxCoefficient maps a scalar function's 16 Bernstein coefficients over the patch to one leaf and
+    // returns their maximum: an upper bound of the function on the leaf (what the originating-patch plane
+    // cull relies on), and a tight one (within the control-net slack, which shrinks with the leaf).
+    Scene s = loadTeapotBpt();
+    SubpatchForest f;
+    buildSubpatchForest(s.patches, 6, f);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> S(-1.f, 1.f);
+    int leaves = 0;
+    for (uint32_t p = 0; p < s.patches.size(); p += 3) {
+        const Vec3 n = normalize(Vec3{S(rng), S(rng), S(rng)});
+        const Vec3 o = s.patches[p].cp[5] + Vec3{S(rng), S(rng), S(rng)} * 0.1f;
+        float h[16];
+        for (int k = 0; k < 16; ++k) h[k] = dot(s.patches[p].cp[k] - o, n);
+        for (uint32_t leaf = 0; leaf < 64; ++leaf) {
+            float u0, u1, v0, v1;
+            subpatchLeafRect(6, leaf, u0, u1, v0, v1);
+            float sampled = -INFINITY;
+            for (int j = 0; j <= 16; ++j)
+                for (int i = 0; i <= 16; ++i) {
+                    const float u = u0 + (u1 - u0) * float(i) / 16.f, v = v0 + (v1 - v0) * float(j) / 16.f;
+                    sampled = std::max(sampled, dot(evalPatch(s.patches[p], u, v) - o, n));
+                }
+            const float bound = leafMaxCoefficient(h, f.leafBasis[leaf]);
+            const float size = length(f.tree(p)[0].diagonal());
+            ASSERT_GE(bound, sampled - 1e-5f * size) << "patch " << p << " leaf " << leaf;
+            EXPECT_LE(bound, sampled + 0.02f * size) << "patch " << p << " leaf " << leaf;
+            ++leaves;
+        }
+    }
+    EXPECT_GT(leaves, 500);
+}
