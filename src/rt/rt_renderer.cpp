@@ -8,6 +8,8 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 #include <memory>
 #include <mutex>
 #if defined(__SSE2__)
@@ -71,7 +73,8 @@ struct Counters {
 };
 
 struct Chunk {
-    std::vector<Candidate> cand;
+    // Written through a raw pointer by the traversal (grown without zeroing), read by index.
+    std::vector<Candidate, DefaultInitAllocator<Candidate>> cand;
     std::vector<uint32_t> segEnd;  // per ray of the chunk: end of its candidates
     Counters c;                    // counters of this chunk (merged in chunk order)
 };
@@ -112,6 +115,7 @@ constexpr int kBvh4Stack = 3 * 64 + 1;
 struct Ray4 {
 #if defined(__SSE2__)
     __m128 ox, oy, oz, ix, iy, iz, t0, t1;
+    Ray4() = default;
     Ray4(Vec3 o, Vec3 inv, float tmin, float tmax)
         : ox(_mm_set1_ps(o.x)),
           oy(_mm_set1_ps(o.y)),
@@ -124,15 +128,23 @@ struct Ray4 {
 #else
     Vec3 o, inv;
     float tmin, tmax;
+    Ray4() = default;
     Ray4(Vec3 o_, Vec3 inv_, float tmin_, float tmax_) : o(o_), inv(inv_), tmin(tmin_), tmax(tmax_) {}
 #endif
 };
 
+#if defined(__SSE2__)
+using F4 = __m128;
+#else
+struct F4 {
+    float v[4];
+};
+#endif
+
 // Slab test of four boxes in structure-of-arrays form (16-byte aligned): bit i set when the ray hits box
-// i, with the entry and exit distances in te[i], tx[i] (same values as rayBoxInterval: no NaNs can occur,
-// so the min/max are order independent).
-inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ray4& r, float te[4],
-                      float tx[4]) {
+// i, with the entry and exit distances in lanes i of te, tx (same values as rayBoxInterval: no NaNs can
+// occur, so the min/max are order independent).
+inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ray4& r, F4& te, F4& tx) {
 #if defined(__SSE2__)
     const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[0]), r.ox), r.ix);
     const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[0]), r.ox), r.ix);
@@ -140,28 +152,93 @@ inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ra
     const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[1]), r.oy), r.iy);
     const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[2]), r.oz), r.iz);
     const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[2]), r.oz), r.iz);
-    const __m128 n =
-        _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
-    const __m128 f =
-        _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
-    _mm_storeu_ps(te, n);
-    _mm_storeu_ps(tx, f);
-    return _mm_movemask_ps(_mm_cmple_ps(n, f));
+    te = _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
+    tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
+    return _mm_movemask_ps(_mm_cmple_ps(te, tx));
 #else
     int mask = 0;
     for (int i = 0; i < 4; ++i) {
         Bounds3 b;
         b.lo = {lo[0][i], lo[1][i], lo[2][i]};
         b.hi = {hi[0][i], hi[1][i], hi[2][i]};
-        if (rayBoxInterval(b, r.o, r.inv, r.tmin, r.tmax, te[i], tx[i])) mask |= 1 << i;
+        if (rayBoxInterval(b, r.o, r.inv, r.tmin, r.tmax, te.v[i], tx.v[i])) mask |= 1 << i;
     }
     return mask;
 #endif
 }
 
-// The four children of a 4-wide BVH node (bits >= count cleared).
-inline int rayBox4(const Bvh4Node& nd, const Ray4& r, float te[4], float tx[4]) {
-    return rayBox4Soa(nd.lo, nd.hi, r, te, tx) & ((1 << nd.count) - 1);
+// Lanes i of `mask` whose exit distance is not below `selfT` (the self-intersection cut: !(tx < selfT)).
+inline int exitNotBelow(int mask, F4 tx, float selfT) {
+#if defined(__SSE2__)
+    return mask & _mm_movemask_ps(_mm_cmpnlt_ps(tx, _mm_set1_ps(selfT)));
+#else
+    for (int i = 0; i < 4; ++i)
+        if (tx.v[i] < selfT) mask &= ~(1 << i);
+    return mask;
+#endif
+}
+
+inline void storeF4(float out[4], F4 v) {
+#if defined(__SSE2__)
+    _mm_storeu_ps(out, v);
+#else
+    for (int i = 0; i < 4; ++i) out[i] = v.v[i];
+#endif
+}
+
+// Order of the hit lanes of a 4-wide box test by entry distance (stable: ties by lane index), from a table
+// indexed by the hit mask (bits 0-3) and six pair comparisons: bits 4-7 for the pairs (0,1), (1,2),
+// (2,3), (0,2) and bits 8-9 for (0,3), (1,3); the bit of a pair (a, b), a < b, is set when key[b] <
+// key[a] (b goes first). Patterns no four numbers can produce still give indices in range.
+struct HitOrder {
+    uint8_t order[4];   // the hit lanes by rank (entries >= the hit count: 0)
+    uint8_t offset[4];  // per lane: 16 * its rank (64 for a lane not hit): a byte offset into Candidate[]
+};
+constexpr int kHitOrderSize = 1 << 10;
+constexpr std::array<HitOrder, kHitOrderSize> makeHitOrderTable() {
+    std::array<HitOrder, kHitOrderSize> t{};
+    constexpr int pa[6] = {0, 1, 2, 0, 0, 1}, pb[6] = {1, 2, 3, 2, 3, 3};
+    for (int idx = 0; idx < kHitOrderSize; ++idx) {
+        const int mask = idx & 15;
+        bool bFirst[4][4] = {};  // bFirst[a][b], a < b: lane b before lane a
+        for (int p = 0; p < 6; ++p) bFirst[pa[p]][pb[p]] = (idx >> (4 + p)) & 1;
+        HitOrder& h = t[size_t(idx)];
+        for (int i = 0; i < 4; ++i) {
+            h.order[i] = 0;
+            h.offset[i] = 64;
+        }
+        int k = 0;
+        for (int i = 0; i < 4; ++i) k += (mask >> i) & 1;
+        for (int i = 0; i < 4; ++i) {
+            if (!((mask >> i) & 1)) continue;
+            int rank = 0;
+            for (int j = 0; j < 4; ++j) {
+                if (j == i || !((mask >> j) & 1)) continue;
+                rank += j < i ? !bFirst[j][i] : bFirst[i][j];
+            }
+            rank = rank < k - 1 ? rank : k - 1;
+            h.order[rank] = uint8_t(i);
+            h.offset[i] = uint8_t(16 * rank);
+        }
+    }
+    return t;
+}
+constexpr std::array<HitOrder, kHitOrderSize> kHitOrder = makeHitOrderTable();
+
+// The table entry for the hit lanes `mask` (at most 4 bits) ordered by `key` (no NaNs in the hit lanes).
+inline const HitOrder& hitOrder(int mask, F4 key) {
+#if defined(__SSE2__)
+    const __m128 a = _mm_shuffle_ps(key, key, _MM_SHUFFLE(2, 3, 2, 1));  // k1 k2 k3 k2
+    const __m128 b = _mm_shuffle_ps(key, key, _MM_SHUFFLE(0, 2, 1, 0));  // k0 k1 k2 k0
+    const int p1 = _mm_movemask_ps(_mm_cmplt_ps(a, b));
+    const int p2 = _mm_movemask_ps(_mm_cmplt_ps(_mm_shuffle_ps(key, key, _MM_SHUFFLE(3, 3, 3, 3)), key)) & 3;
+    return kHitOrder[size_t(mask | p1 << 4 | p2 << 8)];
+#else
+    const float* k = key.v;
+    const int p = (k[1] < k[0]) | (k[2] < k[1]) << 1 | (k[3] < k[2]) << 2 | (k[2] < k[0]) << 3 |
+                  (k[3] < k[0]) << 4 | (k[3] < k[1]) << 5;
+    return kHitOrder[size_t(mask | p << 4)];
+#endif
 }
 
 // Indices of the bits of `mask` in increasing order of key[] (stable); returns their number.
@@ -180,10 +257,107 @@ inline int sortHits(int mask, const float key[4], int order[4]) {
     return k;
 }
 
-// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Both children of a subpatch
-// node are tested together (they are adjacent in memory) and the nearer one is visited first, so leaves
-// come out nearly sorted. Leaves of the ray's originating patch whose box the ray leaves before the
+// Number of bits of a 4-bit mask (no popcnt instruction in the baseline x86-64 build).
+constexpr uint8_t kPop4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+
+// The candidates of four leaves (leaf numbers leaf0 .. leaf0 + 3, entry distances te) in hit order: lane i
+// goes to out[h.offset[i] / 16], a lane not hit to the scratch slot out[4].
+inline void storeCandidates4(Candidate* out, const HitOrder& h, F4 rayPatch, uint32_t leaf0, F4 te) {
+    static_assert(sizeof(Candidate) == 16 && offsetof(Candidate, leaf) == 8 &&
+                  offsetof(Candidate, tEnter) == 12);
+    char* base = reinterpret_cast<char*>(out);
+#if defined(__SSE2__)
+    // rayPatch = (ray, patch, ray, patch)
+    const __m128 leaf =
+        _mm_castsi128_ps(_mm_add_epi32(_mm_set1_epi32(int(leaf0)), _mm_setr_epi32(0, 1, 2, 3)));
+    const __m128 lo = _mm_unpacklo_ps(leaf, te),
+                 hi = _mm_unpackhi_ps(leaf, te);  // (l0 t0 l1 t1), (l2 t2 l3 t3)
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[0]), _mm_movelh_ps(rayPatch, lo));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[1]), _mm_movehl_ps(lo, rayPatch));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[2]), _mm_movelh_ps(rayPatch, hi));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[3]), _mm_movehl_ps(hi, rayPatch));
+#else
+    uint32_t ray, patch;
+    std::memcpy(&ray, &rayPatch.v[0], 4);
+    std::memcpy(&patch, &rayPatch.v[1], 4);
+    for (int i = 0; i < 4; ++i) {
+        const Candidate c{ray, patch, leaf0 + uint32_t(i), te.v[i]};
+        std::memcpy(base + h.offset[i], &c, sizeof c);
+    }
+#endif
+}
+
+inline F4 rayPatchLanes(uint32_t ray, uint32_t patch) {
+#if defined(__SSE2__)
+    return _mm_castsi128_ps(_mm_setr_epi32(int(ray), int(patch), int(ray), int(patch)));
+#else
+    F4 v;
+    std::memcpy(&v.v[0], &ray, 4);
+    std::memcpy(&v.v[1], &patch, 4);
+    return v;
+#endif
+}
+
+// The four children of a 4-wide BVH node (bits >= count cleared).
+inline int rayBox4(const Bvh4Node& nd, const Ray4& r, F4& te, F4& tx) {
+    return rayBox4Soa(nd.lo, nd.hi, r, te, tx) & ((1 << nd.count) - 1);
+}
+
+// out[0..3] = {pair, first + h.order[0..3]} (entries past the hit count are scratch).
+struct QuadItem {
+    uint32_t pair, quad;  // a (ray, patch) pair of the chunk and a quad (or odd-depth node) of its tree
+};
+inline void storeItems4(QuadItem* out, const HitOrder& h, uint32_t pair, uint32_t first) {
+#if defined(__SSE2__)
+    int32_t ord;
+    std::memcpy(&ord, h.order, 4);
+    const __m128i z = _mm_setzero_si128();
+    const __m128i q = _mm_add_epi32(_mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(ord), z), z),
+                                    _mm_set1_epi32(int(first)));
+    const __m128i p = _mm_set1_epi32(int(pair));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_unpacklo_epi32(p, q));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + 2), _mm_unpackhi_epi32(p, q));
+#else
+    for (int i = 0; i < 4; ++i) out[i] = {pair, first + h.order[i]};
+#endif
+}
+
+// One patch whose root box a ray hits, and what its subpatch traversal needs.
+struct PatchPair {
+    const SubpatchQuad* quads;
+    const uint8_t* qback;  // backface bits per quad (primary rays with culling), else null
+    const uint8_t* back;   // backface bits per node (same condition)
+    float selfT;           // leaves the ray exits before this distance are dropped
+    float te;              // entry distance of the root box
+    uint32_t ray;          // index in the chunk
+    uint32_t patch;
+};
+
+// Per-thread scratch of the traversal, reused from chunk to chunk.
+struct TraverseScratch {
+    std::vector<Ray4> ray4;
+    std::vector<PatchPair> pairs;
+    std::vector<QuadItem, DefaultInitAllocator<QuadItem>> items, next;
+    std::vector<uint32_t> count;  // candidates per ray of the chunk
+};
+
+// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Each ray's candidates are
+// emitted in depth-first order (both hierarchies, children near first, ties by index; under a BVH node its
+// patches before its inner children), then sorted by entry distance (stable), so leaves come out nearly
+// sorted and the order is fixed. Leaves of the ray's originating patch whose box the ray leaves before the
 // self-intersection distance are not emitted: every root inside such a leaf would be rejected anyway.
+//
+// Per ray, the BVH's depth-first traversal lists the patches it visits (plain branches: neighbouring rays
+// take the same paths). Then all (ray, patch) pairs of the chunk go down their subpatch trees together,
+// level by level, two levels per 4-wide test (the odd level in between only contributes its backface bit:
+// a grandchild's box lies inside its parent's, so the hit set is the same), through the quads
+// (SubpatchQuad, numbered as a 4-ary heap: the children of quad q are 4q+1..4q+4). The tests of one level
+// are independent and their work is branch free: the hit lanes are filtered in the SIMD mask (exit
+// distance, precomputed backface bits) and ordered by a table lookup, and all four outputs are written at
+// their rank (the ones past the hit count land in scratch slots and are overwritten). Each item's hit
+// children are appended in hit order, so every level, and the leaves' candidates, stay grouped by pair in
+// visit order and in depth-first order within a pair. For an odd depth the nodes of the last level above
+// the leaves test their two children as a pair.
 void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
     const size_t n = rays.size();
     const size_t nChunks = (n + kChunk - 1) / kChunk;
@@ -193,93 +367,42 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     const uint32_t firstLeaf = forest.firstLeaf();
     const uint32_t depth = uint32_t(forest.depth);
     const float ignoreT = 8.f * acc.offset;
+    const uint32_t nQuads = forest.quadsPerPatch;
+    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
+    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
+    const Bvh4Node* wide = bvh.wide.data();
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
+        thread_local TraverseScratch scratch;
+        TraverseScratch& sc = scratch;
         Chunk& ch = chunks[ci];
-        ch.cand.clear();
-        ch.segEnd.clear();
         ch.c = Counters();
         uint64_t boxTests = 0;
         const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
-        for (size_t r = r0; r < r1; ++r) {
-            const size_t segBegin = ch.cand.size();
-            const Vec3 o = rays.o[r], d = rays.d[r];
-            const Vec3 inv = safeInverse(d);
-            const PairRay pr(o, inv);
-            const float tmin = rays.tmin[r], tmax = rays.tmax[r];
+        const uint32_t nr = uint32_t(r1 - r0);
+        sc.ray4.resize(nr);
+        sc.count.assign(nr, 0);
+        sc.pairs.clear();
+
+        // BVH: per ray, the patches it visits (depth first; the hit children in order of entry: inner nodes
+        // pushed far first, patches listed near first).
+        for (uint32_t rl = 0; rl < nr; ++rl) {
+            const size_t r = r0 + rl;
+            sc.ray4[rl] = Ray4(rays.o[r], safeInverse(rays.d[r]), rays.tmin[r], rays.tmax[r]);
+            const Ray4& r4 = sc.ray4[rl];
             const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
             const uint32_t ignore = rays.ignore[r];
-            const Ray4 r4(o, inv, tmin, tmax);
-            // One patch whose root box the ray enters at te and leaves at tx: its subpatch tree.
-            auto visitPatch = [&](uint32_t patch, float te, float tx) {
-                const Bounds3* tree = forest.tree(patch);
-                const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
-                const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
-                if (tx < selfT || (back && back[0])) return;
-                if (firstLeaf == 0) {
-                    ch.cand.push_back({uint32_t(r), patch, 0, te});
-                    return;
-                }
-                // Stack of (node | level << 24) whose box the ray hits. From an even level the four
-                // grandchildren are tested at once (the odd level in between only contributes its backface
-                // bit: a grandchild's box lies inside its parent's, so the hit set is the same); from the
-                // last level above the leaves of an odd depth, the two children as a pair.
-                const SubpatchQuad* quads = forest.quadTree(patch);
-                uint32_t st[64];
-                int s2 = 0;
-                st[s2++] = 0;
-                while (s2 > 0) {
-                    const uint32_t e = st[--s2];
-                    const uint32_t node = e & 0xffffffu, lvl = e >> 24;
-                    if (lvl + 2 <= depth) {
-                        const uint32_t levelFirst = (1u << lvl) - 1u;  // 4^k - 1 for lvl = 2k
-                        const SubpatchQuad& q = quads[levelFirst / 3 + node - levelFirst];
-                        float te[4], tx[4];
-                        int mask = rayBox4Soa(q.lo, q.hi, r4, te, tx);
-                        boxTests += 4;
-                        const uint32_t g0 = 4 * node + 3;
-                        for (int bits = mask; bits;) {
-                            const int i = __builtin_ctz(unsigned(bits));
-                            bits &= bits - 1;
-                            if (tx[i] < selfT || (back && (back[g0 + i] || back[2 * node + 1 + (i >> 1)])))
-                                mask &= ~(1 << i);
-                        }
-                        int order[4];
-                        const int k = sortHits(mask, te, order);
-                        if (g0 >= firstLeaf) {
-                            for (int j = 0; j < k; ++j)
-                                ch.cand.push_back(
-                                    {uint32_t(r), patch, g0 + order[j] - firstLeaf, te[order[j]]});
-                        } else {
-                            // Far first, so that the near one is expanded first.
-                            const uint32_t l2 = (lvl + 2) << 24;
-                            for (int j = k - 1; j >= 0; --j) st[s2++] = (g0 + order[j]) | l2;
-                        }
-                        continue;
-                    }
-                    // Odd depth: the pair of leaves below a node of level depth - 1.
-                    const uint32_t m = 2 * node + 1;
-                    float tn[2], tf[2];
-                    const int mask = rayBoxPair(tree + m, pr, tmin, tmax, tn, tf);
-                    const float ta = tn[0], tb = tn[1];
-                    const bool ha = (mask & 1) && tf[0] >= selfT && !(back && back[m]);
-                    const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
-                    boxTests += 2;
-                    const bool swap = hb && (!ha || tb < ta);
-                    if (swap) ch.cand.push_back({uint32_t(r), patch, m + 1 - firstLeaf, tb});
-                    if (ha) ch.cand.push_back({uint32_t(r), patch, m - firstLeaf, ta});
-                    if (hb && !swap) ch.cand.push_back({uint32_t(r), patch, m + 1 - firstLeaf, tb});
-                }
-            };
-            // 4-wide BVH: the hit children in order of entry; inner nodes are pushed far first, patches
-            // are visited at once (near first).
             uint32_t stack[kBvh4Stack];
             int sp = 0;
             if (!bvh.wide.empty()) stack[sp++] = 0;
             while (sp > 0) {
-                const Bvh4Node& nd = bvh.wide[stack[--sp]];
-                float te[4], tx[4];
-                const int mask = rayBox4(nd, r4, te, tx);
+                const Bvh4Node& nd = wide[stack[--sp]];
+                F4 te4, tx4;
+                const int mask = rayBox4(nd, r4, te4, tx4);
                 boxTests += nd.count;
+                if (!mask) continue;
+                float te[4], tx[4];
+                storeF4(te, te4);
+                storeF4(tx, tx4);
                 int order[4];
                 const int k = sortHits(mask, te, order);
                 for (int q = k - 1; q >= 0; --q) {
@@ -287,26 +410,129 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                     if (!(c & kBvh4Patch)) stack[sp++] = c;
                 }
                 for (int q = 0; q < k; ++q) {
-                    const uint32_t c = nd.child[order[q]];
-                    if (c & kBvh4Patch) visitPatch(c & ~kBvh4Patch, te[order[q]], tx[order[q]]);
+                    const int i = order[q];
+                    const uint32_t c = nd.child[i];
+                    if (!(c & kBvh4Patch)) continue;
+                    const uint32_t patch = c & ~kBvh4Patch;
+                    const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                    const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
+                    if (tx[i] < selfT || (back && back[0])) continue;
+                    sc.pairs.push_back({forest.quadTree(patch),
+                                        cullRay ? forest.quadBackBits(patch) : nullptr, back, selfT, te[i],
+                                        rl, patch});
                 }
             }
-            // Sort the ray's candidates by entry distance (stable insertion sort: short, nearly sorted).
-            Candidate* cd = ch.cand.data();
-            const size_t segEnd = ch.cand.size();
-            for (size_t i = segBegin + 1; i < segEnd; ++i) {
-                if (!(cd[i - 1].tEnter > cd[i].tEnter)) continue;
-                const Candidate x = cd[i];
-                size_t j = i;
-                while (j > segBegin && cd[j - 1].tEnter > x.tEnter) {
-                    cd[j] = cd[j - 1];
+        }
+
+        // Subpatch trees of all pairs, level by level; candidates in pair order.
+        const uint32_t nPairs = uint32_t(sc.pairs.size());
+        // All candidates are written by one level (the leaves' parents), with a scratch slot after the last
+        // quad's: room for `most` of them (the vector's size is the room; no zeroing).
+        Candidate* cand = nullptr;
+        auto candRoom = [&](size_t most) {
+            if (ch.cand.capacity() < most) ch.cand.reserve(std::max(most, 2 * ch.cand.capacity()));
+            ch.cand.resize(ch.cand.capacity());
+            cand = ch.cand.data();
+        };
+        size_t used = 0;
+        const PatchPair* pairs = sc.pairs.data();
+        if (firstLeaf == 0) {
+            candRoom(nPairs);
+            for (uint32_t p = 0; p < nPairs; ++p) {
+                cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
+                ++sc.count[pairs[p].ray];
+            }
+        } else {
+            sc.items.resize(nPairs);
+            for (uint32_t p = 0; p < nPairs; ++p) sc.items[p] = {p, 0};
+            uint32_t nItems = nPairs, lvl = 0;
+            for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
+                boxTests += 4 * uint64_t(nItems);
+                const QuadItem* items = sc.items.data();
+                if (lvl + 2 < depth) {
+                    if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
+                    QuadItem* next = sc.next.data();
+                    uint32_t nNext = 0;
+                    for (uint32_t j = 0; j < nItems; ++j) {
+                        const QuadItem it = items[j];
+                        const PatchPair& pp = pairs[it.pair];
+                        const SubpatchQuad& q = pp.quads[it.quad];
+                        F4 te4, tx4;
+                        int mask = rayBox4Soa(q.lo, q.hi, sc.ray4[pp.ray], te4, tx4);
+                        mask = exitNotBelow(mask, tx4, pp.selfT);
+                        if (pp.qback) mask &= ~int(pp.qback[it.quad]);
+                        const HitOrder& h = hitOrder(mask, te4);
+                        storeItems4(next + nNext, h, it.pair, 4 * it.quad + 1);
+                        nNext += kPop4[mask];
+                    }
+                    std::swap(sc.items, sc.next);
+                    nItems = nNext;
+                    continue;
+                }
+                // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
+                const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
+                candRoom(4 * size_t(nItems) + 1);
+                for (uint32_t j = 0; j < nItems; ++j) {
+                    const QuadItem it = items[j];
+                    const PatchPair& pp = pairs[it.pair];
+                    const SubpatchQuad& q = pp.quads[it.quad];
+                    F4 te4, tx4;
+                    int mask = rayBox4Soa(q.lo, q.hi, sc.ray4[pp.ray], te4, tx4);
+                    mask = exitNotBelow(mask, tx4, pp.selfT);
+                    if (pp.qback) mask &= ~int(pp.qback[it.quad]);
+                    const HitOrder& h = hitOrder(mask, te4);
+                    storeCandidates4(cand + used, h, rayPatchLanes(uint32_t(r0) + pp.ray, pp.patch),
+                                     4 * (it.quad - leafQuadFirst), te4);
+                    used += kPop4[mask];
+                    sc.count[pp.ray] += kPop4[mask];
+                }
+                nItems = 0;
+            }
+            // Odd depth: the pairs of leaves below the nodes of level depth - 1.
+            boxTests += 2 * uint64_t(nItems);
+            if (nItems > 0) candRoom(2 * size_t(nItems));
+            for (uint32_t j = 0; j < nItems; ++j) {
+                const QuadItem it = sc.items[j];
+                const PatchPair& pp = pairs[it.pair];
+                const uint32_t m = 2 * (it.quad + pairNodeBias) + 1;
+                const size_t r = r0 + pp.ray;
+                const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
+                float tn[2], tf[2];
+                const int mask =
+                    rayBoxPair(forest.tree(pp.patch) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
+                const float ta = tn[0], tb = tn[1];
+                const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
+                const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
+                const bool swap = hb && (!ha || tb < ta);
+                const size_t u0 = used;
+                if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+                if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
+                if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+                sc.count[pp.ray] += uint32_t(used - u0);
+            }
+        }
+
+        // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
+        // nearly sorted).
+        ch.segEnd.resize(nr);
+        uint32_t end = 0;
+        for (uint32_t rl = 0; rl < nr; ++rl) {
+            const uint32_t begin = end;
+            end += sc.count[rl];
+            ch.segEnd[rl] = end;
+            for (uint32_t i = begin + 1; i < end; ++i) {
+                if (!(cand[i - 1].tEnter > cand[i].tEnter)) continue;
+                const Candidate x = cand[i];
+                uint32_t j = i;
+                while (j > begin && cand[j - 1].tEnter > x.tEnter) {
+                    cand[j] = cand[j - 1];
                     --j;
                 }
-                cd[j] = x;
+                cand[j] = x;
             }
-            ch.segEnd.push_back(uint32_t(segEnd));
         }
-        ch.c.candidates = ch.cand.size();
+        ch.cand.resize(used);
+        ch.c.candidates = used;
         ch.c.boxTests = boxTests;
     });
 }
@@ -732,8 +958,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     // Tiles of about 16k samples (64x64 pixels at 4 spp): the wavefront's ray and candidate lists scale
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory.
     const int spp = nx * ny;
-    const int bs = std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16,
-                              std::max(settings.bucketSize, 64));
+    const int bs =
+        std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16, std::max(settings.bucketSize, 64));
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int nbx = (W + bs - 1) / bs, nby = (H + bs - 1) / bs, nb = nbx * nby;
 
