@@ -178,6 +178,35 @@ inline int exitNotBelow(int mask, F4 tx, float selfT) {
 #endif
 }
 
+// The hit lanes of a subpatch quad whose exit distance is not below selfT (lanes of selfT4; the
+// self-intersection cut !(tx < selfT)), with the entry distances in te.
+inline int quadHits(const SubpatchQuad& q, const Ray4& r, F4 selfT4, F4& te) {
+#if defined(__SSE2__)
+    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[0]), r.ox), r.ix);
+    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[0]), r.ox), r.ix);
+    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[1]), r.oy), r.iy);
+    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[1]), r.oy), r.iy);
+    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[2]), r.oz), r.iz);
+    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[2]), r.oz), r.iz);
+    te = _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
+    const __m128 tx =
+        _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
+    return _mm_movemask_ps(_mm_andnot_ps(_mm_cmplt_ps(tx, selfT4), _mm_cmple_ps(te, tx)));
+#else
+    F4 tx;
+    const int mask = rayBox4Soa(q.lo, q.hi, r, te, tx);
+    return exitNotBelow(mask, tx, selfT4.v[0]);
+#endif
+}
+
+inline F4 splatF4(float x) {
+#if defined(__SSE2__)
+    return _mm_set1_ps(x);
+#else
+    return F4{{x, x, x, x}};
+#endif
+}
+
 inline void storeF4(float out[4], F4 v) {
 #if defined(__SSE2__)
     _mm_storeu_ps(out, v);
@@ -241,28 +270,26 @@ inline const HitOrder& hitOrder(int mask, F4 key) {
 #endif
 }
 
-// Indices of the bits of `mask` in increasing order of key[] (stable); returns their number.
-inline int sortHits(int mask, const float key[4], int order[4]) {
-    int k = 0;
-    while (mask) {
-        const int i = __builtin_ctz(unsigned(mask));
-        mask &= mask - 1;
-        int j = k++;
-        while (j > 0 && key[order[j - 1]] > key[i]) {
-            order[j] = order[j - 1];
-            --j;
-        }
-        order[j] = i;
-    }
-    return k;
-}
-
 // Number of bits of a 4-bit mask (no popcnt instruction in the baseline x86-64 build).
 constexpr uint8_t kPop4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
 
-// The candidates of four leaves (leaf numbers leaf0 .. leaf0 + 3, entry distances te) in hit order: lane i
-// goes to out[h.offset[i] / 16], a lane not hit to the scratch slot out[4].
-inline void storeCandidates4(Candidate* out, const HitOrder& h, F4 rayPatch, uint32_t leaf0, F4 te) {
+// Per 4-bit hit mask: the byte offset of each lane's candidate when the hit lanes are written in lane order
+// (16 * the number of hit lanes before it; 64, a scratch slot, for a lane not hit).
+struct LaneOffsets {
+    uint8_t offset[4];
+};
+constexpr std::array<LaneOffsets, 16> makeLaneOffsets() {
+    std::array<LaneOffsets, 16> t{};
+    for (int mask = 0; mask < 16; ++mask)
+        for (int i = 0, k = 0; i < 4; ++i)
+            t[size_t(mask)].offset[i] = uint8_t((mask >> i) & 1 ? 16 * k++ : 64);
+    return t;
+}
+constexpr std::array<LaneOffsets, 16> kLaneOffsets = makeLaneOffsets();
+
+// The candidates of four leaves (leaf numbers leaf0 .. leaf0 + 3, entry distances te): lane i goes to
+// byte offset h.offset[i] of out.
+inline void storeCandidates4(Candidate* out, const LaneOffsets& h, F4 rayPatch, uint32_t leaf0, F4 te) {
     static_assert(sizeof(Candidate) == 16 && offsetof(Candidate, leaf) == 8 &&
                   offsetof(Candidate, tEnter) == 12);
     char* base = reinterpret_cast<char*>(out);
@@ -303,33 +330,35 @@ inline int rayBox4(const Bvh4Node& nd, const Ray4& r, F4& te, F4& tx) {
     return rayBox4Soa(nd.lo, nd.hi, r, te, tx) & ((1 << nd.count) - 1);
 }
 
-// out[0..3] = {pair, first + h.order[0..3]} (entries past the hit count are scratch).
-struct QuadItem {
-    uint32_t pair, quad;  // a (ray, patch) pair of the chunk and a quad (or odd-depth node) of its tree
-};
-inline void storeItems4(QuadItem* out, const HitOrder& h, uint32_t pair, uint32_t first) {
+// A subpatch traversal item: a (ray, patch) pair of the current batch (bits 12 and up) and a quad of its
+// tree (bits 0-11; for an odd depth also a node of the last level above the leaves, past the quads).
+constexpr uint32_t kItemQuadBits = 12, kItemQuadMask = (1u << kItemQuadBits) - 1u;
+constexpr uint32_t kMaxBatchPairs = 1u << (32 - kItemQuadBits);
+static_assert(((1u << (2 * (kMaxSubpatchDepth / 2))) - 1) / 3 <= kItemQuadMask);  // items of every level
+
+// out[0..3] = first + h.order[0..3] (entries past the hit count are scratch).
+inline void storeItems4(uint32_t* out, const HitOrder& h, uint32_t first) {
 #if defined(__SSE2__)
     int32_t ord;
     std::memcpy(&ord, h.order, 4);
     const __m128i z = _mm_setzero_si128();
-    const __m128i q = _mm_add_epi32(_mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(ord), z), z),
-                                    _mm_set1_epi32(int(first)));
-    const __m128i p = _mm_set1_epi32(int(pair));
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_unpacklo_epi32(p, q));
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + 2), _mm_unpackhi_epi32(p, q));
+    const __m128i o = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(ord), z), z);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_add_epi32(o, _mm_set1_epi32(int(first))));
 #else
-    for (int i = 0; i < 4; ++i) out[i] = {pair, first + h.order[i]};
+    for (int i = 0; i < 4; ++i) out[i] = first + h.order[i];
 #endif
 }
 
 // One patch whose root box a ray hits, and what its subpatch traversal needs.
 struct PatchPair {
+    F4 rayPatch;  // (ray, patch, ray, patch): the first half of its candidates
+    F4 selfT4;    // leaves the ray exits before this distance are dropped
     const SubpatchQuad* quads;
     const uint8_t* qback;  // backface bits per quad (primary rays with culling), else null
     const uint8_t* back;   // backface bits per node (same condition)
-    float selfT;           // leaves the ray exits before this distance are dropped
-    float te;              // entry distance of the root box
-    uint32_t ray;          // index in the chunk
+    float selfT;
+    float te;      // entry distance of the root box
+    uint32_t ray;  // index in the chunk
     uint32_t patch;
 };
 
@@ -337,7 +366,7 @@ struct PatchPair {
 struct TraverseScratch {
     std::vector<Ray4> ray4;
     std::vector<PatchPair> pairs;
-    std::vector<QuadItem, DefaultInitAllocator<QuadItem>> items, next;
+    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> items, next;
     std::vector<uint32_t> count;  // candidates per ray of the chunk
 };
 
@@ -400,89 +429,89 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                 const int mask = rayBox4(nd, r4, te4, tx4);
                 boxTests += nd.count;
                 if (!mask) continue;
+                const HitOrder& h = hitOrder(mask, te4);
+                const int k = kPop4[mask];
+                for (int q = k - 1; q >= 0; --q) {
+                    const uint32_t c = nd.child[h.order[q]];
+                    if (!(c & kBvh4Patch)) stack[sp++] = c;
+                }
                 float te[4], tx[4];
                 storeF4(te, te4);
                 storeF4(tx, tx4);
-                int order[4];
-                const int k = sortHits(mask, te, order);
-                for (int q = k - 1; q >= 0; --q) {
-                    const uint32_t c = nd.child[order[q]];
-                    if (!(c & kBvh4Patch)) stack[sp++] = c;
-                }
                 for (int q = 0; q < k; ++q) {
-                    const int i = order[q];
+                    const int i = h.order[q];
                     const uint32_t c = nd.child[i];
                     if (!(c & kBvh4Patch)) continue;
                     const uint32_t patch = c & ~kBvh4Patch;
                     const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
                     const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
                     if (tx[i] < selfT || (back && back[0])) continue;
-                    sc.pairs.push_back({forest.quadTree(patch),
-                                        cullRay ? forest.quadBackBits(patch) : nullptr, back, selfT, te[i],
-                                        rl, patch});
+                    sc.pairs.push_back(
+                        {rayPatchLanes(uint32_t(r), patch), splatF4(selfT), forest.quadTree(patch),
+                         cullRay ? forest.quadBackBits(patch) : nullptr, back, selfT, te[i], rl, patch});
                 }
             }
         }
 
-        // Subpatch trees of all pairs, level by level; candidates in pair order.
+        // Subpatch trees of all pairs, level by level, in batches of pairs; candidates in pair order. All
+        // candidates of a batch are written by one level (the leaves' parents).
         const uint32_t nPairs = uint32_t(sc.pairs.size());
-        // All candidates are written by one level (the leaves' parents), with a scratch slot after the last
-        // quad's: room for `most` of them (the vector's size is the room; no zeroing).
         Candidate* cand = nullptr;
-        auto candRoom = [&](size_t most) {
-            if (ch.cand.capacity() < most) ch.cand.reserve(std::max(most, 2 * ch.cand.capacity()));
+        size_t used = 0;
+        auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
+            if (ch.cand.capacity() < used + more)
+                ch.cand.reserve(std::max(used + more, 2 * ch.cand.capacity()));
             ch.cand.resize(ch.cand.capacity());
             cand = ch.cand.data();
         };
-        size_t used = 0;
-        const PatchPair* pairs = sc.pairs.data();
-        if (firstLeaf == 0) {
-            candRoom(nPairs);
-            for (uint32_t p = 0; p < nPairs; ++p) {
-                cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
-                ++sc.count[pairs[p].ray];
+        for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
+            const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
+            const PatchPair* pairs = sc.pairs.data() + pb;
+            if (firstLeaf == 0) {
+                candRoom(nb);
+                for (uint32_t p = 0; p < nb; ++p) {
+                    cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
+                    ++sc.count[pairs[p].ray];
+                }
+                continue;
             }
-        } else {
-            sc.items.resize(nPairs);
-            for (uint32_t p = 0; p < nPairs; ++p) sc.items[p] = {p, 0};
-            uint32_t nItems = nPairs, lvl = 0;
+            if (sc.items.size() < nb) sc.items.resize(nb);
+            for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
+            uint32_t nItems = nb, lvl = 0;
             for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
                 boxTests += 4 * uint64_t(nItems);
-                const QuadItem* items = sc.items.data();
+                const uint32_t* items = sc.items.data();
                 if (lvl + 2 < depth) {
+                    // Inner level: the hit children in hit order.
                     if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
-                    QuadItem* next = sc.next.data();
+                    uint32_t* next = sc.next.data();
                     uint32_t nNext = 0;
                     for (uint32_t j = 0; j < nItems; ++j) {
-                        const QuadItem it = items[j];
-                        const PatchPair& pp = pairs[it.pair];
-                        const SubpatchQuad& q = pp.quads[it.quad];
-                        F4 te4, tx4;
-                        int mask = rayBox4Soa(q.lo, q.hi, sc.ray4[pp.ray], te4, tx4);
-                        mask = exitNotBelow(mask, tx4, pp.selfT);
-                        if (pp.qback) mask &= ~int(pp.qback[it.quad]);
-                        const HitOrder& h = hitOrder(mask, te4);
-                        storeItems4(next + nNext, h, it.pair, 4 * it.quad + 1);
+                        const uint32_t it = items[j], quad = it & kItemQuadMask;
+                        const PatchPair& pp = pairs[it >> kItemQuadBits];
+                        F4 te4;
+                        int mask = quadHits(pp.quads[quad], sc.ray4[pp.ray], pp.selfT4, te4);
+                        if (pp.qback) mask &= ~int(pp.qback[quad]);
+                        storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
                         nNext += kPop4[mask];
                     }
                     std::swap(sc.items, sc.next);
                     nItems = nNext;
                     continue;
                 }
+                // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
+                // entry distance gives the same order, as equal distances keep their lane order either way).
                 // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
                 const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
                 candRoom(4 * size_t(nItems) + 1);
                 for (uint32_t j = 0; j < nItems; ++j) {
-                    const QuadItem it = items[j];
-                    const PatchPair& pp = pairs[it.pair];
-                    const SubpatchQuad& q = pp.quads[it.quad];
-                    F4 te4, tx4;
-                    int mask = rayBox4Soa(q.lo, q.hi, sc.ray4[pp.ray], te4, tx4);
-                    mask = exitNotBelow(mask, tx4, pp.selfT);
-                    if (pp.qback) mask &= ~int(pp.qback[it.quad]);
-                    const HitOrder& h = hitOrder(mask, te4);
-                    storeCandidates4(cand + used, h, rayPatchLanes(uint32_t(r0) + pp.ray, pp.patch),
-                                     4 * (it.quad - leafQuadFirst), te4);
+                    const uint32_t it = items[j], quad = it & kItemQuadMask;
+                    const PatchPair& pp = pairs[it >> kItemQuadBits];
+                    F4 te4;
+                    int mask = quadHits(pp.quads[quad], sc.ray4[pp.ray], pp.selfT4, te4);
+                    if (pp.qback) mask &= ~int(pp.qback[quad]);
+                    storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], pp.rayPatch,
+                                     4 * (quad - leafQuadFirst), te4);
                     used += kPop4[mask];
                     sc.count[pp.ray] += kPop4[mask];
                 }
@@ -492,9 +521,9 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
             boxTests += 2 * uint64_t(nItems);
             if (nItems > 0) candRoom(2 * size_t(nItems));
             for (uint32_t j = 0; j < nItems; ++j) {
-                const QuadItem it = sc.items[j];
-                const PatchPair& pp = pairs[it.pair];
-                const uint32_t m = 2 * (it.quad + pairNodeBias) + 1;
+                const uint32_t it = sc.items[j];
+                const PatchPair& pp = pairs[it >> kItemQuadBits];
+                const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
                 const size_t r = r0 + pp.ray;
                 const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
                 float tn[2], tf[2];
