@@ -16,6 +16,15 @@
 #include <immintrin.h>
 #endif
 
+// The subpatch traversal has AVX2 kernels (two quads per 8-wide test), compiled for AVX2 with a target
+// attribute whatever the build flags and chosen at run time when the CPU has it; SSE2 otherwise.
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__SSE2__)
+#define TESSERA_RT_AVX2 1
+#define TESSERA_AVX2 __attribute__((target("avx2")))
+#else
+#define TESSERA_RT_AVX2 0
+#endif
+
 namespace tessera {
 namespace {
 
@@ -270,6 +279,43 @@ inline const HitOrder& hitOrder(int mask, F4 key) {
 #endif
 }
 
+#if TESSERA_RT_AVX2
+// quadHits for two items at once (lanes 0-3: quad a with ray a, lanes 4-7: quad b with ray b): the same
+// operations lane by lane, so the same results; returns the 8-bit hit mask.
+TESSERA_AVX2 inline __m256 cat2(__m128 lo, __m128 hi) {
+    return _mm256_insertf128_ps(_mm256_castps128_ps256(lo), hi, 1);
+}
+TESSERA_AVX2 inline __m256 slab2(const float* a, const float* b, __m128 oa, __m128 ob, __m128 ia, __m128 ib) {
+    return _mm256_mul_ps(_mm256_sub_ps(cat2(_mm_load_ps(a), _mm_load_ps(b)), cat2(oa, ob)), cat2(ia, ib));
+}
+TESSERA_AVX2 inline int quadHits2(const SubpatchQuad& qa, const Ray4& ra, __m128 sa, const SubpatchQuad& qb,
+                                  const Ray4& rb, __m128 sb, __m256& te) {
+    const __m256 x0 = slab2(qa.lo[0], qb.lo[0], ra.ox, rb.ox, ra.ix, rb.ix);
+    const __m256 x1 = slab2(qa.hi[0], qb.hi[0], ra.ox, rb.ox, ra.ix, rb.ix);
+    const __m256 y0 = slab2(qa.lo[1], qb.lo[1], ra.oy, rb.oy, ra.iy, rb.iy);
+    const __m256 y1 = slab2(qa.hi[1], qb.hi[1], ra.oy, rb.oy, ra.iy, rb.iy);
+    const __m256 z0 = slab2(qa.lo[2], qb.lo[2], ra.oz, rb.oz, ra.iz, rb.iz);
+    const __m256 z1 = slab2(qa.hi[2], qb.hi[2], ra.oz, rb.oz, ra.iz, rb.iz);
+    te = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
+                       _mm256_max_ps(_mm256_min_ps(z0, z1), cat2(ra.t0, rb.t0)));
+    const __m256 tx = _mm256_min_ps(_mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
+                                    _mm256_min_ps(_mm256_max_ps(z0, z1), cat2(ra.t1, rb.t1)));
+    return _mm256_movemask_ps(
+        _mm256_andnot_ps(_mm256_cmp_ps(tx, cat2(sa, sb), _CMP_LT_OS), _mm256_cmp_ps(te, tx, _CMP_LE_OS)));
+}
+
+// hitOrder of both halves of quadHits2.
+TESSERA_AVX2 inline void hitOrder2(int mask, __m256 key, const HitOrder*& ha, const HitOrder*& hb) {
+    const __m256 a = _mm256_shuffle_ps(key, key, _MM_SHUFFLE(2, 3, 2, 1));
+    const __m256 b = _mm256_shuffle_ps(key, key, _MM_SHUFFLE(0, 2, 1, 0));
+    const int p1 = _mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LT_OS));
+    const int p2 = _mm256_movemask_ps(
+        _mm256_cmp_ps(_mm256_shuffle_ps(key, key, _MM_SHUFFLE(3, 3, 3, 3)), key, _CMP_LT_OS));
+    ha = &kHitOrder[size_t((mask & 15) | (p1 & 15) << 4 | (p2 & 3) << 8)];
+    hb = &kHitOrder[size_t((mask >> 4) | (p1 >> 4) << 4 | (p2 & 0x30) << 4)];
+}
+#endif
+
 // Number of bits of a 4-bit mask (no popcnt instruction in the baseline x86-64 build).
 constexpr uint8_t kPop4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
 
@@ -370,6 +416,116 @@ struct TraverseScratch {
     std::vector<uint32_t> count;  // candidates per ray of the chunk
 };
 
+// One level of the subpatch traversal: the items' quads tested, items[0, n). innerLevel appends the hit
+// children of each item to `next` in hit order and returns their number; leafLevel writes the candidates
+// of each item in lane order at cand + used (counted per ray in count[]) and returns the new `used`. `next`
+// and `cand` need room for 4 entries per item and one more. The AVX2 versions do the same, two items per
+// 8-wide test.
+struct LevelIn {
+    const uint32_t* items;
+    uint32_t n;
+    const PatchPair* pairs;
+    const Ray4* ray4;
+};
+
+inline uint32_t innerLevelTail(const LevelIn& in, uint32_t j, uint32_t* next, uint32_t nNext) {
+    for (; j < in.n; ++j) {
+        const uint32_t it = in.items[j], quad = it & kItemQuadMask;
+        const PatchPair& pp = in.pairs[it >> kItemQuadBits];
+        F4 te4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        if (pp.qback) mask &= ~int(pp.qback[quad]);
+        storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
+        nNext += kPop4[mask];
+    }
+    return nNext;
+}
+
+inline size_t leafLevelTail(const LevelIn& in, uint32_t j, uint32_t leafQuadFirst, Candidate* cand,
+                            size_t used, uint32_t* count) {
+    for (; j < in.n; ++j) {
+        const uint32_t it = in.items[j], quad = it & kItemQuadMask;
+        const PatchPair& pp = in.pairs[it >> kItemQuadBits];
+        F4 te4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        if (pp.qback) mask &= ~int(pp.qback[quad]);
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], pp.rayPatch, 4 * (quad - leafQuadFirst),
+                         te4);
+        used += kPop4[mask];
+        count[pp.ray] += kPop4[mask];
+    }
+    return used;
+}
+
+uint32_t innerLevel(const LevelIn& in, uint32_t* next) {
+    return innerLevelTail(in, 0, next, 0);
+}
+
+size_t leafLevel(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, size_t used, uint32_t* count) {
+    return leafLevelTail(in, 0, leafQuadFirst, cand, used, count);
+}
+
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 uint32_t innerLevelAvx2(const LevelIn& in, uint32_t* next) {
+    uint32_t j = 0, nNext = 0;
+    for (; j + 1 < in.n; j += 2) {
+        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
+        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
+        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
+        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        __m256 te8;
+        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
+                             pb.selfT4, te8);
+        if (pa.qback) mask &= ~int(pa.qback[qa]);
+        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const HitOrder *ha, *hb;
+        hitOrder2(mask, te8, ha, hb);
+        storeItems4(next + nNext, *ha, (ia & ~kItemQuadMask) + 4 * qa + 1);
+        nNext += kPop4[mask & 15];
+        storeItems4(next + nNext, *hb, (ib & ~kItemQuadMask) + 4 * qb + 1);
+        nNext += kPop4[mask >> 4];
+    }
+    return innerLevelTail(in, j, next, nNext);
+}
+
+TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, size_t used,
+                                  uint32_t* count) {
+    uint32_t j = 0;
+    for (; j + 1 < in.n; j += 2) {
+        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
+        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
+        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
+        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        __m256 te8;
+        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
+                             pb.selfT4, te8);
+        if (pa.qback) mask &= ~int(pa.qback[qa]);
+        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const int ma = mask & 15, mb = mask >> 4;
+        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], pa.rayPatch, 4 * (qa - leafQuadFirst),
+                         _mm256_castps256_ps128(te8));
+        used += kPop4[ma];
+        count[pa.ray] += kPop4[ma];
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], pb.rayPatch, 4 * (qb - leafQuadFirst),
+                         _mm256_extractf128_ps(te8, 1));
+        used += kPop4[mb];
+        count[pb.ray] += kPop4[mb];
+    }
+    return leafLevelTail(in, j, leafQuadFirst, cand, used, count);
+}
+#endif
+
+// Whether the AVX2 kernels run: the CPU has AVX2 and rtUseAvx2 has not turned them off.
+std::atomic<bool> gAvx2Allowed{true};
+bool cpuHasAvx2() {
+#if TESSERA_RT_AVX2
+    static const bool has = __builtin_cpu_supports("avx2");
+    return has;
+#else
+    return false;
+#endif
+}
+
 // Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Each ray's candidates are
 // emitted in depth-first order (both hierarchies, children near first, ties by index; under a BVH node its
 // patches before its inner children), then sorted by entry distance (stable), so leaves come out nearly
@@ -400,6 +556,7 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
     const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
     const Bvh4Node* wide = bvh.wide.data();
+    [[maybe_unused]] const bool avx2 = cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed);
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
         thread_local TraverseScratch scratch;
         TraverseScratch& sc = scratch;
@@ -480,23 +637,16 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
             uint32_t nItems = nb, lvl = 0;
             for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
                 boxTests += 4 * uint64_t(nItems);
-                const uint32_t* items = sc.items.data();
+                const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
                 if (lvl + 2 < depth) {
                     // Inner level: the hit children in hit order.
                     if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
-                    uint32_t* next = sc.next.data();
-                    uint32_t nNext = 0;
-                    for (uint32_t j = 0; j < nItems; ++j) {
-                        const uint32_t it = items[j], quad = it & kItemQuadMask;
-                        const PatchPair& pp = pairs[it >> kItemQuadBits];
-                        F4 te4;
-                        int mask = quadHits(pp.quads[quad], sc.ray4[pp.ray], pp.selfT4, te4);
-                        if (pp.qback) mask &= ~int(pp.qback[quad]);
-                        storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
-                        nNext += kPop4[mask];
-                    }
+#if TESSERA_RT_AVX2
+                    nItems = avx2 ? innerLevelAvx2(in, sc.next.data()) : innerLevel(in, sc.next.data());
+#else
+                    nItems = innerLevel(in, sc.next.data());
+#endif
                     std::swap(sc.items, sc.next);
-                    nItems = nNext;
                     continue;
                 }
                 // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
@@ -504,17 +654,12 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                 // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
                 const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
                 candRoom(4 * size_t(nItems) + 1);
-                for (uint32_t j = 0; j < nItems; ++j) {
-                    const uint32_t it = items[j], quad = it & kItemQuadMask;
-                    const PatchPair& pp = pairs[it >> kItemQuadBits];
-                    F4 te4;
-                    int mask = quadHits(pp.quads[quad], sc.ray4[pp.ray], pp.selfT4, te4);
-                    if (pp.qback) mask &= ~int(pp.qback[quad]);
-                    storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], pp.rayPatch,
-                                     4 * (quad - leafQuadFirst), te4);
-                    used += kPop4[mask];
-                    sc.count[pp.ray] += kPop4[mask];
-                }
+#if TESSERA_RT_AVX2
+                used = avx2 ? leafLevelAvx2(in, leafQuadFirst, cand, used, sc.count.data())
+                            : leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
+#else
+                used = leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
+#endif
                 nItems = 0;
             }
             // Odd depth: the pairs of leaves below the nodes of level depth - 1.
@@ -831,6 +976,11 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
 }  // namespace
 
 // ---- shared helpers -------------------------------------------------------------------------------
+
+bool rtUseAvx2(bool allow) {
+    gAvx2Allowed.store(allow, std::memory_order_relaxed);
+    return allow && cpuHasAvx2();
+}
 
 Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
     Vec3 N = cross(h.dpdu, h.dpdv);
