@@ -263,20 +263,25 @@ constexpr std::array<HitOrder, kHitOrderSize> makeHitOrderTable() {
 }
 constexpr std::array<HitOrder, kHitOrderSize> kHitOrder = makeHitOrderTable();
 
-// The table entry for the hit lanes `mask` (at most 4 bits) ordered by `key` (no NaNs in the hit lanes).
-inline const HitOrder& hitOrder(int mask, F4 key) {
+// The six pair comparisons of `key` that index the table (bits 4-9 of the index).
+inline int pairBits(F4 key) {
 #if defined(__SSE2__)
     const __m128 a = _mm_shuffle_ps(key, key, _MM_SHUFFLE(2, 3, 2, 1));  // k1 k2 k3 k2
     const __m128 b = _mm_shuffle_ps(key, key, _MM_SHUFFLE(0, 2, 1, 0));  // k0 k1 k2 k0
     const int p1 = _mm_movemask_ps(_mm_cmplt_ps(a, b));
     const int p2 = _mm_movemask_ps(_mm_cmplt_ps(_mm_shuffle_ps(key, key, _MM_SHUFFLE(3, 3, 3, 3)), key)) & 3;
-    return kHitOrder[size_t(mask | p1 << 4 | p2 << 8)];
+    return (p1 | p2 << 4) << 4;
 #else
     const float* k = key.v;
     const int p = (k[1] < k[0]) | (k[2] < k[1]) << 1 | (k[3] < k[2]) << 2 | (k[2] < k[0]) << 3 |
                   (k[3] < k[0]) << 4 | (k[3] < k[1]) << 5;
-    return kHitOrder[size_t(mask | p << 4)];
+    return p << 4;
 #endif
+}
+
+// The table entry for the hit lanes `mask` (at most 4 bits) ordered by `key` (no NaNs in the hit lanes).
+inline const HitOrder& hitOrder(int mask, F4 key) {
+    return kHitOrder[size_t(mask | pairBits(key))];
 }
 
 #if TESSERA_RT_AVX2
@@ -526,6 +531,182 @@ bool cpuHasAvx2() {
 #endif
 }
 
+// One chunk of traverseList (see there), for the SSE2 or the AVX2 kernels: inlined into the two entry
+// points below, so that the AVX2 one is compiled for AVX2 throughout.
+template <bool kAvx2>
+[[gnu::always_inline]] inline void traverseChunk(const RtAccel& acc, const RayList& rays, Chunk& ch,
+                                                 size_t ci, bool cull) {
+    const size_t n = rays.size();
+    const Bvh& bvh = acc.bvh;
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    const uint32_t depth = uint32_t(forest.depth);
+    const float ignoreT = 8.f * acc.offset;
+    const uint32_t nQuads = forest.quadsPerPatch;
+    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
+    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
+    const Bvh4Node* wide = bvh.wide.data();
+    thread_local TraverseScratch scratch;
+    TraverseScratch& sc = scratch;
+    ch.c = Counters();
+    uint64_t boxTests = 0;
+    const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+    const uint32_t nr = uint32_t(r1 - r0);
+    sc.ray4.resize(nr);
+    sc.count.assign(nr, 0);
+    sc.pairs.clear();
+
+    // BVH: per ray, the patches it visits (depth first; the hit children in order of entry: inner nodes
+    // pushed far first, patches listed near first).
+    for (uint32_t rl = 0; rl < nr; ++rl) {
+        const size_t r = r0 + rl;
+        sc.ray4[rl] = Ray4(rays.o[r], safeInverse(rays.d[r]), rays.tmin[r], rays.tmax[r]);
+        const Ray4& r4 = sc.ray4[rl];
+        const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
+        const uint32_t ignore = rays.ignore[r];
+        uint32_t stack[kBvh4Stack];
+        int sp = 0;
+        if (!bvh.wide.empty()) stack[sp++] = 0;
+        while (sp > 0) {
+            const Bvh4Node& nd = wide[stack[--sp]];
+            F4 te4, tx4;
+            const int mask = rayBox4(nd, r4, te4, tx4);
+            boxTests += nd.count;
+            if (!mask) continue;
+            // The hit inner children and the hit patches, each in order of entry.
+            const int pb = pairBits(te4);
+            const int inner = mask & int(nd.innerMask), patches = mask & ~int(nd.innerMask);
+            if (inner) {
+                const HitOrder& h = kHitOrder[size_t(inner | pb)];
+                for (int q = kPop4[inner] - 1; q >= 0; --q) stack[sp++] = nd.child[h.order[q]];
+            }
+            if (!patches) continue;
+            float te[4], tx[4];
+            storeF4(te, te4);
+            storeF4(tx, tx4);
+            const HitOrder& h = kHitOrder[size_t(patches | pb)];
+            for (int q = 0, k = kPop4[patches]; q < k; ++q) {
+                const int i = h.order[q];
+                const uint32_t patch = nd.child[i] & ~kBvh4Patch;
+                const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
+                if (tx[i] < selfT || (back && back[0])) continue;
+                sc.pairs.push_back({rayPatchLanes(uint32_t(r), patch), splatF4(selfT), forest.quadTree(patch),
+                                    cullRay ? forest.quadBackBits(patch) : nullptr, back, selfT, te[i], rl,
+                                    patch});
+            }
+        }
+    }
+
+    // Subpatch trees of all pairs, level by level, in batches of pairs; candidates in pair order. All
+    // candidates of a batch are written by one level (the leaves' parents).
+    const uint32_t nPairs = uint32_t(sc.pairs.size());
+    Candidate* cand = nullptr;
+    size_t used = 0;
+    auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
+        if (ch.cand.capacity() < used + more) ch.cand.reserve(std::max(used + more, 2 * ch.cand.capacity()));
+        ch.cand.resize(ch.cand.capacity());
+        cand = ch.cand.data();
+    };
+    for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
+        const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
+        const PatchPair* pairs = sc.pairs.data() + pb;
+        if (firstLeaf == 0) {
+            candRoom(nb);
+            for (uint32_t p = 0; p < nb; ++p) {
+                cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
+                ++sc.count[pairs[p].ray];
+            }
+            continue;
+        }
+        if (sc.items.size() < nb) sc.items.resize(nb);
+        for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
+        uint32_t nItems = nb, lvl = 0;
+        for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
+            boxTests += 4 * uint64_t(nItems);
+            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
+            if (lvl + 2 < depth) {
+                // Inner level: the hit children in hit order.
+                if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
+#if TESSERA_RT_AVX2
+                if constexpr (kAvx2)
+                    nItems = innerLevelAvx2(in, sc.next.data());
+                else
+#endif
+                    nItems = innerLevel(in, sc.next.data());
+                std::swap(sc.items, sc.next);
+                continue;
+            }
+            // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
+            // entry distance gives the same order, as equal distances keep their lane order either way).
+            // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
+            const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
+            candRoom(4 * size_t(nItems) + 1);
+#if TESSERA_RT_AVX2
+            if constexpr (kAvx2)
+                used = leafLevelAvx2(in, leafQuadFirst, cand, used, sc.count.data());
+            else
+#endif
+                used = leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
+            nItems = 0;
+        }
+        // Odd depth: the pairs of leaves below the nodes of level depth - 1.
+        boxTests += 2 * uint64_t(nItems);
+        if (nItems > 0) candRoom(2 * size_t(nItems));
+        for (uint32_t j = 0; j < nItems; ++j) {
+            const uint32_t it = sc.items[j];
+            const PatchPair& pp = pairs[it >> kItemQuadBits];
+            const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
+            const size_t r = r0 + pp.ray;
+            const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
+            float tn[2], tf[2];
+            const int mask = rayBoxPair(forest.tree(pp.patch) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
+            const float ta = tn[0], tb = tn[1];
+            const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
+            const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
+            const bool swap = hb && (!ha || tb < ta);
+            const size_t u0 = used;
+            if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
+            if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            sc.count[pp.ray] += uint32_t(used - u0);
+        }
+    }
+
+    // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
+    // nearly sorted).
+    ch.segEnd.resize(nr);
+    uint32_t end = 0;
+    for (uint32_t rl = 0; rl < nr; ++rl) {
+        const uint32_t begin = end;
+        end += sc.count[rl];
+        ch.segEnd[rl] = end;
+        for (uint32_t i = begin + 1; i < end; ++i) {
+            if (!(cand[i - 1].tEnter > cand[i].tEnter)) continue;
+            const Candidate x = cand[i];
+            uint32_t j = i;
+            while (j > begin && cand[j - 1].tEnter > x.tEnter) {
+                cand[j] = cand[j - 1];
+                --j;
+            }
+            cand[j] = x;
+        }
+    }
+    ch.cand.resize(used);
+    ch.c.candidates = used;
+    ch.c.boxTests = boxTests;
+}
+
+void traverseChunkSse2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci, bool cull) {
+    traverseChunk<false>(acc, rays, ch, ci, cull);
+}
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 void traverseChunkAvx2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci,
+                                    bool cull) {
+    traverseChunk<true>(acc, rays, ch, ci, cull);
+}
+#endif
+
 // Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Each ray's candidates are
 // emitted in depth-first order (both hierarchies, children near first, ties by index; under a BVH node its
 // patches before its inner children), then sorted by entry distance (stable), so leaves come out nearly
@@ -547,168 +728,15 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
     const size_t n = rays.size();
     const size_t nChunks = (n + kChunk - 1) / kChunk;
     if (chunks.size() < nChunks) chunks.resize(nChunks);
-    const Bvh& bvh = acc.bvh;
-    const SubpatchForest& forest = acc.forest;
-    const uint32_t firstLeaf = forest.firstLeaf();
-    const uint32_t depth = uint32_t(forest.depth);
-    const float ignoreT = 8.f * acc.offset;
-    const uint32_t nQuads = forest.quadsPerPatch;
-    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
-    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
-    const Bvh4Node* wide = bvh.wide.data();
-    [[maybe_unused]] const bool avx2 = cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed);
-    tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
-        thread_local TraverseScratch scratch;
-        TraverseScratch& sc = scratch;
-        Chunk& ch = chunks[ci];
-        ch.c = Counters();
-        uint64_t boxTests = 0;
-        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
-        const uint32_t nr = uint32_t(r1 - r0);
-        sc.ray4.resize(nr);
-        sc.count.assign(nr, 0);
-        sc.pairs.clear();
-
-        // BVH: per ray, the patches it visits (depth first; the hit children in order of entry: inner nodes
-        // pushed far first, patches listed near first).
-        for (uint32_t rl = 0; rl < nr; ++rl) {
-            const size_t r = r0 + rl;
-            sc.ray4[rl] = Ray4(rays.o[r], safeInverse(rays.d[r]), rays.tmin[r], rays.tmax[r]);
-            const Ray4& r4 = sc.ray4[rl];
-            const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
-            const uint32_t ignore = rays.ignore[r];
-            uint32_t stack[kBvh4Stack];
-            int sp = 0;
-            if (!bvh.wide.empty()) stack[sp++] = 0;
-            while (sp > 0) {
-                const Bvh4Node& nd = wide[stack[--sp]];
-                F4 te4, tx4;
-                const int mask = rayBox4(nd, r4, te4, tx4);
-                boxTests += nd.count;
-                if (!mask) continue;
-                const HitOrder& h = hitOrder(mask, te4);
-                const int k = kPop4[mask];
-                for (int q = k - 1; q >= 0; --q) {
-                    const uint32_t c = nd.child[h.order[q]];
-                    if (!(c & kBvh4Patch)) stack[sp++] = c;
-                }
-                float te[4], tx[4];
-                storeF4(te, te4);
-                storeF4(tx, tx4);
-                for (int q = 0; q < k; ++q) {
-                    const int i = h.order[q];
-                    const uint32_t c = nd.child[i];
-                    if (!(c & kBvh4Patch)) continue;
-                    const uint32_t patch = c & ~kBvh4Patch;
-                    const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
-                    const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
-                    if (tx[i] < selfT || (back && back[0])) continue;
-                    sc.pairs.push_back(
-                        {rayPatchLanes(uint32_t(r), patch), splatF4(selfT), forest.quadTree(patch),
-                         cullRay ? forest.quadBackBits(patch) : nullptr, back, selfT, te[i], rl, patch});
-                }
-            }
-        }
-
-        // Subpatch trees of all pairs, level by level, in batches of pairs; candidates in pair order. All
-        // candidates of a batch are written by one level (the leaves' parents).
-        const uint32_t nPairs = uint32_t(sc.pairs.size());
-        Candidate* cand = nullptr;
-        size_t used = 0;
-        auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
-            if (ch.cand.capacity() < used + more)
-                ch.cand.reserve(std::max(used + more, 2 * ch.cand.capacity()));
-            ch.cand.resize(ch.cand.capacity());
-            cand = ch.cand.data();
-        };
-        for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
-            const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
-            const PatchPair* pairs = sc.pairs.data() + pb;
-            if (firstLeaf == 0) {
-                candRoom(nb);
-                for (uint32_t p = 0; p < nb; ++p) {
-                    cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
-                    ++sc.count[pairs[p].ray];
-                }
-                continue;
-            }
-            if (sc.items.size() < nb) sc.items.resize(nb);
-            for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
-            uint32_t nItems = nb, lvl = 0;
-            for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
-                boxTests += 4 * uint64_t(nItems);
-                const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
-                if (lvl + 2 < depth) {
-                    // Inner level: the hit children in hit order.
-                    if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
 #if TESSERA_RT_AVX2
-                    nItems = avx2 ? innerLevelAvx2(in, sc.next.data()) : innerLevel(in, sc.next.data());
-#else
-                    nItems = innerLevel(in, sc.next.data());
+    if (cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed)) {
+        tbb::parallel_for(size_t(0), nChunks,
+                          [&](size_t ci) { traverseChunkAvx2(acc, rays, chunks[ci], ci, cull); });
+        return;
+    }
 #endif
-                    std::swap(sc.items, sc.next);
-                    continue;
-                }
-                // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
-                // entry distance gives the same order, as equal distances keep their lane order either way).
-                // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
-                const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
-                candRoom(4 * size_t(nItems) + 1);
-#if TESSERA_RT_AVX2
-                used = avx2 ? leafLevelAvx2(in, leafQuadFirst, cand, used, sc.count.data())
-                            : leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
-#else
-                used = leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
-#endif
-                nItems = 0;
-            }
-            // Odd depth: the pairs of leaves below the nodes of level depth - 1.
-            boxTests += 2 * uint64_t(nItems);
-            if (nItems > 0) candRoom(2 * size_t(nItems));
-            for (uint32_t j = 0; j < nItems; ++j) {
-                const uint32_t it = sc.items[j];
-                const PatchPair& pp = pairs[it >> kItemQuadBits];
-                const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
-                const size_t r = r0 + pp.ray;
-                const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
-                float tn[2], tf[2];
-                const int mask =
-                    rayBoxPair(forest.tree(pp.patch) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
-                const float ta = tn[0], tb = tn[1];
-                const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
-                const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
-                const bool swap = hb && (!ha || tb < ta);
-                const size_t u0 = used;
-                if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
-                if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
-                if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
-                sc.count[pp.ray] += uint32_t(used - u0);
-            }
-        }
-
-        // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
-        // nearly sorted).
-        ch.segEnd.resize(nr);
-        uint32_t end = 0;
-        for (uint32_t rl = 0; rl < nr; ++rl) {
-            const uint32_t begin = end;
-            end += sc.count[rl];
-            ch.segEnd[rl] = end;
-            for (uint32_t i = begin + 1; i < end; ++i) {
-                if (!(cand[i - 1].tEnter > cand[i].tEnter)) continue;
-                const Candidate x = cand[i];
-                uint32_t j = i;
-                while (j > begin && cand[j - 1].tEnter > x.tEnter) {
-                    cand[j] = cand[j - 1];
-                    --j;
-                }
-                cand[j] = x;
-            }
-        }
-        ch.cand.resize(used);
-        ch.c.candidates = used;
-        ch.c.boxTests = boxTests;
-    });
+    tbb::parallel_for(size_t(0), nChunks,
+                      [&](size_t ci) { traverseChunkSse2(acc, rays, chunks[ci], ci, cull); });
 }
 
 // Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
