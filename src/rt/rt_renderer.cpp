@@ -340,39 +340,29 @@ constexpr std::array<LaneOffsets, 16> kLaneOffsets = makeLaneOffsets();
 
 // The candidates of four leaves (leaf numbers leaf0 .. leaf0 + 3, entry distances te): lane i goes to
 // byte offset h.offset[i] of out.
-inline void storeCandidates4(Candidate* out, const LaneOffsets& h, F4 rayPatch, uint32_t leaf0, F4 te) {
+inline void storeCandidates4(Candidate* out, const LaneOffsets& h, const uint32_t* rayPatch, uint32_t leaf0,
+                             F4 te) {
     static_assert(sizeof(Candidate) == 16 && offsetof(Candidate, leaf) == 8 &&
                   offsetof(Candidate, tEnter) == 12);
     char* base = reinterpret_cast<char*>(out);
 #if defined(__SSE2__)
-    // rayPatch = (ray, patch, ray, patch)
+    const __m128 rp =
+        _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(rayPatch)));  // ray patch
     const __m128 leaf =
         _mm_castsi128_ps(_mm_add_epi32(_mm_set1_epi32(int(leaf0)), _mm_setr_epi32(0, 1, 2, 3)));
     const __m128 lo = _mm_unpacklo_ps(leaf, te),
                  hi = _mm_unpackhi_ps(leaf, te);  // (l0 t0 l1 t1), (l2 t2 l3 t3)
-    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[0]), _mm_movelh_ps(rayPatch, lo));
-    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[1]), _mm_movehl_ps(lo, rayPatch));
-    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[2]), _mm_movelh_ps(rayPatch, hi));
-    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[3]), _mm_movehl_ps(hi, rayPatch));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[0]), _mm_movelh_ps(rp, lo));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[1]),
+                  _mm_shuffle_ps(rp, lo, _MM_SHUFFLE(3, 2, 1, 0)));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[2]), _mm_movelh_ps(rp, hi));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[3]),
+                  _mm_shuffle_ps(rp, hi, _MM_SHUFFLE(3, 2, 1, 0)));
 #else
-    uint32_t ray, patch;
-    std::memcpy(&ray, &rayPatch.v[0], 4);
-    std::memcpy(&patch, &rayPatch.v[1], 4);
     for (int i = 0; i < 4; ++i) {
-        const Candidate c{ray, patch, leaf0 + uint32_t(i), te.v[i]};
+        const Candidate c{rayPatch[0], rayPatch[1], leaf0 + uint32_t(i), te.v[i]};
         std::memcpy(base + h.offset[i], &c, sizeof c);
     }
-#endif
-}
-
-inline F4 rayPatchLanes(uint32_t ray, uint32_t patch) {
-#if defined(__SSE2__)
-    return _mm_castsi128_ps(_mm_setr_epi32(int(ray), int(patch), int(ray), int(patch)));
-#else
-    F4 v;
-    std::memcpy(&v.v[0], &ray, 4);
-    std::memcpy(&v.v[1], &patch, 4);
-    return v;
 #endif
 }
 
@@ -402,16 +392,17 @@ inline void storeItems4(uint32_t* out, const HitOrder& h, uint32_t first) {
 
 // One patch whose root box a ray hits, and what its subpatch traversal needs.
 struct PatchPair {
-    F4 rayPatch;  // (ray, patch, ray, patch): the first half of its candidates
-    F4 selfT4;    // leaves the ray exits before this distance are dropped
+    F4 selfT4;  // leaves the ray exits before this distance are dropped
     const SubpatchQuad* quads;
     const uint8_t* qback;  // backface bits per quad (primary rays with culling), else null
     const uint8_t* back;   // backface bits per node (same condition)
-    float selfT;
-    float te;      // entry distance of the root box
-    uint32_t ray;  // index in the chunk
+    uint32_t rayId;        // the ray's index in the list, then the patch: its candidates' first half
     uint32_t patch;
+    uint32_t ray;  // index in the chunk
+    float te;      // entry distance of the root box
+    float selfT;
 };
+static_assert(sizeof(PatchPair) == 64);
 
 // Per-thread scratch of the traversal, reused from chunk to chunk.
 struct TraverseScratch {
@@ -454,8 +445,7 @@ inline size_t leafLevelTail(const LevelIn& in, uint32_t j, uint32_t leafQuadFirs
         F4 te4;
         int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
         if (pp.qback) mask &= ~int(pp.qback[quad]);
-        storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], pp.rayPatch, 4 * (quad - leafQuadFirst),
-                         te4);
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], &pp.rayId, 4 * (quad - leafQuadFirst), te4);
         used += kPop4[mask];
         count[pp.ray] += kPop4[mask];
     }
@@ -507,11 +497,11 @@ TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Can
         if (pa.qback) mask &= ~int(pa.qback[qa]);
         if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
         const int ma = mask & 15, mb = mask >> 4;
-        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], pa.rayPatch, 4 * (qa - leafQuadFirst),
+        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], &pa.rayId, 4 * (qa - leafQuadFirst),
                          _mm256_castps256_ps128(te8));
         used += kPop4[ma];
         count[pa.ray] += kPop4[ma];
-        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], pb.rayPatch, 4 * (qb - leafQuadFirst),
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], &pb.rayId, 4 * (qb - leafQuadFirst),
                          _mm256_extractf128_ps(te8, 1));
         used += kPop4[mb];
         count[pb.ray] += kPop4[mb];
@@ -591,9 +581,9 @@ template <bool kAvx2>
                 const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
                 const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
                 if (tx[i] < selfT || (back && back[0])) continue;
-                sc.pairs.push_back({rayPatchLanes(uint32_t(r), patch), splatF4(selfT), forest.quadTree(patch),
-                                    cullRay ? forest.quadBackBits(patch) : nullptr, back, selfT, te[i], rl,
-                                    patch});
+                sc.pairs.push_back({splatF4(selfT), forest.quadTree(patch),
+                                    cullRay ? forest.quadBackBits(patch) : nullptr, back, uint32_t(r), patch,
+                                    rl, te[i], selfT});
             }
         }
     }
