@@ -709,11 +709,13 @@ TESSERA_AVX2 void traverseChunkAvx2(const RtAccel& acc, const RayList& rays, Chu
 // a grandchild's box lies inside its parent's, so the hit set is the same), through the quads
 // (SubpatchQuad, numbered as a 4-ary heap: the children of quad q are 4q+1..4q+4). The tests of one level
 // are independent and their work is branch free: the hit lanes are filtered in the SIMD mask (exit
-// distance, precomputed backface bits) and ordered by a table lookup, and all four outputs are written at
-// their rank (the ones past the hit count land in scratch slots and are overwritten). Each item's hit
-// children are appended in hit order, so every level, and the leaves' candidates, stay grouped by pair in
-// visit order and in depth-first order within a pair. For an odd depth the nodes of the last level above
-// the leaves test their two children as a pair.
+// distance, precomputed backface bits), and all four outputs are written (the ones past the hit count land
+// in scratch slots and are overwritten). Each item's hit children are appended in hit order (a table
+// lookup), so every level stays grouped by pair in visit order and in depth-first order within a pair; the
+// leaves' candidates of one quad are written in lane order, which the final stable sort by entry distance
+// turns into the same order as hit order would. For an odd depth the nodes of the last level above the
+// leaves test their two children as a pair. Where the CPU has AVX2, the whole chunk runs AVX2 code (two
+// quads per 8-wide test); the results are the same.
 void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
     const size_t n = rays.size();
     const size_t nChunks = (n + kChunk - 1) / kChunk;
