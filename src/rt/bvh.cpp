@@ -226,6 +226,7 @@ struct Collapser {
             const Bounds3 b = i < n ? box[i] : Bounds3();
             for (int k = 0; k < 3; ++k) w.lo[k][i] = b.lo[k], w.hi[k][i] = b.hi[k];
             w.child[i] = i < n ? child[i] : 0u;
+            if (i < n && !(child[i] & kBvh4Patch)) w.innerMask |= 1u << i;
         }
         return index;
     }

@@ -27,7 +27,8 @@ struct alignas(16) Bvh4Node {
     float lo[3][4], hi[3][4];  // [axis][child]
     uint32_t child[4];
     uint32_t count = 0;
-    uint32_t pad_[3] = {};
+    uint32_t innerMask = 0;  // bit i set when child i is an inner node (i < count)
+    uint32_t pad_[2] = {};
 };
 static_assert(sizeof(Bvh4Node) == 128);
 

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -15,6 +16,15 @@
 #include "rt/newton_lanes.h"
 #if defined(__SSE2__)
 #include <immintrin.h>
+#endif
+
+// The subpatch traversal has AVX2 kernels (two quads per 8-wide test), compiled for AVX2 with a target
+// attribute whatever the build flags and chosen at run time when the CPU has it; SSE2 otherwise.
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__SSE2__)
+#define TESSERA_RT_AVX2 1
+#define TESSERA_AVX2 __attribute__((target("avx2")))
+#else
+#define TESSERA_RT_AVX2 0
 #endif
 
 namespace tessera {
@@ -81,7 +91,8 @@ struct Counters {
 };
 
 struct Chunk {
-    std::vector<Candidate> cand;
+    // Written through a raw pointer by the traversal (grown without zeroing), read by index.
+    std::vector<Candidate, DefaultInitAllocator<Candidate>> cand;
     std::vector<uint32_t> segEnd;  // per ray of the chunk: end of its candidates
     Counters c;                    // counters of this chunk (merged in chunk order)
 };
@@ -142,6 +153,7 @@ constexpr int kBvh4Stack = 3 * 64 + 1;
 struct Ray4 {
 #if defined(__SSE2__)
     __m128 ox, oy, oz, ix, iy, iz, t0, t1;
+    Ray4() = default;
     Ray4(Vec3 o, Vec3 inv, float tmin, float tmax)
         : ox(_mm_set1_ps(o.x)),
           oy(_mm_set1_ps(o.y)),
@@ -154,15 +166,23 @@ struct Ray4 {
 #else
     Vec3 o, inv;
     float tmin, tmax;
+    Ray4() = default;
     Ray4(Vec3 o_, Vec3 inv_, float tmin_, float tmax_) : o(o_), inv(inv_), tmin(tmin_), tmax(tmax_) {}
 #endif
 };
 
+#if defined(__SSE2__)
+using F4 = __m128;
+#else
+struct F4 {
+    float v[4];
+};
+#endif
+
 // Slab test of four boxes in structure-of-arrays form (16-byte aligned): bit i set when the ray hits box
-// i, with the entry and exit distances in te[i], tx[i] (same values as rayBoxInterval: no NaNs can occur,
-// so the min/max are order independent).
-inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ray4& r, float te[4],
-                      float tx[4]) {
+// i, with the entry and exit distances in lanes i of te, tx (same values as rayBoxInterval: no NaNs can
+// occur, so the min/max are order independent).
+inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ray4& r, F4& te, F4& tx) {
 #if defined(__SSE2__)
     const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[0]), r.ox), r.ix);
     const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[0]), r.ox), r.ix);
@@ -170,175 +190,574 @@ inline int rayBox4Soa(const float (&lo)[3][4], const float (&hi)[3][4], const Ra
     const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[1]), r.oy), r.iy);
     const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(lo[2]), r.oz), r.iz);
     const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(hi[2]), r.oz), r.iz);
-    const __m128 n =
-        _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
-    const __m128 f =
-        _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
-    _mm_storeu_ps(te, n);
-    _mm_storeu_ps(tx, f);
-    return _mm_movemask_ps(_mm_cmple_ps(n, f));
+    te = _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
+    tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
+    return _mm_movemask_ps(_mm_cmple_ps(te, tx));
 #else
     int mask = 0;
     for (int i = 0; i < 4; ++i) {
         Bounds3 b;
         b.lo = {lo[0][i], lo[1][i], lo[2][i]};
         b.hi = {hi[0][i], hi[1][i], hi[2][i]};
-        if (rayBoxInterval(b, r.o, r.inv, r.tmin, r.tmax, te[i], tx[i])) mask |= 1 << i;
+        if (rayBoxInterval(b, r.o, r.inv, r.tmin, r.tmax, te.v[i], tx.v[i])) mask |= 1 << i;
     }
     return mask;
 #endif
 }
 
+// Lanes i of `mask` whose exit distance is not below `selfT` (the self-intersection cut: !(tx < selfT)).
+inline int exitNotBelow(int mask, F4 tx, float selfT) {
+#if defined(__SSE2__)
+    return mask & _mm_movemask_ps(_mm_cmpnlt_ps(tx, _mm_set1_ps(selfT)));
+#else
+    for (int i = 0; i < 4; ++i)
+        if (tx.v[i] < selfT) mask &= ~(1 << i);
+    return mask;
+#endif
+}
+
+// The hit lanes of a subpatch quad whose exit distance is not below selfT (lanes of selfT4; the
+// self-intersection cut !(tx < selfT)), with the entry distances in te.
+inline int quadHits(const SubpatchQuad& q, const Ray4& r, F4 selfT4, F4& te) {
+#if defined(__SSE2__)
+    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[0]), r.ox), r.ix);
+    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[0]), r.ox), r.ix);
+    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[1]), r.oy), r.iy);
+    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[1]), r.oy), r.iy);
+    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[2]), r.oz), r.iz);
+    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[2]), r.oz), r.iz);
+    te = _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
+    const __m128 tx =
+        _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
+    return _mm_movemask_ps(_mm_andnot_ps(_mm_cmplt_ps(tx, selfT4), _mm_cmple_ps(te, tx)));
+#else
+    F4 tx;
+    const int mask = rayBox4Soa(q.lo, q.hi, r, te, tx);
+    return exitNotBelow(mask, tx, selfT4.v[0]);
+#endif
+}
+
+inline F4 splatF4(float x) {
+#if defined(__SSE2__)
+    return _mm_set1_ps(x);
+#else
+    return F4{{x, x, x, x}};
+#endif
+}
+
+inline void storeF4(float out[4], F4 v) {
+#if defined(__SSE2__)
+    _mm_storeu_ps(out, v);
+#else
+    for (int i = 0; i < 4; ++i) out[i] = v.v[i];
+#endif
+}
+
+// Order of the hit lanes of a 4-wide box test by entry distance (stable: ties by lane index), from a table
+// indexed by the hit mask (bits 0-3) and six pair comparisons: bits 4-7 for the pairs (0,1), (1,2),
+// (2,3), (0,2) and bits 8-9 for (0,3), (1,3); the bit of a pair (a, b), a < b, is set when key[b] <
+// key[a] (b goes first). Patterns no four numbers can produce still give indices in range.
+struct HitOrder {
+    uint8_t order[4];   // the hit lanes by rank (entries >= the hit count: 0)
+    uint8_t offset[4];  // per lane: 16 * its rank (64 for a lane not hit): a byte offset into Candidate[]
+};
+constexpr int kHitOrderSize = 1 << 10;
+constexpr std::array<HitOrder, kHitOrderSize> makeHitOrderTable() {
+    std::array<HitOrder, kHitOrderSize> t{};
+    constexpr int pa[6] = {0, 1, 2, 0, 0, 1}, pb[6] = {1, 2, 3, 2, 3, 3};
+    for (int idx = 0; idx < kHitOrderSize; ++idx) {
+        const int mask = idx & 15;
+        bool bFirst[4][4] = {};  // bFirst[a][b], a < b: lane b before lane a
+        for (int p = 0; p < 6; ++p) bFirst[pa[p]][pb[p]] = (idx >> (4 + p)) & 1;
+        HitOrder& h = t[size_t(idx)];
+        for (int i = 0; i < 4; ++i) {
+            h.order[i] = 0;
+            h.offset[i] = 64;
+        }
+        int k = 0;
+        for (int i = 0; i < 4; ++i) k += (mask >> i) & 1;
+        for (int i = 0; i < 4; ++i) {
+            if (!((mask >> i) & 1)) continue;
+            int rank = 0;
+            for (int j = 0; j < 4; ++j) {
+                if (j == i || !((mask >> j) & 1)) continue;
+                rank += j < i ? !bFirst[j][i] : bFirst[i][j];
+            }
+            rank = rank < k - 1 ? rank : k - 1;
+            h.order[rank] = uint8_t(i);
+            h.offset[i] = uint8_t(16 * rank);
+        }
+    }
+    return t;
+}
+constexpr std::array<HitOrder, kHitOrderSize> kHitOrder = makeHitOrderTable();
+
+// The six pair comparisons of `key` that index the table (bits 4-9 of the index).
+inline int pairBits(F4 key) {
+#if defined(__SSE2__)
+    const __m128 a = _mm_shuffle_ps(key, key, _MM_SHUFFLE(2, 3, 2, 1));  // k1 k2 k3 k2
+    const __m128 b = _mm_shuffle_ps(key, key, _MM_SHUFFLE(0, 2, 1, 0));  // k0 k1 k2 k0
+    const int p1 = _mm_movemask_ps(_mm_cmplt_ps(a, b));
+    const int p2 = _mm_movemask_ps(_mm_cmplt_ps(_mm_shuffle_ps(key, key, _MM_SHUFFLE(3, 3, 3, 3)), key)) & 3;
+    return (p1 | p2 << 4) << 4;
+#else
+    const float* k = key.v;
+    const int p = (k[1] < k[0]) | (k[2] < k[1]) << 1 | (k[3] < k[2]) << 2 | (k[2] < k[0]) << 3 |
+                  (k[3] < k[0]) << 4 | (k[3] < k[1]) << 5;
+    return p << 4;
+#endif
+}
+
+// The table entry for the hit lanes `mask` (at most 4 bits) ordered by `key` (no NaNs in the hit lanes).
+inline const HitOrder& hitOrder(int mask, F4 key) {
+    return kHitOrder[size_t(mask | pairBits(key))];
+}
+
+#if TESSERA_RT_AVX2
+// quadHits for two items at once (lanes 0-3: quad a with ray a, lanes 4-7: quad b with ray b): the same
+// operations lane by lane, so the same results; returns the 8-bit hit mask.
+TESSERA_AVX2 inline __m256 cat2(__m128 lo, __m128 hi) {
+    return _mm256_insertf128_ps(_mm256_castps128_ps256(lo), hi, 1);
+}
+TESSERA_AVX2 inline __m256 slab2(const float* a, const float* b, __m128 oa, __m128 ob, __m128 ia, __m128 ib) {
+    return _mm256_mul_ps(_mm256_sub_ps(cat2(_mm_load_ps(a), _mm_load_ps(b)), cat2(oa, ob)), cat2(ia, ib));
+}
+TESSERA_AVX2 inline int quadHits2(const SubpatchQuad& qa, const Ray4& ra, __m128 sa, const SubpatchQuad& qb,
+                                  const Ray4& rb, __m128 sb, __m256& te) {
+    const __m256 x0 = slab2(qa.lo[0], qb.lo[0], ra.ox, rb.ox, ra.ix, rb.ix);
+    const __m256 x1 = slab2(qa.hi[0], qb.hi[0], ra.ox, rb.ox, ra.ix, rb.ix);
+    const __m256 y0 = slab2(qa.lo[1], qb.lo[1], ra.oy, rb.oy, ra.iy, rb.iy);
+    const __m256 y1 = slab2(qa.hi[1], qb.hi[1], ra.oy, rb.oy, ra.iy, rb.iy);
+    const __m256 z0 = slab2(qa.lo[2], qb.lo[2], ra.oz, rb.oz, ra.iz, rb.iz);
+    const __m256 z1 = slab2(qa.hi[2], qb.hi[2], ra.oz, rb.oz, ra.iz, rb.iz);
+    te = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
+                       _mm256_max_ps(_mm256_min_ps(z0, z1), cat2(ra.t0, rb.t0)));
+    const __m256 tx = _mm256_min_ps(_mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
+                                    _mm256_min_ps(_mm256_max_ps(z0, z1), cat2(ra.t1, rb.t1)));
+    return _mm256_movemask_ps(
+        _mm256_andnot_ps(_mm256_cmp_ps(tx, cat2(sa, sb), _CMP_LT_OS), _mm256_cmp_ps(te, tx, _CMP_LE_OS)));
+}
+
+// hitOrder of both halves of quadHits2.
+TESSERA_AVX2 inline void hitOrder2(int mask, __m256 key, const HitOrder*& ha, const HitOrder*& hb) {
+    const __m256 a = _mm256_shuffle_ps(key, key, _MM_SHUFFLE(2, 3, 2, 1));
+    const __m256 b = _mm256_shuffle_ps(key, key, _MM_SHUFFLE(0, 2, 1, 0));
+    const int p1 = _mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LT_OS));
+    const int p2 = _mm256_movemask_ps(
+        _mm256_cmp_ps(_mm256_shuffle_ps(key, key, _MM_SHUFFLE(3, 3, 3, 3)), key, _CMP_LT_OS));
+    ha = &kHitOrder[size_t((mask & 15) | (p1 & 15) << 4 | (p2 & 3) << 8)];
+    hb = &kHitOrder[size_t((mask >> 4) | (p1 >> 4) << 4 | (p2 & 0x30) << 4)];
+}
+#endif
+
+// Number of bits of a 4-bit mask (no popcnt instruction in the baseline x86-64 build).
+constexpr uint8_t kPop4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+
+// Per 4-bit hit mask: the byte offset of each lane's candidate when the hit lanes are written in lane order
+// (16 * the number of hit lanes before it; 64, a scratch slot, for a lane not hit).
+struct LaneOffsets {
+    uint8_t offset[4];
+};
+constexpr std::array<LaneOffsets, 16> makeLaneOffsets() {
+    std::array<LaneOffsets, 16> t{};
+    for (int mask = 0; mask < 16; ++mask)
+        for (int i = 0, k = 0; i < 4; ++i)
+            t[size_t(mask)].offset[i] = uint8_t((mask >> i) & 1 ? 16 * k++ : 64);
+    return t;
+}
+constexpr std::array<LaneOffsets, 16> kLaneOffsets = makeLaneOffsets();
+
+// The candidates of four leaves (leaf numbers leaf0 .. leaf0 + 3, entry distances te): lane i goes to
+// byte offset h.offset[i] of out.
+inline void storeCandidates4(Candidate* out, const LaneOffsets& h, const uint32_t* rayPatch, uint32_t leaf0,
+                             F4 te) {
+    static_assert(sizeof(Candidate) == 16 && offsetof(Candidate, leaf) == 8 &&
+                  offsetof(Candidate, tEnter) == 12);
+    char* base = reinterpret_cast<char*>(out);
+#if defined(__SSE2__)
+    const __m128 rp =
+        _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(rayPatch)));  // ray patch
+    const __m128 leaf =
+        _mm_castsi128_ps(_mm_add_epi32(_mm_set1_epi32(int(leaf0)), _mm_setr_epi32(0, 1, 2, 3)));
+    const __m128 lo = _mm_unpacklo_ps(leaf, te),
+                 hi = _mm_unpackhi_ps(leaf, te);  // (l0 t0 l1 t1), (l2 t2 l3 t3)
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[0]), _mm_movelh_ps(rp, lo));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[1]),
+                  _mm_shuffle_ps(rp, lo, _MM_SHUFFLE(3, 2, 1, 0)));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[2]), _mm_movelh_ps(rp, hi));
+    _mm_storeu_ps(reinterpret_cast<float*>(base + h.offset[3]),
+                  _mm_shuffle_ps(rp, hi, _MM_SHUFFLE(3, 2, 1, 0)));
+#else
+    for (int i = 0; i < 4; ++i) {
+        const Candidate c{rayPatch[0], rayPatch[1], leaf0 + uint32_t(i), te.v[i]};
+        std::memcpy(base + h.offset[i], &c, sizeof c);
+    }
+#endif
+}
+
 // The four children of a 4-wide BVH node (bits >= count cleared).
-inline int rayBox4(const Bvh4Node& nd, const Ray4& r, float te[4], float tx[4]) {
+inline int rayBox4(const Bvh4Node& nd, const Ray4& r, F4& te, F4& tx) {
     return rayBox4Soa(nd.lo, nd.hi, r, te, tx) & ((1 << nd.count) - 1);
 }
 
-// Indices of the bits of `mask` in increasing order of key[] (stable); returns their number.
-inline int sortHits(int mask, const float key[4], int order[4]) {
-    int k = 0;
-    while (mask) {
-        const int i = __builtin_ctz(unsigned(mask));
-        mask &= mask - 1;
-        int j = k++;
-        while (j > 0 && key[order[j - 1]] > key[i]) {
-            order[j] = order[j - 1];
-            --j;
-        }
-        order[j] = i;
-    }
-    return k;
+// A subpatch traversal item: a (ray, patch) pair of the current batch (bits 12 and up) and a quad of its
+// tree (bits 0-11; for an odd depth also a node of the last level above the leaves, past the quads).
+constexpr uint32_t kItemQuadBits = 12, kItemQuadMask = (1u << kItemQuadBits) - 1u;
+constexpr uint32_t kMaxBatchPairs = 1u << (32 - kItemQuadBits);
+static_assert(((1u << (2 * (kMaxSubpatchDepth / 2))) - 1) / 3 <= kItemQuadMask);  // items of every level
+
+// out[0..3] = first + h.order[0..3] (entries past the hit count are scratch).
+inline void storeItems4(uint32_t* out, const HitOrder& h, uint32_t first) {
+#if defined(__SSE2__)
+    int32_t ord;
+    std::memcpy(&ord, h.order, 4);
+    const __m128i z = _mm_setzero_si128();
+    const __m128i o = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(ord), z), z);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_add_epi32(o, _mm_set1_epi32(int(first))));
+#else
+    for (int i = 0; i < 4; ++i) out[i] = first + h.order[i];
+#endif
 }
 
-// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Both children of a subpatch
-// node are tested together (they are adjacent in memory) and the nearer one is visited first, so leaves
-// come out nearly sorted. Leaves of the ray's originating patch whose box the ray leaves before the
-// self-intersection distance are not emitted: every root inside such a leaf would be rejected anyway.
-void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
+// One patch whose root box a ray hits, and what its subpatch traversal needs.
+struct PatchPair {
+    F4 selfT4;  // leaves the ray exits before this distance are dropped
+    const SubpatchQuad* quads;
+    const uint8_t* qback;  // backface bits per quad (primary rays with culling), else null
+    const uint8_t* back;   // backface bits per node (same condition)
+    uint32_t rayId;        // the ray's index in the list, then the patch: its candidates' first half
+    uint32_t patch;
+    uint32_t ray;  // index in the chunk
+    float te;      // entry distance of the root box
+    float selfT;
+};
+static_assert(sizeof(PatchPair) == 64);
+
+// Per-thread scratch of the traversal, reused from chunk to chunk.
+struct TraverseScratch {
+    std::vector<Ray4> ray4;
+    std::vector<PatchPair> pairs;
+    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> items, next;
+    std::vector<uint32_t> count;  // candidates per ray of the chunk
+};
+
+// One level of the subpatch traversal: the items' quads tested, items[0, n). innerLevel appends the hit
+// children of each item to `next` in hit order and returns their number; leafLevel writes the candidates
+// of each item in lane order at cand + used (counted per ray in count[]) and returns the new `used`. `next`
+// and `cand` need room for 4 entries per item and one more. The AVX2 versions do the same, two items per
+// 8-wide test.
+struct LevelIn {
+    const uint32_t* items;
+    uint32_t n;
+    const PatchPair* pairs;
+    const Ray4* ray4;
+};
+
+inline uint32_t innerLevelTail(const LevelIn& in, uint32_t j, uint32_t* next, uint32_t nNext) {
+    for (; j < in.n; ++j) {
+        const uint32_t it = in.items[j], quad = it & kItemQuadMask;
+        const PatchPair& pp = in.pairs[it >> kItemQuadBits];
+        F4 te4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        if (pp.qback) mask &= ~int(pp.qback[quad]);
+        storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
+        nNext += kPop4[mask];
+    }
+    return nNext;
+}
+
+inline size_t leafLevelTail(const LevelIn& in, uint32_t j, uint32_t leafQuadFirst, Candidate* cand,
+                            size_t used, uint32_t* count) {
+    for (; j < in.n; ++j) {
+        const uint32_t it = in.items[j], quad = it & kItemQuadMask;
+        const PatchPair& pp = in.pairs[it >> kItemQuadBits];
+        F4 te4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        if (pp.qback) mask &= ~int(pp.qback[quad]);
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], &pp.rayId, 4 * (quad - leafQuadFirst), te4);
+        used += kPop4[mask];
+        count[pp.ray] += kPop4[mask];
+    }
+    return used;
+}
+
+uint32_t innerLevel(const LevelIn& in, uint32_t* next) {
+    return innerLevelTail(in, 0, next, 0);
+}
+
+size_t leafLevel(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, size_t used, uint32_t* count) {
+    return leafLevelTail(in, 0, leafQuadFirst, cand, used, count);
+}
+
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 uint32_t innerLevelAvx2(const LevelIn& in, uint32_t* next) {
+    uint32_t j = 0, nNext = 0;
+    for (; j + 1 < in.n; j += 2) {
+        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
+        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
+        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
+        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        __m256 te8;
+        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
+                             pb.selfT4, te8);
+        if (pa.qback) mask &= ~int(pa.qback[qa]);
+        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const HitOrder *ha, *hb;
+        hitOrder2(mask, te8, ha, hb);
+        storeItems4(next + nNext, *ha, (ia & ~kItemQuadMask) + 4 * qa + 1);
+        nNext += kPop4[mask & 15];
+        storeItems4(next + nNext, *hb, (ib & ~kItemQuadMask) + 4 * qb + 1);
+        nNext += kPop4[mask >> 4];
+    }
+    return innerLevelTail(in, j, next, nNext);
+}
+
+TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, size_t used,
+                                  uint32_t* count) {
+    uint32_t j = 0;
+    for (; j + 1 < in.n; j += 2) {
+        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
+        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
+        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
+        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        __m256 te8;
+        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
+                             pb.selfT4, te8);
+        if (pa.qback) mask &= ~int(pa.qback[qa]);
+        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const int ma = mask & 15, mb = mask >> 4;
+        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], &pa.rayId, 4 * (qa - leafQuadFirst),
+                         _mm256_castps256_ps128(te8));
+        used += kPop4[ma];
+        count[pa.ray] += kPop4[ma];
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], &pb.rayId, 4 * (qb - leafQuadFirst),
+                         _mm256_extractf128_ps(te8, 1));
+        used += kPop4[mb];
+        count[pb.ray] += kPop4[mb];
+    }
+    return leafLevelTail(in, j, leafQuadFirst, cand, used, count);
+}
+#endif
+
+// Whether the AVX2 kernels run: the CPU has AVX2 and rtUseAvx2 has not turned them off.
+std::atomic<bool> gAvx2Allowed{true};
+bool cpuHasAvx2() {
+#if TESSERA_RT_AVX2
+    static const bool has = __builtin_cpu_supports("avx2");
+    return has;
+#else
+    return false;
+#endif
+}
+
+// One chunk of traverseList (see there), for the SSE2 or the AVX2 kernels: inlined into the two entry
+// points below, so that the AVX2 one is compiled for AVX2 throughout.
+template <bool kAvx2>
+[[gnu::always_inline]] inline void traverseChunk(const RtAccel& acc, const RayList& rays, Chunk& ch,
+                                                 size_t ci, bool cull) {
     const size_t n = rays.size();
-    const size_t nChunks = (n + kChunk - 1) / kChunk;
-    if (chunks.size() < nChunks) chunks.resize(nChunks);
     const Bvh& bvh = acc.bvh;
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
     const uint32_t depth = uint32_t(forest.depth);
     const float ignoreT = 8.f * acc.offset;
-    tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
-        Chunk& ch = chunks[ci];
-        ch.cand.clear();
-        ch.segEnd.clear();
-        ch.c = Counters();
-        uint64_t boxTests = 0;
-        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
-        for (size_t r = r0; r < r1; ++r) {
-            const size_t segBegin = ch.cand.size();
-            const Vec3 o = rays.o[r], d = rays.d[r];
-            const Vec3 inv = safeInverse(d);
-            const PairRay pr(o, inv);
-            const float tmin = rays.tmin[r], tmax = rays.tmax[r];
-            const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
-            const uint32_t ignore = rays.ignore[r];
-            const Ray4 r4(o, inv, tmin, tmax);
-            // One patch whose root box the ray enters at te and leaves at tx: its subpatch tree.
-            auto visitPatch = [&](uint32_t patch, float te, float tx) {
-                const Bounds3* tree = forest.tree(patch);
+    const uint32_t nQuads = forest.quadsPerPatch;
+    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
+    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
+    const Bvh4Node* wide = bvh.wide.data();
+    thread_local TraverseScratch scratch;
+    TraverseScratch& sc = scratch;
+    ch.c = Counters();
+    uint64_t boxTests = 0;
+    const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+    const uint32_t nr = uint32_t(r1 - r0);
+    sc.ray4.resize(nr);
+    sc.count.assign(nr, 0);
+    sc.pairs.clear();
+
+    // BVH: per ray, the patches it visits (depth first; the hit children in order of entry: inner nodes
+    // pushed far first, patches listed near first).
+    for (uint32_t rl = 0; rl < nr; ++rl) {
+        const size_t r = r0 + rl;
+        sc.ray4[rl] = Ray4(rays.o[r], safeInverse(rays.d[r]), rays.tmin[r], rays.tmax[r]);
+        const Ray4& r4 = sc.ray4[rl];
+        const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
+        const uint32_t ignore = rays.ignore[r];
+        uint32_t stack[kBvh4Stack];
+        int sp = 0;
+        if (!bvh.wide.empty()) stack[sp++] = 0;
+        while (sp > 0) {
+            const Bvh4Node& nd = wide[stack[--sp]];
+            F4 te4, tx4;
+            const int mask = rayBox4(nd, r4, te4, tx4);
+            boxTests += nd.count;
+            if (!mask) continue;
+            // The hit inner children and the hit patches, each in order of entry.
+            const int pb = pairBits(te4);
+            const int inner = mask & int(nd.innerMask), patches = mask & ~int(nd.innerMask);
+            if (inner) {
+                const HitOrder& h = kHitOrder[size_t(inner | pb)];
+                for (int q = kPop4[inner] - 1; q >= 0; --q) stack[sp++] = nd.child[h.order[q]];
+            }
+            if (!patches) continue;
+            float te[4], tx[4];
+            storeF4(te, te4);
+            storeF4(tx, tx4);
+            const HitOrder& h = kHitOrder[size_t(patches | pb)];
+            for (int q = 0, k = kPop4[patches]; q < k; ++q) {
+                const int i = h.order[q];
+                const uint32_t patch = nd.child[i] & ~kBvh4Patch;
                 const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
                 const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
-                if (tx < selfT || (back && back[0])) return;
-                if (firstLeaf == 0) {
-                    ch.cand.push_back({uint32_t(r), patch, 0, te});
-                    return;
-                }
-                // Stack of (node | level << 24) whose box the ray hits. From an even level the four
-                // grandchildren are tested at once (the odd level in between only contributes its backface
-                // bit: a grandchild's box lies inside its parent's, so the hit set is the same); from the
-                // last level above the leaves of an odd depth, the two children as a pair.
-                const SubpatchQuad* quads = forest.quadTree(patch);
-                uint32_t st[64];
-                int s2 = 0;
-                st[s2++] = 0;
-                while (s2 > 0) {
-                    const uint32_t e = st[--s2];
-                    const uint32_t node = e & 0xffffffu, lvl = e >> 24;
-                    if (lvl + 2 <= depth) {
-                        const uint32_t levelFirst = (1u << lvl) - 1u;  // 4^k - 1 for lvl = 2k
-                        const SubpatchQuad& q = quads[levelFirst / 3 + node - levelFirst];
-                        float te[4], tx[4];
-                        int mask = rayBox4Soa(q.lo, q.hi, r4, te, tx);
-                        boxTests += 4;
-                        const uint32_t g0 = 4 * node + 3;
-                        for (int bits = mask; bits;) {
-                            const int i = __builtin_ctz(unsigned(bits));
-                            bits &= bits - 1;
-                            if (tx[i] < selfT || (back && (back[g0 + i] || back[2 * node + 1 + (i >> 1)])))
-                                mask &= ~(1 << i);
-                        }
-                        int order[4];
-                        const int k = sortHits(mask, te, order);
-                        if (g0 >= firstLeaf) {
-                            for (int j = 0; j < k; ++j)
-                                ch.cand.push_back(
-                                    {uint32_t(r), patch, g0 + order[j] - firstLeaf, te[order[j]]});
-                        } else {
-                            // Far first, so that the near one is expanded first.
-                            const uint32_t l2 = (lvl + 2) << 24;
-                            for (int j = k - 1; j >= 0; --j) st[s2++] = (g0 + order[j]) | l2;
-                        }
-                        continue;
-                    }
-                    // Odd depth: the pair of leaves below a node of level depth - 1.
-                    const uint32_t m = 2 * node + 1;
-                    float tn[2], tf[2];
-                    const int mask = rayBoxPair(tree + m, pr, tmin, tmax, tn, tf);
-                    const float ta = tn[0], tb = tn[1];
-                    const bool ha = (mask & 1) && tf[0] >= selfT && !(back && back[m]);
-                    const bool hb = (mask & 2) && tf[1] >= selfT && !(back && back[m + 1]);
-                    boxTests += 2;
-                    const bool swap = hb && (!ha || tb < ta);
-                    if (swap) ch.cand.push_back({uint32_t(r), patch, m + 1 - firstLeaf, tb});
-                    if (ha) ch.cand.push_back({uint32_t(r), patch, m - firstLeaf, ta});
-                    if (hb && !swap) ch.cand.push_back({uint32_t(r), patch, m + 1 - firstLeaf, tb});
-                }
-            };
-            // 4-wide BVH: the hit children in order of entry; inner nodes are pushed far first, patches
-            // are visited at once (near first).
-            uint32_t stack[kBvh4Stack];
-            int sp = 0;
-            if (!bvh.wide.empty()) stack[sp++] = 0;
-            while (sp > 0) {
-                const Bvh4Node& nd = bvh.wide[stack[--sp]];
-                float te[4], tx[4];
-                const int mask = rayBox4(nd, r4, te, tx);
-                boxTests += nd.count;
-                int order[4];
-                const int k = sortHits(mask, te, order);
-                for (int q = k - 1; q >= 0; --q) {
-                    const uint32_t c = nd.child[order[q]];
-                    if (!(c & kBvh4Patch)) stack[sp++] = c;
-                }
-                for (int q = 0; q < k; ++q) {
-                    const uint32_t c = nd.child[order[q]];
-                    if (c & kBvh4Patch) visitPatch(c & ~kBvh4Patch, te[order[q]], tx[order[q]]);
-                }
+                if (tx[i] < selfT || (back && back[0])) continue;
+                sc.pairs.push_back({splatF4(selfT), forest.quadTree(patch),
+                                    cullRay ? forest.quadBackBits(patch) : nullptr, back, uint32_t(r), patch,
+                                    rl, te[i], selfT});
             }
-            // Sort the ray's candidates by entry distance (stable insertion sort: short, nearly sorted).
-            Candidate* cd = ch.cand.data();
-            const size_t segEnd = ch.cand.size();
-            for (size_t i = segBegin + 1; i < segEnd; ++i) {
-                if (!(cd[i - 1].tEnter > cd[i].tEnter)) continue;
-                const Candidate x = cd[i];
-                size_t j = i;
-                while (j > segBegin && cd[j - 1].tEnter > x.tEnter) {
-                    cd[j] = cd[j - 1];
-                    --j;
-                }
-                cd[j] = x;
-            }
-            ch.segEnd.push_back(uint32_t(segEnd));
         }
-        ch.c.candidates = ch.cand.size();
-        ch.c.boxTests = boxTests;
-    });
+    }
+
+    // Subpatch trees of all pairs, level by level, in batches of pairs; candidates in pair order. All
+    // candidates of a batch are written by one level (the leaves' parents).
+    const uint32_t nPairs = uint32_t(sc.pairs.size());
+    Candidate* cand = nullptr;
+    size_t used = 0;
+    auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
+        if (ch.cand.capacity() < used + more) ch.cand.reserve(std::max(used + more, 2 * ch.cand.capacity()));
+        ch.cand.resize(ch.cand.capacity());
+        cand = ch.cand.data();
+    };
+    for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
+        const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
+        const PatchPair* pairs = sc.pairs.data() + pb;
+        if (firstLeaf == 0) {
+            candRoom(nb);
+            for (uint32_t p = 0; p < nb; ++p) {
+                cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
+                ++sc.count[pairs[p].ray];
+            }
+            continue;
+        }
+        if (sc.items.size() < nb) sc.items.resize(nb);
+        for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
+        uint32_t nItems = nb, lvl = 0;
+        for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
+            boxTests += 4 * uint64_t(nItems);
+            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
+            if (lvl + 2 < depth) {
+                // Inner level: the hit children in hit order.
+                if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
+#if TESSERA_RT_AVX2
+                if constexpr (kAvx2)
+                    nItems = innerLevelAvx2(in, sc.next.data());
+                else
+#endif
+                    nItems = innerLevel(in, sc.next.data());
+                std::swap(sc.items, sc.next);
+                continue;
+            }
+            // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
+            // entry distance gives the same order, as equal distances keep their lane order either way).
+            // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
+            const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
+            candRoom(4 * size_t(nItems) + 1);
+#if TESSERA_RT_AVX2
+            if constexpr (kAvx2)
+                used = leafLevelAvx2(in, leafQuadFirst, cand, used, sc.count.data());
+            else
+#endif
+                used = leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
+            nItems = 0;
+        }
+        // Odd depth: the pairs of leaves below the nodes of level depth - 1.
+        boxTests += 2 * uint64_t(nItems);
+        if (nItems > 0) candRoom(2 * size_t(nItems));
+        for (uint32_t j = 0; j < nItems; ++j) {
+            const uint32_t it = sc.items[j];
+            const PatchPair& pp = pairs[it >> kItemQuadBits];
+            const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
+            const size_t r = r0 + pp.ray;
+            const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
+            float tn[2], tf[2];
+            const int mask = rayBoxPair(forest.tree(pp.patch) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
+            const float ta = tn[0], tb = tn[1];
+            const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
+            const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
+            const bool swap = hb && (!ha || tb < ta);
+            const size_t u0 = used;
+            if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
+            if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            sc.count[pp.ray] += uint32_t(used - u0);
+        }
+    }
+
+    // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
+    // nearly sorted).
+    ch.segEnd.resize(nr);
+    uint32_t end = 0;
+    for (uint32_t rl = 0; rl < nr; ++rl) {
+        const uint32_t begin = end;
+        end += sc.count[rl];
+        ch.segEnd[rl] = end;
+        for (uint32_t i = begin + 1; i < end; ++i) {
+            if (!(cand[i - 1].tEnter > cand[i].tEnter)) continue;
+            const Candidate x = cand[i];
+            uint32_t j = i;
+            while (j > begin && cand[j - 1].tEnter > x.tEnter) {
+                cand[j] = cand[j - 1];
+                --j;
+            }
+            cand[j] = x;
+        }
+    }
+    ch.cand.resize(used);
+    ch.c.candidates = used;
+    ch.c.boxTests = boxTests;
+}
+
+void traverseChunkSse2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci, bool cull) {
+    traverseChunk<false>(acc, rays, ch, ci, cull);
+}
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 void traverseChunkAvx2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci,
+                                    bool cull) {
+    traverseChunk<true>(acc, rays, ch, ci, cull);
+}
+#endif
+
+// Stage 1: traversal of the ray list, chunk by chunk, emitting candidates. Each ray's candidates are
+// emitted in depth-first order (both hierarchies, children near first, ties by index; under a BVH node its
+// patches before its inner children), then sorted by entry distance (stable), so leaves come out nearly
+// sorted and the order is fixed. Leaves of the ray's originating patch whose box the ray leaves before the
+// self-intersection distance are not emitted: every root inside such a leaf would be rejected anyway.
+//
+// Per ray, the BVH's depth-first traversal lists the patches it visits (plain branches: neighbouring rays
+// take the same paths). Then all (ray, patch) pairs of the chunk go down their subpatch trees together,
+// level by level, two levels per 4-wide test (the odd level in between only contributes its backface bit:
+// a grandchild's box lies inside its parent's, so the hit set is the same), through the quads
+// (SubpatchQuad, numbered as a 4-ary heap: the children of quad q are 4q+1..4q+4). The tests of one level
+// are independent and their work is branch free: the hit lanes are filtered in the SIMD mask (exit
+// distance, precomputed backface bits), and all four outputs are written (the ones past the hit count land
+// in scratch slots and are overwritten). Each item's hit children are appended in hit order (a table
+// lookup), so every level stays grouped by pair in visit order and in depth-first order within a pair; the
+// leaves' candidates of one quad are written in lane order, which the final stable sort by entry distance
+// turns into the same order as hit order would. For an odd depth the nodes of the last level above the
+// leaves test their two children as a pair. Where the CPU has AVX2, the whole chunk runs AVX2 code (two
+// quads per 8-wide test); the results are the same.
+void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
+    const size_t n = rays.size();
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    if (chunks.size() < nChunks) chunks.resize(nChunks);
+#if TESSERA_RT_AVX2
+    if (cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed)) {
+        tbb::parallel_for(size_t(0), nChunks,
+                          [&](size_t ci) { traverseChunkAvx2(acc, rays, chunks[ci], ci, cull); });
+        return;
+    }
+#endif
+    tbb::parallel_for(size_t(0), nChunks,
+                      [&](size_t ci) { traverseChunkSse2(acc, rays, chunks[ci], ci, cull); });
 }
 
 // The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
@@ -1179,6 +1598,11 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
 }  // namespace
 
 // ---- shared helpers -------------------------------------------------------------------------------
+
+bool rtUseAvx2(bool allow) {
+    gAvx2Allowed.store(allow, std::memory_order_relaxed);
+    return allow && cpuHasAvx2();
+}
 
 Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
     Vec3 N = cross(h.dpdu, h.dpdv);

@@ -72,6 +72,11 @@ Vec3 reflectDir(Vec3 I, Vec3 N);
 // Returns false on total internal reflection; F receives the Fresnel reflectance.
 bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F);
 
+// The traversal's subpatch kernels use AVX2 where the CPU has it (chosen at run time; same results as the
+// SSE2 kernels). allow = false forces the SSE2 kernels (tests), true allows AVX2 again; returns whether
+// AVX2 kernels will run.
+bool rtUseAvx2(bool allow);
+
 // The wavefront path (the renderer's traversal and Newton stages) over a batch of rays, serially in
 // the caller's thread: the same answers as traceRayScalar, for tests and tools.
 void traceBatch(const RtAccel& acc, std::span<const Ray> rays, const TraceOptions& opt,

@@ -243,7 +243,7 @@ void transposeQuad(const float* b, SubpatchQuad& q) {
 
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
                          bool backfaceFromOrigin, std::span<const uint8_t> flip) {
-    depth = std::clamp(depth, 0, 12);
+    depth = std::clamp(depth, 0, kMaxSubpatchDepth);
     f.depth = depth;
     f.nodesPerPatch = (2u << depth) - 1u;
     f.boxes.resize(patches.size() * f.nodesPerPatch);
@@ -251,6 +251,8 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     if (backfaceFromOrigin) f.backfacing.assign(f.boxes.size(), 0);
     f.quadsPerPatch = ((1u << (2 * (depth / 2))) - 1u) / 3u;
     f.quads.resize(patches.size() * f.quadsPerPatch);
+    f.quadBack.clear();
+    if (backfaceFromOrigin) f.quadBack.assign(f.quads.size(), 0);
     const uint32_t leaves = 1u << depth;
     f.leafCentre.resize(leaves);
     f.leafBasis.resize(leaves);
@@ -293,9 +295,16 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                 tb.build(patches[i], f.boxes.data() + i * f.nodesPerPatch, back, sign);
                 const Bounds3* bx = f.boxes.data() + i * f.nodesPerPatch;
                 SubpatchQuad* q = f.quads.data() + i * f.quadsPerPatch;
+                uint8_t* qb = backfaceFromOrigin ? f.quadBack.data() + i * f.quadsPerPatch : nullptr;
                 for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
-                    for (uint32_t n = first; n <= 2 * first; ++n, ++q)  // the 4^k nodes of level 2k
+                    for (uint32_t n = first; n <= 2 * first; ++n, ++q) {  // the 4^k nodes of level 2k
                         transposeQuad(&bx[4 * n + 3].lo.x, *q);
+                        if (!qb) continue;
+                        uint8_t bits = 0;
+                        for (uint32_t c = 0; c < 4; ++c)
+                            if (back[4 * n + 3 + c] || back[2 * n + 1 + (c >> 1)]) bits |= uint8_t(1u << c);
+                        *qb++ = bits;
+                    }
             }
         });
 }

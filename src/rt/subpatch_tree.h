@@ -15,6 +15,9 @@
 
 namespace tessera {
 
+// Deepest subpatch tree (buildSubpatchForest clamps to it).
+constexpr int kMaxSubpatchDepth = 12;
+
 // The four grandchildren 4i+3 .. 4i+6 of a node i at an even level, structure of arrays, for one 4-wide
 // slab test (the traversal goes two levels per step; the odd levels are only needed for the backface bits).
 struct alignas(16) SubpatchQuad {
@@ -69,6 +72,9 @@ struct SubpatchForest {
     // group (4^k - 1) / 3 + i - (4^k - 1). A copy of `boxes` (levels 2, 4, ...) for the 4-wide traversal.
     std::vector<SubpatchQuad, DefaultInitAllocator<SubpatchQuad>> quads;
     uint32_t quadsPerPatch = 21;
+    // With `backfacing`, per quad: bit i set when grandchild i or its parent (the odd level in between)
+    // is backfacing, i.e. the traversal's cull test of the four grandchildren as one 4-bit mask.
+    std::vector<uint8_t> quadBack;
 
     const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
     const uint8_t* backfaceBits(uint32_t patch) const {
@@ -78,9 +84,12 @@ struct SubpatchForest {
     const SubpatchQuad* quadTree(uint32_t patch) const {
         return quads.data() + size_t(patch) * quadsPerPatch;
     }
+    const uint8_t* quadBackBits(uint32_t patch) const {
+        return quadBack.empty() ? nullptr : quadBack.data() + size_t(patch) * quadsPerPatch;
+    }
     size_t memoryBytes() const {
         return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
-               quads.size() * sizeof(SubpatchQuad) +
+               quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
                (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis);
     }
 };
