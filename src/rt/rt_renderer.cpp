@@ -1219,6 +1219,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
         ProjectedPatch<float> pp;
+        alignas(16) float depth[16];  // the control points' distances along the ray (t units)
     };
 
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
@@ -1238,6 +1239,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             const __m128 n1x = _mm_set1_ps(pl.n1.x), n1y = _mm_set1_ps(pl.n1.y), n1z = _mm_set1_ps(pl.n1.z),
                          n2x = _mm_set1_ps(pl.n2.x), n2y = _mm_set1_ps(pl.n2.y), n2z = _mm_set1_ps(pl.n2.z),
                          d1 = _mm_set1_ps(pl.d1), d2 = _mm_set1_ps(pl.d2);
+            const __m128 ox = _mm_set1_ps(s.ray.o.x), oy = _mm_set1_ps(s.ray.o.y), oz = _mm_set1_ps(s.ray.o.z),
+                         dx = _mm_set1_ps(s.ray.d.x), dy = _mm_set1_ps(s.ray.d.y), dz = _mm_set1_ps(s.ray.d.z),
+                         idd = _mm_set1_ps(s.invDD);
             for (int q = 0; q < 16; q += 4) {
                 const __m128 x = _mm_load_ps(ps.x + q), y = _mm_load_ps(ps.y + q), z = _mm_load_ps(ps.z + q);
                 const __m128 a1 = _mm_add_ps(
@@ -1246,11 +1250,20 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     _mm_add_ps(_mm_add_ps(_mm_mul_ps(n2x, x), _mm_mul_ps(n2y, y)), _mm_mul_ps(n2z, z)), d2);
                 _mm_store_ps(s.pp.a1 + q, a1);
                 _mm_store_ps(s.pp.a2 + q, a2);
+                // Distance along the ray, (P - o).d / d.d: t of a root without evaluating the patch again.
+                const __m128 a3 = _mm_mul_ps(
+                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(x, ox), dx), _mm_mul_ps(_mm_sub_ps(y, oy), dy)),
+                               _mm_mul_ps(_mm_sub_ps(z, oz), dz)),
+                    idd);
+                _mm_store_ps(s.depth + q, a3);
             }
 #else
             for (int k = 0; k < 16; ++k) {
                 s.pp.a1[k] = pl.n1.x * ps.x[k] + pl.n1.y * ps.y[k] + pl.n1.z * ps.z[k] + pl.d1;
                 s.pp.a2[k] = pl.n2.x * ps.x[k] + pl.n2.y * ps.y[k] + pl.n2.z * ps.z[k] + pl.d2;
+                s.depth[k] = ((ps.x[k] - s.ray.o.x) * s.ray.d.x + (ps.y[k] - s.ray.o.y) * s.ray.d.y +
+                              (ps.z[k] - s.ray.o.z) * s.ray.d.z) *
+                             s.invDD;
             }
 #endif
             for (int k = 0; k < 16; ++k) L.a1[k][l] = s.pp.a1[k], L.a2[k][l] = s.pp.a2[k];
@@ -1378,7 +1391,13 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             if (found) {
                 s.rootPatch = c.patch, s.rootU = uc, s.rootV = vc;
                 const BezierPatch& patch = acc.patches[c.patch];
-                const float t = dot(evalPatch(patch, uc, vc) - s.ray.o, s.ray.d) * s.invDD;
+                float bu[4], bv[4];
+                bernstein3(uc, bu);
+                bernstein3(vc, bv);
+                float t = 0.f;
+                for (int j = 0; j < 4; ++j)
+                    t += bv[j] * (s.depth[4 * j] * bu[0] + s.depth[4 * j + 1] * bu[1] + s.depth[4 * j + 2] * bu[2] +
+                                  s.depth[4 * j + 3] * bu[3]);
                 bool ok =
                     t > s.ray.tmin && t < s.ray.tmax && !(c.patch == s.opt.ignorePatch && t < s.opt.ignoreT);
                 bool haveDeriv = false;
