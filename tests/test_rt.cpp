@@ -718,7 +718,7 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
     // traversal must give the same candidate set (hence the same count) and the same image, for a
     // perspective view of the teapot (two distant lights; then a point light, where shadow rays use the
     // traversal), a view from inside a scene whose boxes reach behind the eye, and an orthographic view.
-    auto compare = [](const Scene& s, const char* what) {
+    auto compare = [](const Scene& s, const char* what) -> RenderResult {
         RenderSettings rs;
         rs.engine = "rt";
         rs.threads = 2;
@@ -739,11 +739,15 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
         // shadow ray may differ (below).
         EXPECT_TRUE(differing == 0 || d.psnrColor > 60.0) << what;
         EXPECT_GT(binned.stats["hits"]["primary"].get<uint64_t>(), 1000u) << what;
+        std::printf("  shadow ray lists binned %llu, traversed %llu\n",
+                    (unsigned long long)binned.stats["shadow_lists"]["binned"].get<uint64_t>(),
+                    (unsigned long long)binned.stats["shadow_lists"]["traversed"].get<uint64_t>());
         // The candidate order of shadow rays is not the traversal's (any hit ends them), and a start may
         // reach a root in another leaf by chance (docs/rt.md), so a rare shadow ray may differ.
         const double sb = binned.stats["hits"]["shadow"].get<double>(),
                      st = traversed.stats["hits"]["shadow"].get<double>();
         EXPECT_LE(std::fabs(sb - st), 1e-3 * st + 1.0) << what;
+        return binned;
     };
     Scene teapot =
         loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/teapot.rib", [](const std::string&) {});
@@ -755,7 +759,8 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
     compare(twoLights, "teapot, two distant lights");
     Scene pointLight = teapot;
     pointLight.lights.push_back({LightType::Point, {1e4f, 1e4f, 1e4f}, {20.f, 40.f, -10.f}, {}});
-    compare(pointLight, "teapot, distant and point lights");
+    const RenderResult pl = compare(pointLight, "teapot, distant and point lights");
+    EXPECT_GT(pl.stats["shadow_lists"]["binned"].get<uint64_t>(), 0u);  // the point light's rays binned too
 
     // The eye inside the scene: a floor under and behind the eye, a bent sheet in front.
     Scene inside = cameraSpaceScene(200, 150, 70.f);
@@ -768,6 +773,9 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
     addPatch(inside, floor);
     addPatch(inside, sheet);
     compare(inside, "eye inside the scene");
+    // A point light among the patches (boxes around the light's plane).
+    inside.lights.push_back({LightType::Point, {4.f, 4.f, 4.f}, {0.f, 0.5f, 1.f}, {}});
+    compare(inside, "eye and point light inside the scene");
 
     Scene ortho = teapot;
     ortho.camera.perspective = false;

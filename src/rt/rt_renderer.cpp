@@ -79,12 +79,15 @@ struct Candidate {
 struct Counters {
     uint64_t rays[kKinds] = {}, hits[kKinds] = {};
     uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
+    uint64_t shadowListsBinned = 0,
+             shadowListsTraversed = 0;  // shadow ray lists by how candidates were found
     std::array<uint64_t, kHistBins> hist{};
     double traversalMs = 0, newtonMs = 0, shadeMs = 0, filterMs = 0;
     void add(const Counters& c) {
         for (int k = 0; k < kKinds; ++k) rays[k] += c.rays[k], hits[k] += c.hits[k];
         candidates += c.candidates, newtonRuns += c.newtonRuns, newtonIterations += c.newtonIterations;
         boxTests += c.boxTests, hullCulled += c.hullCulled;
+        shadowListsBinned += c.shadowListsBinned, shadowListsTraversed += c.shadowListsTraversed;
         for (int i = 0; i < kHistBins; ++i) hist[i] += c.hist[i];
         traversalMs += c.traversalMs, newtonMs += c.newtonMs, shadeMs += c.shadeMs, filterMs += c.filterMs;
     }
@@ -117,7 +120,14 @@ struct ParallelBinning {
     std::vector<uint32_t> cellStart, cellOf;  // grid: rays of cell c are sorted[cellStart[c], cellStart[c+1])
     // Per sorted ray (padded by 4): its index and its point, origin, interval, originating patch.
     std::vector<uint32_t> ray, ignore;
-    std::vector<float> px, py, ox, oy, oz, tmin, tmax;
+    std::vector<float> px, py, ox, oy, oz, ix, iy, iz, tmin, tmax;  // point, origin, 1/direction, interval
+};
+
+// The shadow rays towards one light: a contiguous run of the shadow list.
+struct ShadowRun {
+    size_t begin, end;
+    bool point;  // point light at `position` (else distant: the rays share one direction)
+    Vec3 position;
 };
 
 struct Workspace {
@@ -133,6 +143,7 @@ struct Workspace {
     std::vector<Color> secW;
     CameraBinning bin;
     ParallelBinning parallel;
+    std::vector<ShadowRun> shadowRuns;
     Counters c;
 };
 
@@ -994,23 +1005,47 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, 
 // leaf box is slab-tested (the traversal's arithmetic, with its self-intersection cut) against the rays
 // in the grid cells its rectangle covers. Candidates are the traversal's; appended to `found` unordered.
 
-void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t r1, ParallelBinning& pb,
-                     std::vector<Candidate>& found, uint64_t& boxTests) {
+bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t r1, ParallelBinning& pb,
+                     std::vector<Candidate>& found, uint64_t& boxTests, const Vec3* light = nullptr) {
     const size_t n = r1 - r0;
-    if (n == 0) return;
-    const Vec3 d = rays.d[r0];
-    const Vec3 inv = safeInverse(d);
-    // Frame of the projection plane.
-    const Vec3 w = normalize(d);
+    if (n == 0) return true;
+    // Projection: along the shared direction, or (point light) centrally from the light onto a plane
+    // orthogonal to the mean direction from the light to the origins. Every point of a shadow ray lies
+    // on the segment from its origin towards the light, so it projects to the origin's point.
+    const Vec3 C = light ? *light : Vec3{0, 0, 0};
+    Vec3 w;
+    if (light) {
+        Vec3 sum{0, 0, 0};
+        for (size_t r = r0; r < r1; ++r) sum += normalize(rays.o[r] - C);
+        w = normalize(sum);
+        // Every origin well in front of the light's plane (else: the per-ray traversal).
+        for (size_t r = r0; r < r1; ++r) {
+            const Vec3 q = rays.o[r] - C;
+            if (!(dot(w, q) > 0.05f * length(q))) return false;
+        }
+    } else {
+        w = normalize(rays.d[r0]);
+    }
+    if (!isFinite(w) || dot(w, w) == 0.f) return false;
     const Vec3 a = std::fabs(w.x) > 0.9f ? Vec3{0, 1, 0} : Vec3{1, 0, 0};
     const Vec3 eu = normalize(cross(a, w)), ev = cross(w, eu);
+    auto project = [&](Vec3 x, float& px, float& py) {
+        if (light) {
+            const Vec3 q = x - C;
+            const float iz = 1.f / dot(w, q);
+            px = dot(eu, q) * iz, py = dot(ev, q) * iz;
+        } else {
+            px = dot(eu, x), py = dot(ev, x);
+        }
+    };
     // Points and their bounds; the grid: about 4 rays per cell.
     float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
     for (size_t r = r0; r < r1; ++r) {
-        const float x = dot(eu, rays.o[r]), y = dot(ev, rays.o[r]);
+        float x, y;
+        project(rays.o[r], x, y);
         x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
     }
-    if (!(std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))) return;
+    if (!(std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))) return false;
     const int g = std::clamp(int(std::sqrt(double(n) / 4.0)), 1, 256);
     const float cw = std::max((x1 - x0) / float(g), 1e-30f), ch = std::max((y1 - y0) / float(g), 1e-30f);
     auto cellX = [&](float x) { return int(std::clamp((x - x0) / cw, 0.f, float(g - 1))); };
@@ -1018,12 +1053,15 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
     pb.cellStart.assign(size_t(g) * g + 1, 0);
     pb.cellOf.resize(n);
     for (size_t r = r0; r < r1; ++r) {
-        const uint32_t c = uint32_t(cellY(dot(ev, rays.o[r])) * g + cellX(dot(eu, rays.o[r])));
+        float x, y;
+        project(rays.o[r], x, y);
+        const uint32_t c = uint32_t(cellY(y) * g + cellX(x));
         pb.cellOf[r - r0] = c;
         ++pb.cellStart[c + 1];
     }
     for (size_t c = 0; c < size_t(g) * g; ++c) pb.cellStart[c + 1] += pb.cellStart[c];
-    for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.tmin, &pb.tmax}) v->assign(n + 4, 0.f);
+    for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.ix, &pb.iy, &pb.iz, &pb.tmin, &pb.tmax})
+        v->assign(n + 4, 0.f);
     std::fill(pb.px.begin() + n, pb.px.end(), NAN);  // padding: never inside a rectangle
     pb.ray.assign(n + 4, 0), pb.ignore.assign(n + 4, kNone);
     {
@@ -1032,12 +1070,19 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         for (size_t r = r0; r < r1; ++r) {
             const uint32_t s = slot[next[r - r0]]++;
             const Vec3 o = rays.o[r];
+            const Vec3 inv = safeInverse(rays.d[r]);
             pb.ray[s] = uint32_t(r), pb.ignore[s] = rays.ignore[r];
-            pb.px[s] = dot(eu, o), pb.py[s] = dot(ev, o);
+            project(o, pb.px[s], pb.py[s]);
             pb.ox[s] = o.x, pb.oy[s] = o.y, pb.oz[s] = o.z;
+            pb.ix[s] = inv.x, pb.iy[s] = inv.y, pb.iz[s] = inv.z;
             pb.tmin[s] = rays.tmin[r], pb.tmax[s] = rays.tmax[r];
         }
     }
+    const Vec3 d = light ? -w : rays.d[r0];  // visit order: nearer boxes along the rays first
+    // Point light: the magnitude of the coordinates involved (the light, the origins), for the margins.
+    float reach = maxComponent(Vec3{std::fabs(C.x), std::fabs(C.y), std::fabs(C.z)});
+    if (light)
+        for (size_t r = r0; r < r1; ++r) reach = std::max(reach, length(rays.o[r] - C));
     const float ignoreT = 8.f * acc.offset;
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
@@ -1045,14 +1090,35 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
     // Projected bounding rectangle of a box, grown for rounding, clipped to the points' bounds.
     auto overlaps = [&](const Bounds3& b, float& rx0, float& rx1, float& ry0, float& ry1) {
         rx0 = ry0 = INFINITY, rx1 = ry1 = -INFINITY;
+        int behind = 0;
         for (int c = 0; c < 8; ++c) {
             const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
-            const float x = dot(eu, p), y = dot(ev, p);
+            if (light && !(dot(w, p - C) > 0.f)) {
+                ++behind;
+                continue;
+            }
+            float x, y;
+            project(p, x, y);
             rx0 = std::min(rx0, x), rx1 = std::max(rx1, x), ry0 = std::min(ry0, y), ry1 = std::max(ry1, y);
         }
-        const float m = 1e-5f * std::max({std::fabs(rx0), std::fabs(rx1), std::fabs(ry0), std::fabs(ry1),
-                                          rx1 - rx0, ry1 - ry0}) +
-                        1e-30f;
+        if (behind == 8) return false;  // behind the light: no segment towards it gets there
+        if (behind > 0) {               // around the light's plane: any ray may hit it
+            rx0 = x0, rx1 = x1, ry0 = y0, ry1 = y1;
+            return true;
+        }
+        float m = 1e-5f * std::max({std::fabs(rx0), std::fabs(rx1), std::fabs(ry0), std::fabs(ry1), rx1 - rx0,
+                                    ry1 - ry0}) +
+                  1e-30f;
+        if (light) {
+            // Central projection: rounding of a ray point at distance h from the light moves its projection
+            // by ~ulp(coordinates) / h, largest at the box's nearest corner.
+            float h = INFINITY;
+            for (int c = 0; c < 8; ++c)
+                h = std::min(h, dot(w, Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y,
+                                            c & 4 ? b.hi.z : b.lo.z} -
+                                           C));
+            m += 1e-6f * reach / h;
+        }
         rx0 -= m, rx1 += m, ry0 -= m, ry1 += m;
         return rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0;
     };
@@ -1068,7 +1134,6 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
 #if defined(__SSE2__)
         const __m128 lox = _mm_set1_ps(box.lo.x), loy = _mm_set1_ps(box.lo.y), loz = _mm_set1_ps(box.lo.z);
         const __m128 hix = _mm_set1_ps(box.hi.x), hiy = _mm_set1_ps(box.hi.y), hiz = _mm_set1_ps(box.hi.z);
-        const __m128 ix = _mm_set1_ps(inv.x), iy = _mm_set1_ps(inv.y), iz = _mm_set1_ps(inv.z);
         const __m128 vx0 = _mm_set1_ps(rx0), vx1 = _mm_set1_ps(rx1), vy0 = _mm_set1_ps(ry0),
                      vy1 = _mm_set1_ps(ry1);
         const __m128 vself = _mm_set1_ps(ignoreT);
@@ -1085,6 +1150,8 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
                 const __m128 x = _mm_loadu_ps(&pb.px[i]), y = _mm_loadu_ps(&pb.py[i]);
                 const __m128 ox = _mm_loadu_ps(&pb.ox[i]), oy = _mm_loadu_ps(&pb.oy[i]),
                              oz = _mm_loadu_ps(&pb.oz[i]);
+                const __m128 ix = _mm_loadu_ps(&pb.ix[i]), iy = _mm_loadu_ps(&pb.iy[i]),
+                             iz = _mm_loadu_ps(&pb.iz[i]);
                 const __m128 ax = _mm_mul_ps(_mm_sub_ps(lox, ox), ix),
                              bx = _mm_mul_ps(_mm_sub_ps(hix, ox), ix);
                 const __m128 ay = _mm_mul_ps(_mm_sub_ps(loy, oy), iy),
@@ -1117,7 +1184,8 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             for (size_t i = b; i < e; ++i) {
                 if (!(pb.px[i] >= rx0 && pb.px[i] <= rx1 && pb.py[i] >= ry0 && pb.py[i] <= ry1)) continue;
                 float te, tx;
-                if (!rayBoxInterval(box, {pb.ox[i], pb.oy[i], pb.oz[i]}, inv, pb.tmin[i], pb.tmax[i], te, tx))
+                if (!rayBoxInterval(box, {pb.ox[i], pb.oy[i], pb.oz[i]}, {pb.ix[i], pb.iy[i], pb.iz[i]},
+                                    pb.tmin[i], pb.tmax[i], te, tx))
                     continue;
                 if (pb.ignore[i] == patch && tx < ignoreT) continue;
                 found[k++] = {pb.ray[i], patch, leaf, te};
@@ -1172,6 +1240,7 @@ void binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         }
         while (nInner > 0) stack[sp++] = inner[--nInner];
     }
+    return true;
 }
 
 // Stage 2: Newton over the candidates and the closest hit per ray (a segmented minimum over each ray's
@@ -1239,9 +1308,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             const __m128 n1x = _mm_set1_ps(pl.n1.x), n1y = _mm_set1_ps(pl.n1.y), n1z = _mm_set1_ps(pl.n1.z),
                          n2x = _mm_set1_ps(pl.n2.x), n2y = _mm_set1_ps(pl.n2.y), n2z = _mm_set1_ps(pl.n2.z),
                          d1 = _mm_set1_ps(pl.d1), d2 = _mm_set1_ps(pl.d2);
-            const __m128 ox = _mm_set1_ps(s.ray.o.x), oy = _mm_set1_ps(s.ray.o.y), oz = _mm_set1_ps(s.ray.o.z),
-                         dx = _mm_set1_ps(s.ray.d.x), dy = _mm_set1_ps(s.ray.d.y), dz = _mm_set1_ps(s.ray.d.z),
-                         idd = _mm_set1_ps(s.invDD);
+            const __m128 ox = _mm_set1_ps(s.ray.o.x), oy = _mm_set1_ps(s.ray.o.y),
+                         oz = _mm_set1_ps(s.ray.o.z), dx = _mm_set1_ps(s.ray.d.x),
+                         dy = _mm_set1_ps(s.ray.d.y), dz = _mm_set1_ps(s.ray.d.z), idd = _mm_set1_ps(s.invDD);
             for (int q = 0; q < 16; q += 4) {
                 const __m128 x = _mm_load_ps(ps.x + q), y = _mm_load_ps(ps.y + q), z = _mm_load_ps(ps.z + q);
                 const __m128 a1 = _mm_add_ps(
@@ -1251,10 +1320,10 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 _mm_store_ps(s.pp.a1 + q, a1);
                 _mm_store_ps(s.pp.a2 + q, a2);
                 // Distance along the ray, (P - o).d / d.d: t of a root without evaluating the patch again.
-                const __m128 a3 = _mm_mul_ps(
-                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(x, ox), dx), _mm_mul_ps(_mm_sub_ps(y, oy), dy)),
-                               _mm_mul_ps(_mm_sub_ps(z, oz), dz)),
-                    idd);
+                const __m128 a3 = _mm_mul_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(x, ox), dx),
+                                                                   _mm_mul_ps(_mm_sub_ps(y, oy), dy)),
+                                                        _mm_mul_ps(_mm_sub_ps(z, oz), dz)),
+                                             idd);
                 _mm_store_ps(s.depth + q, a3);
             }
 #else
@@ -1396,8 +1465,8 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 bernstein3(vc, bv);
                 float t = 0.f;
                 for (int j = 0; j < 4; ++j)
-                    t += bv[j] * (s.depth[4 * j] * bu[0] + s.depth[4 * j + 1] * bu[1] + s.depth[4 * j + 2] * bu[2] +
-                                  s.depth[4 * j + 3] * bu[3]);
+                    t += bv[j] * (s.depth[4 * j] * bu[0] + s.depth[4 * j + 1] * bu[1] +
+                                  s.depth[4 * j + 2] * bu[2] + s.depth[4 * j + 3] * bu[3]);
                 bool ok =
                     t > s.ray.tmin && t < s.ray.tmax && !(c.patch == s.opt.ignorePatch && t < s.opt.ignoreT);
                 bool haveDeriv = false;
@@ -1437,31 +1506,31 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
 }
 
 // How the traversal stage finds a list's candidates: per ray (traverseList), or by binning the camera rays
-// of a tile (binCameraRays), or by binning runs of rays with one direction (binParallelRays; every ray of
-// the list must belong to such a run: shadow rays towards distant lights, light by light).
-enum class Candidates { kPerRay, kCameraBinning, kParallelBinning };
+// of a tile (binCameraRays), or by binning the shadow rays light by light (binParallelRays, runs given by
+// Workspace::shadowRuns; per ray after all when a point light's rays surround it).
+enum class Candidates { kPerRay, kCameraBinning, kShadowBinning };
 
 void traceList(const RtAccel& acc, const RayList& rays, Workspace& ws, std::vector<RayHit>& hits, bool cull,
                Candidates how = Candidates::kPerRay) {
     auto t0 = Clock::now();
     if (how == Candidates::kCameraBinning) {
         binCameraRays(acc, rays, ws.bin, ws.chunks, cull);
-    } else if (how == Candidates::kParallelBinning) {
-        ws.bin.found.clear();
-        uint64_t boxTests = 0;
-        for (size_t r0 = 0, r1; r0 < rays.size(); r0 = r1) {
-            for (r1 = r0 + 1; r1 < rays.size() && rays.d[r1] == rays.d[r0]; ++r1) {
-            }
-            binParallelRays(acc, rays, r0, r1, ws.parallel, ws.bin.found, boxTests);
-        }
-        // Shadow rays stop at any accepted hit: their candidates need no order (they come out near first
-        // along the light anyway); other rays need them nearest first.
-        const bool anyHitOnly =
-            std::all_of(rays.kind.begin(), rays.kind.end(), [](uint8_t k) { return k == kShadow; });
-        groupCandidates(ws.bin.found, rays.size(), ws.bin.start, ws.bin.next, ws.chunks, boxTests,
-                        /*sortByEntry=*/!anyHitOnly);
     } else {
-        traverseList(acc, rays, ws.chunks, cull);
+        bool binned = false;
+        if (how == Candidates::kShadowBinning) {
+            ws.bin.found.clear();
+            uint64_t boxTests = 0;
+            binned = true;
+            for (const ShadowRun& run : ws.shadowRuns)
+                binned = binned && binParallelRays(acc, rays, run.begin, run.end, ws.parallel, ws.bin.found,
+                                                   boxTests, run.point ? &run.position : nullptr);
+            // Shadow rays stop at any accepted hit: their candidates need no order.
+            if (binned)
+                groupCandidates(ws.bin.found, rays.size(), ws.bin.start, ws.bin.next, ws.chunks, boxTests,
+                                /*sortByEntry=*/false);
+            ++(binned ? ws.c.shadowListsBinned : ws.c.shadowListsTraversed);
+        }
+        if (!binned) traverseList(acc, rays, ws.chunks, cull);
     }
     auto t1 = Clock::now();
     newtonList(acc, rays, ws.chunks, hits, cull);
@@ -1509,11 +1578,12 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
         hi.N = hitNormal(acc, rh.patch, rh.h);
         hi.I = normalize(rays.d[r]);
     }
-    // Shadow rays light by light, so that those towards one distant light (one direction) are contiguous.
-    bool allDistant = true;
+    // Shadow rays light by light (runs for the binning stage).
+    ws.shadowRuns.clear();
     for (size_t l = 0; l < nL; ++l) {
         const ShadingLight& light = fr.lights[l];
         if (light.type == LightType::Ambient) continue;
+        const size_t runBegin = ws.shadow.size();
         for (size_t r = 0; r < n; ++r) {
             const RayHit& rh = ws.hits[r];
             if (!rh.hit) continue;
@@ -1526,16 +1596,28 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
             float dist;
             if (!lightIncidence(light, hi.P, L, Cl, dist)) continue;
             if (dot(Nf, L) <= 0.f) continue;
-            const float tmax = std::isfinite(dist) ? dist - acc.offset : dist;
+            const Vec3 o = hi.P + Nf * acc.offset;
+            float tmax = dist;
+            if (light.type != LightType::Distant) {
+                // Aimed from the offset origin, so that the ray's line passes through the light (the
+                // shadow binning projects from the light).
+                const Vec3 toLight = light.position - o;
+                const float len = length(toLight);
+                if (len > 0.f && std::isfinite(len)) L = toLight / len, tmax = len;
+                if (!(dot(Nf, L) > 0.f)) continue;
+            }
+            if (std::isfinite(tmax)) tmax -= acc.offset;
             ws.shadowIdx[r * nL + l] = uint32_t(ws.shadow.size());
-            ws.shadow.push(hi.P + Nf * acc.offset, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0,
-                           Vec2{rh.h.u, rh.h.v}, Nf);
-            allDistant = allDistant && light.type == LightType::Distant;
+            ws.shadow.push(o, L, 0.f, tmax, uint32_t(r), Color{}, rh.patch, kShadow, 0, Vec2{rh.h.u, rh.h.v},
+                           Nf);
         }
+        if (ws.shadow.size() > runBegin)
+            ws.shadowRuns.push_back(
+                {runBegin, ws.shadow.size(), light.type != LightType::Distant, light.position});
     }
     ws.c.shadeMs += msSince(ts);
     traceList(acc, ws.shadow, ws, ws.shadowHits, fr.cull,
-              allDistant && fr.rayBinning ? Candidates::kParallelBinning : Candidates::kPerRay);
+              fr.rayBinning ? Candidates::kShadowBinning : Candidates::kPerRay);
 
     ts = Clock::now();
     ws.contrib.assign(n, Color{});
@@ -1952,6 +2034,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["box_tests"] = total.boxTests;
     s["newton_runs"] = total.newtonRuns;
     s["hull_culled"] = total.hullCulled;
+    s["shadow_lists"] = {{"binned", total.shadowListsBinned}, {"traversed", total.shadowListsTraversed}};
     s["newton_iterations"] = {
         {"total", total.newtonIterations},
         {"mean", total.newtonRuns ? double(total.newtonIterations) / double(total.newtonRuns) : 0.0},
