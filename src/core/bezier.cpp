@@ -1,5 +1,7 @@
 #include "core/bezier.h"
 
+#include <cstring>
+
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -10,8 +12,9 @@ namespace tessera {
 namespace {
 // A control point in lanes 0..2 (lane 3 zero), without reading past the Vec3.
 inline __m128 loadVec3(const Vec3& p) {
-    const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&p.x)));
-    return _mm_movelh_ps(xy, _mm_load_ss(&p.z));
+    double xy;  // x and y as one 8-byte load (memcpy: Vec3 is only 4-byte aligned)
+    std::memcpy(&xy, &p.x, sizeof(xy));
+    return _mm_movelh_ps(_mm_castpd_ps(_mm_set_sd(xy)), _mm_load_ss(&p.z));
 }
 inline Vec3 storeVec3(__m128 v) {  // lanes extracted in registers (no store and reload)
     return {_mm_cvtss_f32(v), _mm_cvtss_f32(_mm_shuffle_ps(v, v, 0x55)), _mm_cvtss_f32(_mm_movehl_ps(v, v))};

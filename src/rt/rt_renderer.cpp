@@ -1120,6 +1120,10 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             m += 1e-6f * reach / h;
         }
         rx0 -= m, rx1 += m, ry0 -= m, ry1 += m;
+        if (!(std::isfinite(rx0) && std::isfinite(rx1) && std::isfinite(ry0) && std::isfinite(ry1))) {
+            rx0 = x0, rx1 = x1, ry0 = y0, ry1 = y1;  // (nearly) on the light's plane: any ray may hit it
+            return true;
+        }
         return rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0;
     };
     // Near side of a box along the direction (visit order, so that candidates come out nearly sorted).
