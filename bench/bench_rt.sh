@@ -58,6 +58,8 @@ print(f"{name:14s} patches {s['patches_in']:5d} build {s['build_ms']:7.2f} ms  t
       f"rays {s['rays_total']:8d} ({s['mrays_per_s']:.2f} Mrays/s)  cand/ray {s['candidates_per_ray']:.2f}  "
       f"newton it {s['newton_iterations']['mean']:.2f}  cpu ms trav {st['traversal_cpu']:.0f} newton {st['newton_cpu']:.0f} "
       f"shade {st['shading_cpu']:.0f}  mem/patch {s['memory']['bytes_per_patch']:.0f} B")
+print("               by kind (rays of the kind / trace time): " +
+      ", ".join(f"{k} {v:.2f}" for k, v in mr.items() if r[k] > 0) + " Mrays/s")
 out = {"name": name, "trace_ms": ms, "build_ms": s["build_ms"], "rays": r, "mrays_per_s_by_kind": mr,
        "mrays_per_s": s["mrays_per_s"], "stage_ms": st, "candidates_per_ray": s["candidates_per_ray"],
        "newton_mean": s["newton_iterations"]["mean"], "patches": s["patches_in"], "memory": s["memory"]}

@@ -733,6 +733,8 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
                     what, (unsigned long long)binned.stats["candidates"].get<uint64_t>(),
                     (unsigned long long)traversed.stats["candidates"].get<uint64_t>(), differing,
                     100 * d.alphaMismatch, d.psnrColor);
+        EXPECT_TRUE(binned.stats["ray_binning"].get<bool>()) << what;  // the scene is small enough to bin
+        EXPECT_FALSE(traversed.stats["ray_binning"].get<bool>()) << what;
         EXPECT_EQ(binned.stats["candidates"], traversed.stats["candidates"]) << what;
         EXPECT_EQ(d.alphaMismatch, 0.0) << what;
         // Ties in box entry distance may order two starts differently (roots move by rounding), and a rare

@@ -1,13 +1,13 @@
 // tessera: the command-line driver. `tessera render SCENE` and `tessera info SCENE`.
-#include <CLI/CLI.hpp>
 #include <fmt/core.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
-#include <csignal>
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -28,7 +28,9 @@ constexpr int kMaxResolution = kMaxImageSize;  // per axis; documented in docs/e
 constexpr int kMaxSpp = kMaxPixelSamples;
 std::atomic<bool> gCancel{false};
 
-extern "C" void onSigint(int) { gCancel.store(true); }
+extern "C" void onSigint(int) {
+    gCancel.store(true);
+}
 
 double peakRssMb() {
     rusage ru{};
@@ -46,12 +48,13 @@ struct RenderArgs {
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
-    bool quiet = false, cullBackfaces = false;
+    bool quiet = false, cullBackfaces = false, noRayBinning = false;
 };
 
 Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatName = "auto") {
     std::optional<SceneFormat> format = parseSceneFormat(formatName);
-    if (!format) fail(fmt::format("error: unknown --format '{}' (auto, rib, bpt, obj, micropolis)", formatName));
+    if (!format)
+        fail(fmt::format("error: unknown --format '{}' (auto, rib, bpt, obj, micropolis)", formatName));
     try {
         return loadScene(
             path,
@@ -77,7 +80,7 @@ std::string defaultOutput(const Scene& scene, const std::string& scenePath) {
 }
 
 class ProgressBar {
-public:
+  public:
     explicit ProgressBar(bool enabled) : enabled_(enabled), start_(std::chrono::steady_clock::now()) {}
     void update(int done, int total) {
         if (!enabled_) return;
@@ -96,7 +99,7 @@ public:
         if (done == total) fmt::print(stderr, "\n");
     }
 
-private:
+  private:
     bool enabled_;
     std::chrono::steady_clock::time_point start_;
     std::mutex mutex_;
@@ -148,6 +151,7 @@ int runRender(const RenderArgs& a) {
     settings.subpatchDepth = a.subpatchDepth;
     settings.maxDepth = a.maxDepth;
     settings.cullBackfaces = a.cullBackfaces;
+    settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
     ProgressBar bar(!a.quiet && isatty(STDERR_FILENO));
     settings.progress = [&bar](int done, int total) { bar.update(done, total); };
@@ -160,7 +164,8 @@ int runRender(const RenderArgs& a) {
     } catch (const std::invalid_argument& e) {
         fail(std::string("error: ") + e.what());
     }
-    double renderMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    double renderMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     if (result.cancelled) {
         fmt::print(stderr, "\ninterrupted after {:.0f} ms: no image written\n", renderMs);
         return 130;
@@ -186,18 +191,20 @@ int runRender(const RenderArgs& a) {
     }
     if (!a.quiet) {
         fmt::print(stderr, "{}: {}x{} {} spp, {} engine, {} threads: {:.1f} ms, peak {:.1f} MB\n", output,
-                   scene.camera.width, scene.camera.height, s.value("spp", 0), a.engine, s.value("threads", 0),
-                   renderMs, s["peak_rss_mb"].get<double>());
+                   scene.camera.width, scene.camera.height, s.value("spp", 0), a.engine,
+                   s.value("threads", 0), renderMs, s["peak_rss_mb"].get<double>());
         if (a.engine == "reyes")
-            fmt::print(stderr, "  patches {} (culled {}), splits {}, grids {}, micropolygons {}, sample tests {}\n",
-                       s.value("patches_in", 0), s.value("patches_culled", 0), s.value("splits", 0),
-                       s.value("grids", 0), s.value("micropolygons", 0), s.value("sample_tests", uint64_t(0)));
+            fmt::print(
+                stderr, "  patches {} (culled {}), splits {}, grids {}, micropolygons {}, sample tests {}\n",
+                s.value("patches_in", 0), s.value("patches_culled", 0), s.value("splits", 0),
+                s.value("grids", 0), s.value("micropolygons", 0), s.value("sample_tests", uint64_t(0)));
     }
     return 0;
 }
 
 int runConvert(const std::string& in, const std::string& out, const std::string& format) {
-    if (fs::path(out).extension() != ".rib") fail(fmt::format("{}: error: convert writes RIB: name it .rib", out));
+    if (fs::path(out).extension() != ".rib")
+        fail(fmt::format("{}: error: convert writes RIB: name it .rib", out));
     Scene scene = loadOrFail(in, false, format);
     try {
         writeRib(scene, out);
@@ -217,14 +224,15 @@ int runInfo(const std::string& path, const std::string& format) {
     fmt::print("patches:  {}\n", scene.patches.size());
     fmt::print("objects:  {}\n", scene.objectCount);
     fmt::print("lights:   {}\n", scene.lights.size());
-    fmt::print("bounds:   ({:.6g}, {:.6g}, {:.6g}) - ({:.6g}, {:.6g}, {:.6g})\n", b.lo.x, b.lo.y, b.lo.z, b.hi.x,
-               b.hi.y, b.hi.z);
+    fmt::print("bounds:   ({:.6g}, {:.6g}, {:.6g}) - ({:.6g}, {:.6g}, {:.6g})\n", b.lo.x, b.lo.y, b.lo.z,
+               b.hi.x, b.hi.y, b.hi.z);
     Mat4 worldFromCamera = c.cameraFromWorld.inverse();
     Vec3 eye = worldFromCamera.point({0, 0, 0});
     Vec3 dir = normalize(worldFromCamera.vector({0, 0, 1}));
-    fmt::print("camera:   {}x{}, {} fov {:.4g}, eye ({:.6g}, {:.6g}, {:.6g}), looking ({:.4g}, {:.4g}, {:.4g})\n",
-               c.width, c.height, c.perspective ? "perspective" : "orthographic", c.fovDegrees, eye.x, eye.y,
-               eye.z, dir.x, dir.y, dir.z);
+    fmt::print(
+        "camera:   {}x{}, {} fov {:.4g}, eye ({:.6g}, {:.6g}, {:.6g}), looking ({:.4g}, {:.4g}, {:.4g})\n",
+        c.width, c.height, c.perspective ? "perspective" : "orthographic", c.fovDegrees, eye.x, eye.y, eye.z,
+        dir.x, dir.y, dir.z);
     fmt::print("clipping: {:.6g} .. {:.6g}\n", c.nearClip, c.farClip);
     fmt::print("samples:  {}x{} per pixel\n", scene.image.pixelSamplesX, scene.image.pixelSamplesY);
     return 0;
@@ -242,17 +250,25 @@ int main(int argc, char** argv) {
     render->add_option("--format", ra.format, "Input format: auto, rib, bpt, obj, micropolis");
     render->add_option("--engine", ra.engine, "reyes or rt")->check(CLI::IsMember({"reyes", "rt"}));
     render->add_option("--res", ra.res, "Resolution WIDTHxHEIGHT (overrides Format)");
-    render->add_option("--spp", ra.spp, "Samples per pixel (overrides PixelSamples)")->check(CLI::Range(1, kMaxSpp));
-    render->add_option("--shading-rate", ra.shadingRate, "Micropolygon area in pixels (overrides ShadingRate)")
+    render->add_option("--spp", ra.spp, "Samples per pixel (overrides PixelSamples)")
+        ->check(CLI::Range(1, kMaxSpp));
+    render
+        ->add_option("--shading-rate", ra.shadingRate, "Micropolygon area in pixels (overrides ShadingRate)")
         ->check(CLI::PositiveNumber);
-    render->add_option("--threads", ra.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    render->add_option("--threads", ra.threads, "Worker threads (0 = all cores)")
+        ->check(CLI::NonNegativeNumber);
     render->add_option("--stats", ra.stats, "Write statistics as JSON to this file");
     render->add_option("--seed", ra.seed, "Sample pattern seed");
     render->add_option("--bucket-size", ra.bucketSize, "Bucket side in pixels")->check(CLI::Range(4, 1024));
-    render->add_option("--max-grid", ra.maxGridEdge, "Reyes: micropolygons per grid edge")->check(CLI::Range(1, 256));
-    render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")->check(CLI::Range(0, 12));
+    render->add_option("--max-grid", ra.maxGridEdge, "Reyes: micropolygons per grid edge")
+        ->check(CLI::Range(1, 256));
+    render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
+        ->check(CLI::Range(0, 12));
     render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(CLI::Range(0, 64));
-    render->add_flag("--cull-backfaces", ra.cullBackfaces, "rt: cull back-facing subpatches for primary rays");
+    render->add_flag("--cull-backfaces", ra.cullBackfaces,
+                     "rt: cull back-facing subpatches for primary rays");
+    render->add_flag("--no-ray-binning", ra.noRayBinning,
+                     "rt: per-ray traversal for camera and shadow rays (no binning; same image)");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");
     std::string infoPath, infoFormat = "auto";
     CLI::App* info = app.add_subcommand("info", "Print patch count, objects, bounds and camera of a scene");

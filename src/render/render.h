@@ -21,8 +21,9 @@ struct RenderSettings {
     int subpatchDepth = 6;
     int maxDepth = 4;
     bool cullBackfaces = false;
-    // Camera rays, and shadow rays towards distant lights, find their candidates by binning the boxes in
-    // a projection plane instead of one traversal per ray (same candidates; off: for tests).
+    // Camera and shadow rays may find their candidates by binning the boxes in a projection plane instead
+    // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves
+    // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
     // Progress: called with (buckets done, total) from worker threads; must be thread-safe.
     std::function<void(int, int)> progress;

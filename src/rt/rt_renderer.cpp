@@ -118,6 +118,8 @@ struct CameraBinning {
 
 struct ParallelBinning {
     std::vector<uint32_t> cellStart, cellOf;  // grid: rays of cell c are sorted[cellStart[c], cellStart[c+1])
+    std::vector<uint32_t> sat;                // summed-area table of rays per cell, (g+1) x (g+1)
+    std::vector<std::vector<float>> minStart;  // per level of a min pyramid over the cells: earliest start
     // Per sorted ray (padded by 4): its index and its point, origin, interval, originating patch.
     std::vector<uint32_t> ray, ignore;
     std::vector<float> px, py, ox, oy, oz, ix, iy, iz, tmin, tmax;  // point, origin, 1/direction, interval
@@ -1046,7 +1048,7 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
     }
     if (!(std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))) return false;
-    const int g = std::clamp(int(std::sqrt(double(n) / 4.0)), 1, 256);
+    const int g = std::clamp(int(2.0 * std::sqrt(double(n))), 1, 1024);
     const float cw = std::max((x1 - x0) / float(g), 1e-30f), ch = std::max((y1 - y0) / float(g), 1e-30f);
     auto cellX = [&](float x) { return int(std::clamp((x - x0) / cw, 0.f, float(g - 1))); };
     auto cellY = [&](float y) { return int(std::clamp((y - y0) / ch, 0.f, float(g - 1))); };
@@ -1059,6 +1061,14 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         pb.cellOf[r - r0] = c;
         ++pb.cellStart[c + 1];
     }
+    // Summed-area table of the rays per cell: a box whose rectangle covers no ray is culled at once
+    // (a tile's points often form separate clusters in the light's view).
+    pb.sat.assign(size_t(g + 1) * (g + 1), 0);
+    for (int cy = 0; cy < g; ++cy)
+        for (int cx = 0; cx < g; ++cx)
+            pb.sat[size_t(cy + 1) * (g + 1) + cx + 1] =
+                pb.cellStart[size_t(cy) * g + cx + 1] + pb.sat[size_t(cy) * (g + 1) + cx + 1] +
+                pb.sat[size_t(cy + 1) * (g + 1) + cx] - pb.sat[size_t(cy) * (g + 1) + cx];
     for (size_t c = 0; c < size_t(g) * g; ++c) pb.cellStart[c + 1] += pb.cellStart[c];
     for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.ix, &pb.iy, &pb.iz, &pb.tmin, &pb.tmax})
         v->assign(n + 4, 0.f);
@@ -1078,6 +1088,38 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             pb.tmin[s] = rays.tmin[r], pb.tmax[s] = rays.tmax[r];
         }
     }
+    // Where each ray starts along its way (increasing towards the light): a box entirely before the
+    // starts of all the rays in its rectangle cannot be hit. Per cell the smallest start, and a min
+    // pyramid over the cells (2x2 blocks per level) for rectangles of any size.
+    auto startOf = [&](Vec3 p) { return light ? -dot(w, p - C) : dot(w, p); };
+    pb.minStart.assign(1, std::vector<float>(size_t(g) * g, INFINITY));
+    for (size_t s = 0; s < n; ++s) {
+        const uint32_t c = uint32_t(cellY(pb.py[s]) * g + cellX(pb.px[s]));
+        float& m = pb.minStart[0][c];
+        m = std::min(m, startOf(Vec3{pb.ox[s], pb.oy[s], pb.oz[s]}));
+    }
+    for (int gk = g; gk > 1;) {
+        const int gn = (gk + 1) / 2;
+        const std::vector<float>& lower = pb.minStart.back();
+        std::vector<float> upper(size_t(gn) * gn, INFINITY);
+        for (int y = 0; y < gk; ++y)
+            for (int x = 0; x < gk; ++x) {
+                float& m = upper[size_t(y / 2) * gn + x / 2];
+                m = std::min(m, lower[size_t(y) * gk + x]);
+            }
+        pb.minStart.push_back(std::move(upper));
+        gk = gn;
+    }
+    auto minStartIn = [&](int cx0, int cx1, int cy0, int cy1) {
+        int k = 0;
+        while ((cx1 >> k) - (cx0 >> k) > 1 || (cy1 >> k) - (cy0 >> k) > 1) ++k;
+        const std::vector<float>& lv = pb.minStart[size_t(k)];
+        const int gk = (g + (1 << k) - 1) >> k;
+        float m = INFINITY;
+        for (int y = cy0 >> k; y <= (cy1 >> k); ++y)
+            for (int x = cx0 >> k; x <= (cx1 >> k); ++x) m = std::min(m, lv[size_t(y) * gk + x]);
+        return m;
+    };
     const Vec3 d = light ? -w : rays.d[r0];  // visit order: nearer boxes along the rays first
     // Point light: the magnitude of the coordinates involved (the light, the origins), for the margins.
     float reach = maxComponent(Vec3{std::fabs(C.x), std::fabs(C.y), std::fabs(C.z)});
@@ -1124,7 +1166,22 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             rx0 = x0, rx1 = x1, ry0 = y0, ry1 = y1;  // (nearly) on the light's plane: any ray may hit it
             return true;
         }
-        return rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0;
+        if (!(rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0)) return false;
+        const int cx0 = cellX(rx0), cx1 = cellX(rx1), cy0 = cellY(ry0), cy1 = cellY(ry1);
+        const size_t G = size_t(g) + 1;
+        if (pb.sat[size_t(cy1 + 1) * G + cx1 + 1] - pb.sat[size_t(cy0) * G + cx1 + 1] -
+                pb.sat[size_t(cy1 + 1) * G + cx0] + pb.sat[size_t(cy0) * G + cx0] ==
+            0)
+            return false;  // no ray in the rectangle
+        // Box entirely before every start in the rectangle (margin for rounding).
+        float reachOfBox = -INFINITY, mag = 0.f;
+        for (int c = 0; c < 8; ++c) {
+            const float v =
+                startOf(Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z});
+            reachOfBox = std::max(reachOfBox, v), mag = std::max(mag, std::fabs(v));
+        }
+        const float first = minStartIn(cx0, cx1, cy0, cy1);
+        return !(reachOfBox < first - (1e-5f * (mag + std::fabs(first)) + 1e-30f));
     };
     // Near side of a box along the direction (visit order, so that candidates come out nearly sorted).
     auto nearDepth = [&](const Bounds3& b) {
@@ -1870,7 +1927,15 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     RtAccel acc;
     buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc);
     const double buildMs = msSince(tBuild);
-    Frame fr{scene, acc, {}, std::max(0, settings.maxDepth), settings.cullBackfaces, settings.rayBinning};
+    // Binning (camera and shadow rays) pays when the subpatch leaves are few compared with the samples, i.e.
+    // boxes cover several samples each: the per-tile descent then replaces many per-ray box tests. With
+    // many small leaves the descent costs more than the traversal it replaces. Measured crossover (800x600,
+    // 4 spp, docs/rt.md): about 0.4 leaves per sample (teapot 0.001 and bigguy 0.19: binning faster;
+    // killeroo 0.38: equal; killeroo2 0.77, bigguy9 1.07, bigguy24 2.85: the traversal faster).
+    const double leavesPerSample = double(acc.patches.size()) * double(acc.forest.firstLeaf() + 1) /
+                                   std::max(1.0, double(W) * double(H) * double(nx * ny));
+    const bool binning = settings.rayBinning && leavesPerSample <= 0.4;
+    Frame fr{scene, acc, {}, std::max(0, settings.maxDepth), settings.cullBackfaces, binning};
     for (const Light& l : scene.lights) fr.lights.push_back(prepareLight(l, cam.cameraFromWorld));
     const Projector proj(cam);
 
@@ -1974,7 +2039,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         ws.c.shadeMs += msSince(ts);
         for (bool camera = true; ws.rays.size() > 0; camera = false) {
             traceList(acc, ws.rays, ws, ws.hits, fr.cull,
-                      camera && settings.rayBinning ? Candidates::kCameraBinning : Candidates::kPerRay);
+                      camera && binning ? Candidates::kCameraBinning : Candidates::kPerRay);
             shadeGeneration(fr, ws);
             std::swap(ws.rays, ws.next);
         }
@@ -2060,6 +2125,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["tile_size"] = bs;
     s["tiles"] = nb;
     s["cull_backfaces"] = settings.cullBackfaces;
+    s["ray_binning"] = binning;
+    s["leaves_per_sample"] = leavesPerSample;
     s["max_depth"] = fr.maxDepth;
     s["stage_ms"] = {{"traversal_cpu", total.traversalMs},
                      {"newton_cpu", total.newtonMs},
