@@ -1048,7 +1048,7 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
     }
     if (!(std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))) return false;
-    const int g = std::clamp(int(2.0 * std::sqrt(double(n))), 1, 1024);
+    const int g = std::clamp(int(std::sqrt(double(n) / 4.0)), 1, 1024);
     const float cw = std::max((x1 - x0) / float(g), 1e-30f), ch = std::max((y1 - y0) / float(g), 1e-30f);
     auto cellX = [&](float x) { return int(std::clamp((x - x0) / cw, 0.f, float(g - 1))); };
     auto cellY = [&](float y) { return int(std::clamp((y - y0) / ch, 0.f, float(g - 1))); };
