@@ -1481,9 +1481,18 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 // away from it: exact, by the convex hull of the leaf's Bernstein coefficients; this
                 // removes the starts that would converge back to the origin on convex and flat parts), or
                 // whose ray-frame hull stays off the ray, cannot hold a root.
-                if (c.patch == s.opt.ignorePatch &&
-                    ((s.selfPlane && leafMaxCoefficient(s.selfHeight, leafBasis[c.leaf]) < -4.f * s.eps) ||
-                     !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps))) {
+                // The plane test is repeated on the leaf's quarters (their control nets bulge 4x less) when
+                // the whole leaf's net reaches above the plane.
+                auto belowPlane = [&](uint32_t leaf) {
+                    const float lim = -4.f * s.eps;
+                    if (leafMaxCoefficient(s.selfHeight, leafBasis[leaf]) < lim) return true;
+                    for (int q = 0; q < 4; ++q)
+                        if (!(leafMaxCoefficient(s.selfHeight, quarterBasis[4 * leaf + q]) < lim))
+                            return false;
+                    return true;
+                };
+                if (c.patch == s.opt.ignorePatch && ((s.selfPlane && belowPlane(c.leaf)) ||
+                                                     !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps))) {
                     ++culled;
                     ++s.cur;
                     continue;
