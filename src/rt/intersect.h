@@ -397,8 +397,8 @@ inline bool newtonIterate(const ProjectedPatch<T>& pp, T eps, T& u, T& v, int& i
 // point still lies on the ray (|R| < 2 eps: a root at a collapsed edge, where u is free, or within rounding
 // of a shared edge). Returns the clamped parameters.
 template <class T>
-inline bool acceptRootDomain(const ProjectedPatch<T>& pp, T eps, T u, T v, float domainTol, float& uc,
-                             float& vc) {
+__attribute__((always_inline)) inline bool acceptRootDomain(const ProjectedPatch<T>& pp, T eps, T u, T v,
+                                                            float domainTol, float& uc, float& vc) {
     const T tol = T(domainTol);
     uc = std::clamp(float(u), 0.f, 1.f);
     vc = std::clamp(float(v), 0.f, 1.f);

@@ -58,6 +58,10 @@ struct RayList {
         o.resize(n), d.resize(n), tmin.resize(n), tmax.resize(n), owner.resize(n), weight.resize(n);
         ignore.resize(n), ignoreUV.resize(n), originN.resize(n), kind.resize(n), depth.resize(n);
     }
+    void reserve(size_t n) {
+        o.reserve(n), d.reserve(n), tmin.reserve(n), tmax.reserve(n), owner.reserve(n), weight.reserve(n);
+        ignore.reserve(n), ignoreUV.reserve(n), originN.reserve(n), kind.reserve(n), depth.reserve(n);
+    }
     void clear() {
         o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
         ignoreUV.clear(), originN.clear(), kind.clear(), depth.clear();
@@ -1317,7 +1321,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 std::vector<RayHit>& hits, bool cull) {
     const size_t n = rays.size();
     const size_t nChunks = (n + kChunk - 1) / kChunk;
-    hits.assign(n, RayHit());
+    // Only the flag: the rest of a RayHit is written when the ray gets one, and read only then.
+    hits.resize(n);
+    for (RayHit& h : hits) h.hit = false;
     float hu, hv;
     leafHalfSize(acc.forest.depth, hu, hv);
     // A root within this margin of a leaf counts as inside it (Newton from the leaf centre finds it).
@@ -1650,6 +1656,7 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
     }
     // Shadow rays light by light (runs for the binning stage).
     ws.shadowRuns.clear();
+    ws.shadow.reserve(n * std::max<size_t>(nL, 1));
     for (size_t l = 0; l < nL; ++l) {
         const ShadingLight& light = fr.lights[l];
         if (light.type == LightType::Ambient) continue;
