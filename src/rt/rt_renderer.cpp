@@ -848,6 +848,112 @@ constexpr std::array<std::array<uint8_t, 4>, 16> makeCompressLanes() {
 constexpr std::array<std::array<uint8_t, 4>, 16> kCompressLanes = makeCompressLanes();
 constexpr uint8_t kPopCount[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};  // no popcnt in x86-64 v1
 
+// Shared by the two binning stages.
+// A box's projected rectangle (clipped), as the binning stages pass it down.
+struct Rect2 {
+    float x0, x1, y0, y1;
+};
+
+// Visits the leaf boxes of every patch top down, through the 4-wide BVH and then each subpatch tree,
+// children in increasing `nearKey(box)` (so each ray's candidates come out nearly sorted), dropping every
+// box that `overlaps(box, rect)` rejects (it also yields the box's clipped rectangle) and every subpatch
+// node that `skip(patch, node)` rejects; `leaf(patch, node, box, rect)` gets the rest.
+template <class NearKey, class Overlaps, class Skip, class Leaf>
+void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, Skip&& skip, Leaf&& leaf) {
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    auto visitPatch = [&](uint32_t patch) {
+        const Bounds3* tree = forest.tree(patch);
+        uint32_t stack[64];
+        int sp = 0;
+        stack[sp++] = 0;
+        while (sp > 0) {
+            const uint32_t n = stack[--sp];
+            if (skip(patch, n)) continue;
+            Rect2 rect;
+            if (!overlaps(tree[n], rect)) continue;
+            if (n >= firstLeaf) {
+                leaf(patch, n, tree[n], rect);
+                continue;
+            }
+            const bool lowFirst = nearKey(tree[2 * n + 1]) <= nearKey(tree[2 * n + 2]);
+            stack[sp++] = lowFirst ? 2 * n + 2 : 2 * n + 1;
+            stack[sp++] = lowFirst ? 2 * n + 1 : 2 * n + 2;
+        }
+    };
+    uint32_t stack[kBvh4Stack];
+    int sp = 0;
+    if (!acc.bvh.wide.empty()) stack[sp++] = 0;
+    while (sp > 0) {
+        const Bvh4Node& nd = acc.bvh.wide[stack[--sp]];
+        Bounds3 box[4];
+        float key[4];
+        uint32_t order[4] = {0, 1, 2, 3};
+        for (uint32_t c = 0; c < nd.count; ++c) {
+            box[c].lo = {nd.lo[0][c], nd.lo[1][c], nd.lo[2][c]};
+            box[c].hi = {nd.hi[0][c], nd.hi[1][c], nd.hi[2][c]};
+            key[c] = nearKey(box[c]);
+        }
+        for (uint32_t i = 1; i < nd.count; ++i)
+            for (uint32_t j = i; j > 0 && key[order[j]] < key[order[j - 1]]; --j)
+                std::swap(order[j], order[j - 1]);
+        // Patches are visited in this order; inner nodes are pushed far first.
+        uint32_t inner[4], nInner = 0;
+        for (uint32_t k = 0; k < nd.count; ++k) {
+            const uint32_t c = order[k];
+            Rect2 rect;
+            if (!overlaps(box[c], rect)) continue;
+            if (nd.child[c] & kBvh4Patch)
+                visitPatch(nd.child[c] & ~kBvh4Patch);
+            else
+                inner[nInner++] = nd.child[c];
+        }
+        while (nInner > 0) stack[sp++] = inner[--nInner];
+    }
+}
+
+#if defined(__SSE2__)
+// One leaf box against four rays (origin, reciprocal direction and interval per lane), lane for lane
+// the arithmetic of rayBoxInterval, with the rays' projected points inside the box's rectangle: the
+// lanes that hit (bit mask) and their entry distances.
+struct LeafBox4 {
+    __m128 lox, loy, loz, hix, hiy, hiz, x0, x1, y0, y1;
+    LeafBox4(const Bounds3& b, const Rect2& r)
+        : lox(_mm_set1_ps(b.lo.x)),
+          loy(_mm_set1_ps(b.lo.y)),
+          loz(_mm_set1_ps(b.lo.z)),
+          hix(_mm_set1_ps(b.hi.x)),
+          hiy(_mm_set1_ps(b.hi.y)),
+          hiz(_mm_set1_ps(b.hi.z)),
+          x0(_mm_set1_ps(r.x0)),
+          x1(_mm_set1_ps(r.x1)),
+          y0(_mm_set1_ps(r.y0)),
+          y1(_mm_set1_ps(r.y1)) {}
+};
+inline __m128 leafBox4Hits(const LeafBox4& b, __m128 px, __m128 py, __m128 ox, __m128 oy, __m128 oz,
+                           __m128 ix, __m128 iy, __m128 iz, __m128 t0, __m128 t1, __m128& te, __m128& tx) {
+    const __m128 ax = _mm_mul_ps(_mm_sub_ps(b.lox, ox), ix), bx = _mm_mul_ps(_mm_sub_ps(b.hix, ox), ix);
+    const __m128 ay = _mm_mul_ps(_mm_sub_ps(b.loy, oy), iy), by = _mm_mul_ps(_mm_sub_ps(b.hiy, oy), iy);
+    const __m128 az = _mm_mul_ps(_mm_sub_ps(b.loz, oz), iz), bz = _mm_mul_ps(_mm_sub_ps(b.hiz, oz), iz);
+    te = _mm_max_ps(_mm_max_ps(_mm_min_ps(ax, bx), _mm_min_ps(ay, by)), _mm_max_ps(_mm_min_ps(az, bz), t0));
+    tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(ax, bx), _mm_max_ps(ay, by)), _mm_min_ps(_mm_max_ps(az, bz), t1));
+    const __m128 inside = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(px, b.x0), _mm_cmple_ps(px, b.x1)),
+                                     _mm_and_ps(_mm_cmpge_ps(py, b.y0), _mm_cmple_ps(py, b.y1)));
+    return _mm_and_ps(_mm_cmple_ps(te, tx), inside);
+}
+// The candidates of the lanes in `mask` to out[0..], compressed (four written, their count returned).
+inline size_t emitLanes(Candidate* out, int mask, __m128 te, const uint32_t* rayOfLane, uint32_t patch,
+                        uint32_t leaf) {
+    alignas(16) float tev[4];
+    _mm_store_ps(tev, te);
+    for (int j = 0; j < 4; ++j) {
+        const int l = kCompressLanes[mask][j];
+        out[j] = {rayOfLane[l], patch, leaf, tev[l]};
+    }
+    return kPopCount[mask];
+}
+#endif
+
 inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
     x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
     for (int c = 0; c < 8; ++c) {
@@ -875,36 +981,33 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, 
     found.clear();
     uint64_t boxTests = 0;
 
-    // Whether the rectangle of box b can hold a sample of the tile; r* receive the rectangle clipped to the
+    // Whether the rectangle of box b can hold a sample of the tile, and the rectangle clipped to the
     // region (the whole region when the box reaches behind the eye).
-    auto overlaps = [&](const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
-        if (!screenRect(proj, b, x0, x1, y0, y1)) {
-            x0 = rx0, x1 = rx1, y0 = ry0, y1 = ry1;
+    auto overlaps = [&](const Bounds3& b, Rect2& rect) {
+        if (!screenRect(proj, b, rect.x0, rect.x1, rect.y0, rect.y1)) {
+            rect = {rx0, rx1, ry0, ry1};
             return true;
         }
-        x0 = std::max(x0, rx0), x1 = std::min(x1, rx1), y0 = std::max(y0, ry0), y1 = std::min(y1, ry1);
-        return x0 <= x1 && y0 <= y1;
+        rect = {std::max(rect.x0, rx0), std::min(rect.x1, rx1), std::max(rect.y0, ry0),
+                std::min(rect.y1, ry1)};
+        return rect.x0 <= rect.x1 && rect.y0 <= rect.y1;
     };
-    // The rays of the samples inside [x0, x1] x [y0, y1] against one leaf box, four samples of a row at a
-    // time (per-sample structure of arrays; lane for lane the arithmetic of rayBoxInterval).
+    // The rays of the samples inside the rectangle against one leaf box, four samples of a row at a time
+    // (per-sample structure of arrays; camera rays start at z = 0).
     const float tmin = proj.nearClip, tmax = proj.farClip;
-    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, float x0, float x1, float y0,
-                        float y1) {
-        const int px0 = std::max(reg.x0, int(std::floor(x0))),
-                  px1 = std::min(reg.x1 - 1, int(std::floor(x1)));
-        const int py0 = std::max(reg.y0, int(std::floor(y0))),
-                  py1 = std::min(reg.y1 - 1, int(std::floor(y1)));
+    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, const Rect2& rect) {
+        const int px0 = std::max(reg.x0, int(std::floor(rect.x0))),
+                  px1 = std::min(reg.x1 - 1, int(std::floor(rect.x1)));
+        const int py0 = std::max(reg.y0, int(std::floor(rect.y0))),
+                  py1 = std::min(reg.y1 - 1, int(std::floor(rect.y1)));
         if (px0 > px1 || py0 > py1) return;
         const uint32_t leaf = node - firstLeaf;
         // Room for every sample of the rectangle's rows plus a full group of 4 (trimmed at the end).
         size_t k = found.size();
         found.resize(k + size_t(px1 - px0 + 1) * size_t(py1 - py0 + 1) * size_t(spp) + 4);
 #if defined(__SSE2__)
-        const __m128 lox = _mm_set1_ps(box.lo.x), loy = _mm_set1_ps(box.lo.y), loz = _mm_set1_ps(box.lo.z);
-        const __m128 hix = _mm_set1_ps(box.hi.x), hiy = _mm_set1_ps(box.hi.y), hiz = _mm_set1_ps(box.hi.z);
-        const __m128 vx0 = _mm_set1_ps(x0), vx1 = _mm_set1_ps(x1), vy0 = _mm_set1_ps(y0),
-                     vy1 = _mm_set1_ps(y1);
-        const __m128 t0 = _mm_set1_ps(tmin), t1 = _mm_set1_ps(tmax);
+        const LeafBox4 b4(box, rect);
+        const __m128 t0 = _mm_set1_ps(tmin), t1 = _mm_set1_ps(tmax), zero = _mm_setzero_ps();
 #endif
         for (int py = py0; py <= py1; ++py) {
             const size_t rowBase = (size_t(py - reg.y0) * tw + size_t(px0 - reg.x0)) * spp;
@@ -912,39 +1015,21 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, 
             boxTests += rowEnd - rowBase;
 #if defined(__SSE2__)
             for (size_t i = rowBase; i < rowEnd; i += 4) {
-                const __m128 x = _mm_loadu_ps(&bin.sampleX[i]), y = _mm_loadu_ps(&bin.sampleY[i]);
-                const __m128 ox = _mm_loadu_ps(&bin.originX[i]), oy = _mm_loadu_ps(&bin.originY[i]);
-                const __m128 ix = _mm_loadu_ps(&bin.invX[i]), iy = _mm_loadu_ps(&bin.invY[i]),
-                             iz = _mm_loadu_ps(&bin.invZ[i]);
-                const __m128 ax = _mm_mul_ps(_mm_sub_ps(lox, ox), ix),
-                             bx = _mm_mul_ps(_mm_sub_ps(hix, ox), ix);
-                const __m128 ay = _mm_mul_ps(_mm_sub_ps(loy, oy), iy),
-                             by = _mm_mul_ps(_mm_sub_ps(hiy, oy), iy);
-                const __m128 az = _mm_mul_ps(loz, iz), bz = _mm_mul_ps(hiz, iz);  // origin z is 0
-                const __m128 te = _mm_max_ps(_mm_max_ps(_mm_min_ps(ax, bx), _mm_min_ps(ay, by)),
-                                             _mm_max_ps(_mm_min_ps(az, bz), t0));
-                const __m128 tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(ax, bx), _mm_max_ps(ay, by)),
-                                             _mm_min_ps(_mm_max_ps(az, bz), t1));
-                const __m128 inside = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(x, vx0), _mm_cmple_ps(x, vx1)),
-                                                 _mm_and_ps(_mm_cmpge_ps(y, vy0), _mm_cmple_ps(y, vy1)));
-                int mask = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(te, tx), inside));
+                __m128 te, tx;
+                const __m128 hit =
+                    leafBox4Hits(b4, _mm_loadu_ps(&bin.sampleX[i]), _mm_loadu_ps(&bin.sampleY[i]),
+                                 _mm_loadu_ps(&bin.originX[i]), _mm_loadu_ps(&bin.originY[i]), zero,
+                                 _mm_loadu_ps(&bin.invX[i]), _mm_loadu_ps(&bin.invY[i]),
+                                 _mm_loadu_ps(&bin.invZ[i]), t0, t1, te, tx);
+                int mask = _mm_movemask_ps(hit);
                 if (rowEnd - i < 4) mask &= (1 << (rowEnd - i)) - 1;
-                if (!mask) continue;
-                // Compress: the hit lanes' candidates to the front (4 written, popcount kept).
-                alignas(16) float tev[4];
-                _mm_store_ps(tev, te);
-                Candidate* out = found.data() + k;
-                for (int j = 0; j < 4; ++j) {
-                    const int l = kCompressLanes[mask][j];
-                    out[j] = {bin.rayOfSample[i + l], patch, leaf, tev[l]};
-                }
-                k += size_t(kPopCount[mask]);
+                if (mask) k += emitLanes(found.data() + k, mask, te, &bin.rayOfSample[i], patch, leaf);
             }
 #else
             for (size_t i = rowBase; i < rowEnd; ++i) {
                 const uint32_t ray = bin.rayOfSample[i];
                 const float x = bin.sampleX[i], y = bin.sampleY[i];
-                if (ray == kNone || !(x >= x0 && x <= x1 && y >= y0 && y <= y1)) continue;
+                if (ray == kNone || !(x >= rect.x0 && x <= rect.x1 && y >= rect.y0 && y <= rect.y1)) continue;
                 float te, tx;
                 if (rayBoxInterval(box, rays.o[ray], safeInverse(rays.d[ray]), tmin, tmax, te, tx))
                     found[k++] = {ray, patch, leaf, te};
@@ -953,53 +1038,14 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, CameraBinning& bin, 
         }
         found.resize(k);
     };
-    auto visitPatch = [&](uint32_t patch) {
-        const Bounds3* tree = forest.tree(patch);
-        const uint8_t* back = useBack ? forest.backfaceBits(patch) : nullptr;
-        uint32_t stack[64];
-        int sp = 0;
-        stack[sp++] = 0;
-        while (sp > 0) {
-            const uint32_t n = stack[--sp];
-            if (back && back[n]) continue;
-            float x0, x1, y0, y1;
-            if (!overlaps(tree[n], x0, x1, y0, y1)) continue;
-            if (n >= firstLeaf) {
-                testLeaf(patch, n, tree[n], x0, x1, y0, y1);
-                continue;
-            }
-            // Nearer child (smaller depth) first, so that each ray's candidates come out nearly sorted.
-            const bool lowFirst = tree[2 * n + 1].lo.z <= tree[2 * n + 2].lo.z;
-            stack[sp++] = lowFirst ? 2 * n + 2 : 2 * n + 1;
-            stack[sp++] = lowFirst ? 2 * n + 1 : 2 * n + 2;
-        }
-    };
-    // BVH: nodes whose rectangle meets the region.
-    uint32_t stack[kBvh4Stack];
-    int sp = 0;
-    if (!acc.bvh.wide.empty()) stack[sp++] = 0;
-    while (sp > 0) {
-        const Bvh4Node& nd = acc.bvh.wide[stack[--sp]];
-        // Children near first (by depth): patches are visited in this order, inner nodes pushed far first.
-        uint32_t order[4] = {0, 1, 2, 3};
-        for (uint32_t i = 1; i < nd.count; ++i)
-            for (uint32_t j = i; j > 0 && nd.lo[2][order[j]] < nd.lo[2][order[j - 1]]; --j)
-                std::swap(order[j], order[j - 1]);
-        uint32_t inner[4], nInner = 0;
-        for (uint32_t k = 0; k < nd.count; ++k) {
-            const uint32_t c = order[k];
-            Bounds3 b;
-            b.lo = {nd.lo[0][c], nd.lo[1][c], nd.lo[2][c]};
-            b.hi = {nd.hi[0][c], nd.hi[1][c], nd.hi[2][c]};
-            float x0, x1, y0, y1;
-            if (!overlaps(b, x0, x1, y0, y1)) continue;
-            if (nd.child[c] & kBvh4Patch)
-                visitPatch(nd.child[c] & ~kBvh4Patch);
-            else
-                inner[nInner++] = nd.child[c];
-        }
-        while (nInner > 0) stack[sp++] = inner[--nInner];
-    }
+    // Nearer boxes (smaller depth) first; back-facing subpatch nodes skipped (--cull-backfaces).
+    descendCulled(
+        acc, [](const Bounds3& b) { return b.lo.z; }, overlaps,
+        [&](uint32_t patch, uint32_t n) {
+            const uint8_t* back = useBack ? forest.backfaceBits(patch) : nullptr;
+            return back && back[n];
+        },
+        testLeaf);
 
     groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests);
 }
@@ -1134,8 +1180,8 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
     const uint32_t firstLeaf = forest.firstLeaf();
 
     // Projected bounding rectangle of a box, grown for rounding, clipped to the points' bounds.
-    auto overlaps = [&](const Bounds3& b, float& rx0, float& rx1, float& ry0, float& ry1) {
-        rx0 = ry0 = INFINITY, rx1 = ry1 = -INFINITY;
+    auto overlaps = [&](const Bounds3& b, Rect2& rect) {
+        float rx0 = INFINITY, rx1 = -INFINITY, ry0 = INFINITY, ry1 = -INFINITY;
         int behind = 0;
         for (int c = 0; c < 8; ++c) {
             const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
@@ -1149,7 +1195,7 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         }
         if (behind == 8) return false;  // behind the light: no segment towards it gets there
         if (behind > 0) {               // around the light's plane: any ray may hit it
-            rx0 = x0, rx1 = x1, ry0 = y0, ry1 = y1;
+            rect = {x0, x1, y0, y1};
             return true;
         }
         float m = 1e-5f * std::max({std::fabs(rx0), std::fabs(rx1), std::fabs(ry0), std::fabs(ry1), rx1 - rx0,
@@ -1166,8 +1212,9 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             m += 1e-6f * reach / h;
         }
         rx0 -= m, rx1 += m, ry0 -= m, ry1 += m;
+        rect = {rx0, rx1, ry0, ry1};
         if (!(std::isfinite(rx0) && std::isfinite(rx1) && std::isfinite(ry0) && std::isfinite(ry1))) {
-            rx0 = x0, rx1 = x1, ry0 = y0, ry1 = y1;  // (nearly) on the light's plane: any ray may hit it
+            rect = {x0, x1, y0, y1};  // (nearly) on the light's plane: any ray may hit it
             return true;
         }
         if (!(rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0)) return false;
@@ -1192,15 +1239,11 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         return (d.x > 0 ? b.lo.x : b.hi.x) * d.x + (d.y > 0 ? b.lo.y : b.hi.y) * d.y +
                (d.z > 0 ? b.lo.z : b.hi.z) * d.z;
     };
-    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, float rx0, float rx1, float ry0,
-                        float ry1) {
-        const int cx0 = cellX(rx0), cx1 = cellX(rx1), cy0 = cellY(ry0), cy1 = cellY(ry1);
+    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, const Rect2& rect) {
+        const int cx0 = cellX(rect.x0), cx1 = cellX(rect.x1), cy0 = cellY(rect.y0), cy1 = cellY(rect.y1);
         const uint32_t leaf = node - firstLeaf;
 #if defined(__SSE2__)
-        const __m128 lox = _mm_set1_ps(box.lo.x), loy = _mm_set1_ps(box.lo.y), loz = _mm_set1_ps(box.lo.z);
-        const __m128 hix = _mm_set1_ps(box.hi.x), hiy = _mm_set1_ps(box.hi.y), hiz = _mm_set1_ps(box.hi.z);
-        const __m128 vx0 = _mm_set1_ps(rx0), vx1 = _mm_set1_ps(rx1), vy0 = _mm_set1_ps(ry0),
-                     vy1 = _mm_set1_ps(ry1);
+        const LeafBox4 b4(box, rect);
         const __m128 vself = _mm_set1_ps(ignoreT);
         const __m128i vpatch = _mm_set1_epi32(int32_t(patch));
 #endif
@@ -1212,42 +1255,25 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             found.resize(k + (e - b) + 4);
 #if defined(__SSE2__)
             for (size_t i = b; i < e; i += 4) {
-                const __m128 x = _mm_loadu_ps(&pb.px[i]), y = _mm_loadu_ps(&pb.py[i]);
-                const __m128 ox = _mm_loadu_ps(&pb.ox[i]), oy = _mm_loadu_ps(&pb.oy[i]),
-                             oz = _mm_loadu_ps(&pb.oz[i]);
-                const __m128 ix = _mm_loadu_ps(&pb.ix[i]), iy = _mm_loadu_ps(&pb.iy[i]),
-                             iz = _mm_loadu_ps(&pb.iz[i]);
-                const __m128 ax = _mm_mul_ps(_mm_sub_ps(lox, ox), ix),
-                             bx = _mm_mul_ps(_mm_sub_ps(hix, ox), ix);
-                const __m128 ay = _mm_mul_ps(_mm_sub_ps(loy, oy), iy),
-                             by = _mm_mul_ps(_mm_sub_ps(hiy, oy), iy);
-                const __m128 az = _mm_mul_ps(_mm_sub_ps(loz, oz), iz),
-                             bz = _mm_mul_ps(_mm_sub_ps(hiz, oz), iz);
-                const __m128 te = _mm_max_ps(_mm_max_ps(_mm_min_ps(ax, bx), _mm_min_ps(ay, by)),
-                                             _mm_max_ps(_mm_min_ps(az, bz), _mm_loadu_ps(&pb.tmin[i])));
-                const __m128 tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(ax, bx), _mm_max_ps(ay, by)),
-                                             _mm_min_ps(_mm_max_ps(az, bz), _mm_loadu_ps(&pb.tmax[i])));
-                const __m128 inside = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(x, vx0), _mm_cmple_ps(x, vx1)),
-                                                 _mm_and_ps(_mm_cmpge_ps(y, vy0), _mm_cmple_ps(y, vy1)));
+                __m128 te, tx;
+                const __m128 hit =
+                    leafBox4Hits(b4, _mm_loadu_ps(&pb.px[i]), _mm_loadu_ps(&pb.py[i]),
+                                 _mm_loadu_ps(&pb.ox[i]), _mm_loadu_ps(&pb.oy[i]), _mm_loadu_ps(&pb.oz[i]),
+                                 _mm_loadu_ps(&pb.ix[i]), _mm_loadu_ps(&pb.iy[i]), _mm_loadu_ps(&pb.iz[i]),
+                                 _mm_loadu_ps(&pb.tmin[i]), _mm_loadu_ps(&pb.tmax[i]), te, tx);
                 // The ray's own patch: boxes it leaves before the self-intersection distance are skipped.
                 const __m128 own = _mm_castsi128_ps(_mm_cmpeq_epi32(
                     _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pb.ignore[i])), vpatch));
                 const __m128 selfCut = _mm_and_ps(own, _mm_cmplt_ps(tx, vself));
-                int mask = _mm_movemask_ps(_mm_andnot_ps(selfCut, _mm_and_ps(_mm_cmple_ps(te, tx), inside)));
+                int mask = _mm_movemask_ps(_mm_andnot_ps(selfCut, hit));
                 if (e - i < 4) mask &= (1 << (e - i)) - 1;
-                if (!mask) continue;
-                alignas(16) float tev[4];
-                _mm_store_ps(tev, te);
-                Candidate* out = found.data() + k;
-                for (int j = 0; j < 4; ++j) {
-                    const int l = kCompressLanes[mask][j];
-                    out[j] = {pb.ray[i + l], patch, leaf, tev[l]};
-                }
-                k += size_t(kPopCount[mask]);
+                if (mask) k += emitLanes(found.data() + k, mask, te, &pb.ray[i], patch, leaf);
             }
 #else
             for (size_t i = b; i < e; ++i) {
-                if (!(pb.px[i] >= rx0 && pb.px[i] <= rx1 && pb.py[i] >= ry0 && pb.py[i] <= ry1)) continue;
+                if (!(pb.px[i] >= rect.x0 && pb.px[i] <= rect.x1 && pb.py[i] >= rect.y0 &&
+                      pb.py[i] <= rect.y1))
+                    continue;
                 float te, tx;
                 if (!rayBoxInterval(box, {pb.ox[i], pb.oy[i], pb.oz[i]}, {pb.ix[i], pb.iy[i], pb.iz[i]},
                                     pb.tmin[i], pb.tmax[i], te, tx))
@@ -1259,52 +1285,8 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             found.resize(k);
         }
     };
-    auto visitPatch = [&](uint32_t patch) {
-        const Bounds3* tree = forest.tree(patch);
-        uint32_t stack[64];
-        int sp = 0;
-        stack[sp++] = 0;
-        while (sp > 0) {
-            const uint32_t nd = stack[--sp];
-            float rx0, rx1, ry0, ry1;
-            if (!overlaps(tree[nd], rx0, rx1, ry0, ry1)) continue;
-            if (nd >= firstLeaf) {
-                testLeaf(patch, nd, tree[nd], rx0, rx1, ry0, ry1);
-                continue;
-            }
-            const bool lowFirst = nearDepth(tree[2 * nd + 1]) <= nearDepth(tree[2 * nd + 2]);
-            stack[sp++] = lowFirst ? 2 * nd + 2 : 2 * nd + 1;
-            stack[sp++] = lowFirst ? 2 * nd + 1 : 2 * nd + 2;
-        }
-    };
-    uint32_t stack[kBvh4Stack];
-    int sp = 0;
-    if (!acc.bvh.wide.empty()) stack[sp++] = 0;
-    while (sp > 0) {
-        const Bvh4Node& nd = acc.bvh.wide[stack[--sp]];
-        Bounds3 box[4];
-        float depth[4];
-        uint32_t order[4] = {0, 1, 2, 3};
-        for (uint32_t c = 0; c < nd.count; ++c) {
-            box[c].lo = {nd.lo[0][c], nd.lo[1][c], nd.lo[2][c]};
-            box[c].hi = {nd.hi[0][c], nd.hi[1][c], nd.hi[2][c]};
-            depth[c] = nearDepth(box[c]);
-        }
-        for (uint32_t i = 1; i < nd.count; ++i)
-            for (uint32_t j = i; j > 0 && depth[order[j]] < depth[order[j - 1]]; --j)
-                std::swap(order[j], order[j - 1]);
-        uint32_t inner[4], nInner = 0;
-        for (uint32_t k = 0; k < nd.count; ++k) {
-            const uint32_t c = order[k];
-            float rx0, rx1, ry0, ry1;
-            if (!overlaps(box[c], rx0, rx1, ry0, ry1)) continue;
-            if (nd.child[c] & kBvh4Patch)
-                visitPatch(nd.child[c] & ~kBvh4Patch);
-            else
-                inner[nInner++] = nd.child[c];
-        }
-        while (nInner > 0) stack[sp++] = inner[--nInner];
-    }
+    descendCulled(
+        acc, nearDepth, overlaps, [](uint32_t, uint32_t) { return false; }, testLeaf);
     return true;
 }
 
