@@ -97,6 +97,21 @@ struct Counters {
     }
 };
 
+// One ray's candidates cand[begin, end) sorted by box entry distance, stably (insertion sort: segments are
+// short and nearly sorted).
+inline void sortSegmentByEntry(Candidate* cand, size_t begin, size_t end) {
+    for (size_t i = begin + 1; i < end; ++i) {
+        if (!(cand[i - 1].tEnter > cand[i].tEnter)) continue;
+        const Candidate x = cand[i];
+        size_t j = i;
+        while (j > begin && cand[j - 1].tEnter > x.tEnter) {
+            cand[j] = cand[j - 1];
+            --j;
+        }
+        cand[j] = x;
+    }
+}
+
 struct Chunk {
     // Written through a raw pointer by the traversal (grown without zeroing), read by index.
     std::vector<Candidate, DefaultInitAllocator<Candidate>> cand;
@@ -717,16 +732,7 @@ template <bool kAvx2>
         const uint32_t begin = end;
         end += sc.count[rl];
         ch.segEnd[rl] = end;
-        for (uint32_t i = begin + 1; i < end; ++i) {
-            if (!(cand[i - 1].tEnter > cand[i].tEnter)) continue;
-            const Candidate x = cand[i];
-            uint32_t j = i;
-            while (j > begin && cand[j - 1].tEnter > x.tEnter) {
-                cand[j] = cand[j - 1];
-                --j;
-            }
-            cand[j] = x;
-        }
+        sortSegmentByEntry(cand, begin, end);
     }
     ch.cand.resize(used);
     ch.c.candidates = used;
@@ -808,18 +814,8 @@ void groupCandidates(const std::vector<Candidate>& found, size_t n, std::vector<
     for (size_t ci = 0; ci < nChunks; ++ci) {
         Candidate* cd = chunks[ci].cand.data();
         const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
-        for (size_t r = r0; r < r1; ++r) {
-            const size_t b = start[r] - start[r0], e = start[r + 1] - start[r0];
-            for (size_t i = b + 1; i < e; ++i) {
-                const Candidate x = cd[i];
-                size_t j = i;
-                while (j > b && cd[j - 1].tEnter > x.tEnter) {
-                    cd[j] = cd[j - 1];
-                    --j;
-                }
-                cd[j] = x;
-            }
-        }
+        for (size_t r = r0; r < r1; ++r)
+            sortSegmentByEntry(cd, start[r] - start[r0], start[r + 1] - start[r0]);
     }
 }
 
