@@ -68,6 +68,10 @@ void writeSurface(std::ostream& o, const Material& m) {
             o << "Surface \"metal\" \"Ka\" [" << num(m.Ka) << "] \"Ks\" [" << num(m.Ks) << "] \"roughness\" ["
               << num(m.roughness) << "]\n";
             break;
+        case MaterialType::ShinyMetal:
+            o << "Surface \"shinymetal\" \"Ka\" [" << num(m.Ka) << "] \"Ks\" [" << num(m.Ks) << "] \"Kr\" ["
+              << num(m.Kr) << "] \"roughness\" [" << num(m.roughness) << "]\n";
+            break;
         case MaterialType::Constant:
             o << "Surface \"constant\"\n";
             break;
@@ -79,8 +83,9 @@ void writeSurface(std::ostream& o, const Material& m) {
               << num(m.eta) << "]\n";
             break;
         case MaterialType::Plastic:
+        case MaterialType::PaintedPlastic:
         default:
-            o << "Surface \"plastic\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" ["
+            o << "Surface \"" << (m.type == MaterialType::PaintedPlastic ? "paintedplastic" : "plastic") << "\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" ["
               << num(m.Ks) << "] \"roughness\" [" << num(m.roughness) << "] \"specularcolor\" ["
               << triple(m.specularColor) << "]\n";
             break;
@@ -141,6 +146,12 @@ void writeRib(const Scene& scene, std::ostream& o) {
             case LightType::Point:
                 o << "LightSource \"pointlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
                   << triple(l.color) << "] \"from\" [" << triple(l.from) << "]\n";
+                break;
+            case LightType::Spot:
+                o << "LightSource \"spotlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
+                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to)
+                  << "] \"coneangle\" [" << num(l.coneAngle) << "] \"conedeltaangle\" [" << num(l.coneDeltaAngle)
+                  << "] \"beamdistribution\" [" << num(l.beamDistribution) << "]\n";
                 break;
         }
     }

@@ -35,6 +35,14 @@ void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& 
     grid.G.resize(count);
     grid.B.resize(count);
     grid.front.resize(count);
+    // Dice first (positions, normals, view directions of the whole grid), then shade the grid as one batch.
+    thread_local std::vector<Vec3> Ps, Ns, Is;
+    thread_local std::vector<Color> Ci;
+    thread_local LightSamples lightSamples;
+    Ps.resize(count);
+    Ns.resize(count);
+    Is.resize(count);
+    Ci.resize(count);
 
     for (int j = 0; j <= nv; ++j) {
         for (int i = 0; i <= nu; ++i) {
@@ -71,17 +79,29 @@ void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& 
             if (shade.flipNormal) N = -N;
 
             const int v = j * (nu + 1) + i;
-            Vec3 I = normalize(P);  // the eye is at the camera-space origin
-            Color C = shadeLocal(*shade.material, P, N, I, shade.lights);
+            Ps[v] = P;
+            Ns[v] = N;
+            Is[v] = normalize(P);  // the eye is at the camera-space origin
             Vec3 r = view.projector.toRaster(P);
             grid.X[v] = toFixed(r.x);
             grid.Y[v] = toFixed(r.y);
             grid.Z[v] = P.z;
-            grid.R[v] = C.x;
-            grid.G[v] = C.y;
-            grid.B[v] = C.z;
             grid.front[v] = dot(N, P) < 0.f;
         }
+    }
+    SurfacePoints points;
+    points.count = size_t(count);
+    points.P = Ps.data();
+    points.N = Ns.data();
+    points.I = Is.data();
+    const std::span<const Material> material(shade.material, 1);
+    sampleLights(shade.lights, material, points, lightSamples);
+    // Visibility: Reyes has no shadows yet (shadow maps come later), so every query answers "visible".
+    shadeSurfaces(material, points, lightSamples, Ci.data());
+    for (int v = 0; v < count; ++v) {
+        grid.R[v] = Ci[v].x;
+        grid.G[v] = Ci[v].y;
+        grid.B[v] = Ci[v].z;
     }
 }
 

@@ -6,7 +6,7 @@
 
 #include "film/film.h"
 #include "reyes/split.h"
-#include "scene/shading.h"
+#include "shading/surface.h"
 
 namespace tessera {
 

@@ -1780,33 +1780,6 @@ bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint
     return true;
 }
 
-Vec3 reflectDir(Vec3 I, Vec3 N) {
-    return normalize(I - N * (2.f * dot(I, N)));
-}
-
-bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F) {
-    float cosi = -dot(I, N);
-    float n1 = 1.f, n2 = eta;
-    Vec3 n = N;
-    if (cosi < 0.f) {  // leaving the medium
-        cosi = -cosi;
-        n = -N;
-        std::swap(n1, n2);
-    }
-    const float r = n1 / n2;
-    const float sin2t = r * r * std::max(0.f, 1.f - cosi * cosi);
-    if (sin2t >= 1.f) {
-        F = 1.f;
-        return false;
-    }
-    const float cost = std::sqrt(1.f - sin2t);
-    const float rs = (n1 * cosi - n2 * cost) / (n1 * cosi + n2 * cost);
-    const float rp = (n1 * cost - n2 * cosi) / (n1 * cost + n2 * cosi);
-    F = 0.5f * (rs * rs + rp * rp);
-    T = normalize(I * r + n * (r * cosi - cost));
-    return true;
-}
-
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc) {
     const size_t n = scene.patches.size();

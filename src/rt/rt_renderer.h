@@ -66,11 +66,7 @@ Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h);
 bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint32_t patch,
                const PatchHit& h);
 
-// Secondary directions. I: unit incident direction, N: unit normal (either side).
-Vec3 reflectDir(Vec3 I, Vec3 N);
-// Refraction through a surface of relative index eta (outside 1, inside eta; N points outside).
-// Returns false on total internal reflection; F receives the Fresnel reflectance.
-bool refractDir(Vec3 I, Vec3 N, float eta, Vec3& T, float& F);
+// Secondary directions: reflectDir and refractDir live in shading/bsdf.h.
 
 // The traversal's subpatch kernels use AVX2 where the CPU has it (chosen at run time; same results as the
 // SSE2 kernels). allow = false forces the SSE2 kernels (tests), true allows AVX2 again; returns whether

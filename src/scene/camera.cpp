@@ -35,6 +35,9 @@ Projector::Projector(const Camera& c) {
     oy = t * c.height / (t - b);
     nearClip = c.nearClip;
     farClip = c.farClip;
+    lensRadius = c.lensRadius();
+    focalDistance = c.focalDistance;
+    if (!(focalDistance > 0.f)) lensRadius = 0.f;  // a lens needs a focal plane in front of the eye
 }
 
 }  // namespace tessera

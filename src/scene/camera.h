@@ -2,6 +2,10 @@
 // camera space is left-handed, +x right, +y up, +z into the screen; a perspective projection maps
 // the screen window onto the raster.
 #pragma once
+#include <cmath>
+#include <limits>
+
+#include "core/hostdevice.h"
 #include "core/transform.h"
 
 namespace tessera {
@@ -16,23 +20,97 @@ struct Camera {
     float frameAspect = 0.f;                 // FrameAspectRatio, 0 = from the resolution
     float nearClip = 1e-4f, farClip = 1e30f;
     Mat4 cameraFromWorld;  // the CTM at WorldBegin
+    // RI Shutter open close: the interval the camera sample's time spans (RI default 0 0: no motion).
+    float shutterOpen = 0.f, shutterClose = 0.f;
+    // RI DepthOfField fstop focallength focaldistance (camera-space units); fstop = infinity: pinhole.
+    float fStop = std::numeric_limits<float>::infinity(), focalLength = 0.f, focalDistance = 0.f;
+
+    // Thin lens (RI spec 3.2, sec. 4.1.3): radius = focallength / (2 fstop); 0 for a pinhole.
+    float lensRadius() const {
+        return (std::isfinite(fStop) && fStop > 0.f && focalLength > 0.f) ? focalLength / (2.f * fStop) : 0.f;
+    }
+    // Time of a camera sample u in [0,1) within the shutter interval.
+    float timeAt(float u) const { return shutterOpen + (shutterClose - shutterOpen) * u; }
 
     float aspect() const { return frameAspect > 0 ? frameAspect : width * pixelAspect / height; }
     // Screen window, the default derived from the frame aspect ratio as the spec prescribes.
     void window(float& l, float& r, float& b, float& t) const;
 };
 
-// Everything needed to project camera-space points to raster space, precomputed.
+// Everything needed to project camera-space points to raster space and to generate camera rays,
+// precomputed: the one place both engines take the camera model from.
 struct Projector {
     float sx, sy, ox, oy;  // raster = (x/z * sx + ox, -y/z * sy + oy) for perspective
     bool perspective;
     float nearClip, farClip;
+    float lensRadius = 0.f, focalDistance = 0.f;  // thin lens (0: pinhole)
     explicit Projector(const Camera& c);
     // Raster position of a camera-space point (caller guarantees z > 0 for perspective).
     Vec3 toRaster(Vec3 p) const {
         float iz = perspective ? 1.f / p.z : 1.f;
         return {p.x * iz * sx + ox, p.y * iz * sy + oy, p.z};
     }
+    // Camera-space point on the z = 1 plane (perspective) or the z = 0 plane (orthographic) that projects
+    // to raster position (x, y).
+    Vec3 fromRaster(float x, float y) const { return {(x - ox) / sx, (y - oy) / sy, perspective ? 1.f : 0.f}; }
+
+    bool hasLens() const { return lensRadius > 0.f; }
+    // Radius in raster pixels of the circle of confusion of a camera-space depth z (Reyes' blur bound):
+    // a lens point a shifts the screen image of a point at depth z by a * (1/focaldistance - 1/z)
+    // (thin lens, ray through the focal plane point), so the radius is lensRadius * |1/fd - 1/z| in
+    // screen units, times the raster scale.
+    float circleOfConfusion(float z) const {
+        if (!hasLens() || !perspective) return 0.f;
+        return lensRadius * std::abs(1.f / focalDistance - 1.f / z) * std::max(std::abs(sx), std::abs(sy));
+    }
+    // Screen-space shift (raster pixels) of a point at depth z seen through lens position (lu, lv) in
+    // [-1,1]^2 on the unit disk: what Reyes adds to a micropolygon's raster position for a lens sample.
+    Vec2 lensShift(float z, Vec2 lens) const {
+        if (!hasLens() || !perspective) return {};
+        const float k = lensRadius * (1.f / focalDistance - 1.f / z);
+        return {lens.x * k * sx, lens.y * k * sy};
+    }
 };
+
+// Camera ray for a raster position and a lens position on the unit disk (camera space, unnormalised
+// direction). Pinhole: from the eye through the pixel. Thin lens: from the lens point through the point of
+// the focal plane that the pinhole ray would hit (pbrt-v4's thin-lens camera, RI focaldistance).
+struct CameraRay {
+    Vec3 origin, direction;
+};
+inline CameraRay generateRay(const Projector& p, Vec2 raster, Vec2 lensDisk) {
+    const Vec3 onPlane = p.fromRaster(raster.x, raster.y);
+    CameraRay r;
+    if (p.perspective) {
+        r.origin = {0, 0, 0};
+        r.direction = onPlane;
+    } else {
+        r.origin = onPlane;
+        r.direction = {0, 0, 1};
+    }
+    if (p.hasLens() && p.perspective) {
+        const Vec3 focus = onPlane * p.focalDistance;  // onPlane.z = 1
+        r.origin = {lensDisk.x * p.lensRadius, lensDisk.y * p.lensRadius, 0.f};
+        r.direction = focus - r.origin;
+    }
+    return r;
+}
+
+// Concentric map of [0,1)^2 onto the unit disk (Shirley and Chiu 1997): keeps the sampler's
+// stratification on the lens.
+TESSERA_HD Vec2 squareToDisk(float u, float v) {
+    const float a = 2.f * u - 1.f, b = 2.f * v - 1.f;
+    if (a == 0.f && b == 0.f) return {0.f, 0.f};
+    constexpr float kPi4 = 0.78539816f;
+    float r, phi;
+    if (std::abs(a) > std::abs(b)) {
+        r = a;
+        phi = kPi4 * (b / a);
+    } else {
+        r = b;
+        phi = 2.f * kPi4 - kPi4 * (a / b);
+    }
+    return {r * std::cos(phi), r * std::sin(phi)};
+}
 
 }  // namespace tessera

@@ -50,19 +50,3 @@ void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
 }
 
 }  // namespace tessera
-
-namespace tessera {
-Material defaultMaterial(MaterialType type) {
-    Material m;
-    m.type = type;
-    switch (type) {
-        case MaterialType::Matte: m.Ka = 1, m.Kd = 1; break;
-        case MaterialType::Plastic: m.Ka = 1, m.Kd = 0.5f, m.Ks = 0.5f, m.roughness = 0.1f; break;
-        case MaterialType::Metal: m.Ka = 1, m.Ks = 1, m.roughness = 0.1f; break;
-        case MaterialType::Constant: break;
-        case MaterialType::Mirror: m.Kr = 1; m.Ka = 0, m.Kd = 0; break;
-        case MaterialType::Glass: m.Kr = 1, m.Kt = 1, m.eta = 1.5f; m.Ka = 0, m.Kd = 0; break;
-    }
-    return m;
-}
-}  // namespace tessera

@@ -21,16 +21,18 @@ struct ImageOptions {
     std::string displayName;                         // RIB Display name ("" if none)
 };
 
-enum class LightType { Ambient, Distant, Point };
+enum class LightType { Ambient, Distant, Point, Spot };
 
 struct Light {
     LightType type = LightType::Distant;
     Color color{1, 1, 1};  // intensity * lightcolor
     Vec3 from{0, 0, 0};    // world space (point lights, distant lights)
-    Vec3 to{0, 0, 1};      // world space (distant lights shine from -> to)
+    Vec3 to{0, 0, 1};      // world space (distant and spot lights shine from -> to)
+    // RI spotlight (radians; RI defaults radians(30), radians(5), 2).
+    float coneAngle = 0.5235988f, coneDeltaAngle = 0.0872665f, beamDistribution = 2.f;
 };
 
-enum class MaterialType { Matte, Plastic, Metal, Constant, Mirror, Glass };
+enum class MaterialType { Matte, Plastic, Metal, ShinyMetal, PaintedPlastic, Constant, Mirror, Glass };
 
 // Parameters of the RI standard surface shaders (RI spec 3.2, appendix A), plus mirror and glass.
 struct Material {
@@ -74,6 +76,7 @@ void frameSceneDefault(Scene& scene, int width, int height, UpAxis up = UpAxis::
 }  // namespace tessera
 
 namespace tessera {
-// Defaults of the RI standard shaders (RI spec 3.2, appendix A) for a material type.
+// Defaults of the RI standard shaders (RI spec 3.2, appendix A) for a material type; defined with the
+// shader registry (src/shading/registry.cpp).
 Material defaultMaterial(MaterialType type);
 }  // namespace tessera

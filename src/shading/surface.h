@@ -1,0 +1,123 @@
+// The surfaces: RI standard shaders (RI spec 3.2, appendix A: matte, metal, shinymetal, plastic,
+// paintedplastic, constant) and the ray tracer's mirror and glass, evaluated over batches of shading
+// points in structure-of-arrays form (a Reyes grid, or a list of ray hits). Light meets surface here and
+// nowhere else: an engine (1) asks for the light samples of a batch, (2) answers their visibility queries
+// (the ray tracer with shadow rays; Reyes has no shadows yet and answers "visible"), (3) shades.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/hostdevice.h"
+#include "scene/scene.h"
+#include "shading/bsdf.h"
+#include "shading/light.h"
+
+namespace tessera {
+
+// A batch of shading points in one space. N: unit normal on either side (orientation already applied),
+// I: unit direction from the eye (or the ray origin) to P.
+struct SurfacePoints {
+    size_t count = 0;
+    const Vec3* P = nullptr;
+    const Vec3* N = nullptr;
+    const Vec3* I = nullptr;
+    const uint32_t* material = nullptr;  // index into the materials per point; nullptr: all use materials[0]
+    uint32_t materialOf(size_t i) const { return material ? material[i] : 0u; }
+};
+
+// The light samples of a batch, [point * lights + light]. A sample with needsVisibility set asks the engine
+// whether the segment from P towards the light (to `dist`, or to the light position) is clear; the engine
+// writes the transmission in [0,1] to `visibility` (initialised to 1).
+struct LightSamples {
+    size_t lights = 0;
+    std::vector<LightSample> sample;
+    std::vector<uint8_t> needsVisibility;
+    std::vector<float> visibility;
+    size_t index(size_t point, size_t light) const { return point * lights + light; }
+};
+
+// Whether a surface is lit at all (constant is not: no light samples, no shadow rays).
+TESSERA_HD bool surfaceUsesLights(MaterialType t) { return t != MaterialType::Constant; }
+// Whether part of a surface's response is traced (mirror and glass): Reyes shades only the local part.
+TESSERA_HD bool surfaceHasTracedLobes(MaterialType t) { return t == MaterialType::Mirror || t == MaterialType::Glass; }
+
+// Step 1: light samples for every point of the batch. Lights facing the point's back side (Nf.L <= 0) and
+// ambient lights need no visibility query.
+void sampleLights(std::span<const ShadingLight> lights, std::span<const Material> materials,
+                  const SurfacePoints& points, LightSamples& out);
+
+// Step 3: colour leaving each point towards -I (the local part: ambient, diffuse and specular terms; the
+// traced lobes of mirror and glass come from tracedLobes()).
+void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
+                   Color* Ci);
+
+// The local response of one point: shared by the batch loop and by tests that check both engines get the
+// same radiance for the same hit.
+TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const LightSample* samples,
+                                   const float* visibility, size_t lightCount) {
+    if (m.type == MaterialType::Constant) return m.Os * m.Cs;
+    const Vec3 Nf = faceForward(N, I);
+    const Vec3 V = -I;
+    const float exponent = specularExponent(m.roughness);
+    Color ambient, diffuse, specular;
+    for (size_t l = 0; l < lightCount; ++l) {
+        const LightSample& s = samples[l];
+        if (!s.valid) continue;
+        if (s.ambient) {
+            ambient += s.Cl;
+            continue;
+        }
+        const float nl = dot(Nf, s.L);
+        if (nl <= 0.f) continue;
+        const float vis = visibility[l];
+        if (vis <= 0.f) continue;
+        const Color Cl = s.Cl * vis;
+        diffuse += Cl * nl;
+        specular += Cl * specularLobe(Nf, V, s.L, exponent);
+    }
+    switch (m.type) {
+        case MaterialType::Matte: return m.Os * m.Cs * (ambient * m.Ka + diffuse * m.Kd);
+        // shinymetal adds Kr * an environment map; with no textures yet its local part is metal's.
+        case MaterialType::Metal:
+        case MaterialType::ShinyMetal: return m.Os * m.Cs * (ambient * m.Ka + specular * m.Ks);
+        // paintedplastic multiplies Cs by a texture; with no textures yet it is plastic.
+        // Mirror and glass: the RI plastic terms with their own Ka, Kd, Ks (defaults 0, 0, 0.5: a highlight)
+        // as the local part; reflection and refraction are traced lobes.
+        case MaterialType::Plastic:
+        case MaterialType::PaintedPlastic:
+        case MaterialType::Mirror:
+        case MaterialType::Glass:
+        default: return m.Os * (m.Cs * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
+    }
+}
+
+// A direction the integrator traces further, with the weight its radiance is multiplied by.
+struct TracedLobe {
+    Vec3 direction;
+    Color weight;
+    bool transmitted = false;  // starts on the far side of the surface
+};
+
+// The traced lobes of a surface at a point, weighted by `w` (the path's weight so far): a mirror
+// reflects Kr * Cs; glass reflects Kr * F and transmits Kt * (1 - F) * Cs, F the Fresnel reflectance.
+// Lobes whose weight is below `cutoff` are dropped. N is the outward normal. Returns the lobe count (<= 2).
+TESSERA_HD int tracedLobes(const Material& m, Vec3 I, Vec3 N, Color w, float cutoff, TracedLobe out[2]) {
+    const Vec3 Nf = faceForward(N, I);
+    int n = 0;
+    if (m.type == MaterialType::Mirror) {
+        const Color wr = w * m.Cs * m.Kr;
+        if (maxComponent(wr) > cutoff) out[n++] = {reflectDir(I, Nf), wr, false};
+    } else if (m.type == MaterialType::Glass) {
+        Vec3 T;
+        float F;
+        const bool refracts = refractDir(I, N, m.eta, T, F);
+        const Color wr = w * (m.Kr * F);
+        if (maxComponent(wr) > cutoff) out[n++] = {reflectDir(I, Nf), wr, false};
+        const Color wt = w * m.Cs * (m.Kt * (1.f - F));
+        if (refracts && maxComponent(wt) > cutoff) out[n++] = {T, wt, true};
+    }
+    return n;
+}
+
+}  // namespace tessera
