@@ -1,0 +1,168 @@
+// The shading module against closed-form answers: the RI standard shaders with the RenderMan specular
+// convention, the spotlight's cone, which light samples ask for visibility, the traced lobes of glass.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "shading/registry.h"
+#include "shading/surface.h"
+
+using namespace tessera;
+
+namespace {
+
+ShadingLight distantFrom(Vec3 towardsLight, Color c) {
+    Light l = defaultLight(LightType::Distant);
+    l.color = c;
+    l.from = towardsLight;
+    l.to = {0, 0, 0};
+    return prepareLight(l, Mat4{});
+}
+
+Color shadeOne(const Material& m, Vec3 N, Vec3 I, const std::vector<ShadingLight>& lights) {
+    const Vec3 P{0, 0, 0};
+    SurfacePoints pts;
+    pts.count = 1;
+    pts.P = &P;
+    pts.N = &N;
+    pts.I = &I;
+    LightSamples ls;
+    sampleLights(lights, std::span<const Material>(&m, 1), pts, ls);
+    Color Ci;
+    shadeSurfaces(std::span<const Material>(&m, 1), pts, ls, &Ci);
+    return Ci;
+}
+
+}  // namespace
+
+TEST(Shading, PlasticFollowsTheRenderManSpecularConvention) {
+    // Light at 40 degrees from N in the xz plane, eye on N: H is at 20 degrees, N.L = cos 40.
+    const float a = 40.f * float(M_PI) / 180.f;
+    const Vec3 N{0, 0, -1}, I{0, 0, 1};  // looking down +z at a surface facing the eye
+    const Vec3 L{std::sin(a), 0, -std::cos(a)};
+    Material m = defaultMaterial(MaterialType::Plastic);
+    m.Cs = {0.8f, 0.5f, 0.2f};
+    m.Ka = 0.3f, m.Kd = 0.6f, m.Ks = 0.7f, m.roughness = 0.25f;
+    m.specularColor = {1.f, 0.9f, 0.8f};
+    Light amb = defaultLight(LightType::Ambient);
+    amb.color = {0.1f, 0.2f, 0.3f};
+    const std::vector<ShadingLight> lights = {prepareLight(amb, Mat4{}), distantFrom(L * 10.f, {1, 1, 1})};
+    const Color got = shadeOne(m, N, I, lights);
+    // RI plastic: Cs * (Ka ambient + Kd N.L Cl) + specularcolor * Ks * Cl * (N.H)^(1/(roughness/8)).
+    const float spec = std::pow(std::cos(a / 2), 8.f / m.roughness);
+    const Color want = m.Cs * (amb.color * m.Ka + Color{1, 1, 1} * (m.Kd * std::cos(a))) +
+                       m.specularColor * (m.Ks * spec);
+    EXPECT_NEAR(got.x, want.x, 1e-5f);
+    EXPECT_NEAR(got.y, want.y, 1e-5f);
+    EXPECT_NEAR(got.z, want.z, 1e-5f);
+    // The spec's 1/roughness would give a visibly broader highlight: the convention is what is tested.
+    EXPECT_GT(std::pow(std::cos(a / 2), 1.f / m.roughness) - spec, 0.2f);
+}
+
+TEST(Shading, MatteAndMetalAndConstant) {
+    const Vec3 N{0, 1, 0}, I{0, -1, 0};
+    const std::vector<ShadingLight> lights = {distantFrom({0, 5, 0}, {0.5f, 0.5f, 0.5f})};
+    Material matte = defaultMaterial(MaterialType::Matte);
+    matte.Cs = {1, 0.5f, 0.25f};
+    EXPECT_NEAR(shadeOne(matte, N, I, lights).y, 0.25f, 1e-6f);  // Kd N.L Cl Cs = 1 * 1 * 0.5 * 0.5
+    Material metal = defaultMaterial(MaterialType::Metal);  // L = V = N: H = N, lobe = 1
+    EXPECT_NEAR(shadeOne(metal, N, I, lights).x, 0.5f, 1e-6f);
+    Material c = defaultMaterial(MaterialType::Constant);
+    c.Cs = {0.1f, 0.2f, 0.3f};
+    EXPECT_NEAR(shadeOne(c, N, I, lights).z, 0.3f, 1e-7f);
+    // Lit from behind: a one-sided light contributes nothing, whichever side N was given on.
+    const std::vector<ShadingLight> behind = {distantFrom({0, -5, 0}, {1, 1, 1})};
+    EXPECT_EQ(shadeOne(matte, N, Vec3{0, 1, 0} * -1.f, behind).x, 0.f);
+}
+
+TEST(Shading, SpotlightConeAndFalloff) {
+    Light l = defaultLight(LightType::Spot);
+    l.from = {0, 0, 0};
+    l.to = {0, 0, 1};
+    l.color = {4, 4, 4};
+    l.coneAngle = 0.5f;
+    l.coneDeltaAngle = 0.1f;
+    l.beamDistribution = 3.f;
+    const ShadingLight s = prepareLight(l, Mat4{});
+    auto at = [&](float angle, float dist) {
+        return sampleLight(s, Vec3{std::sin(angle), 0, std::cos(angle)} * dist);
+    };
+    // Inside the inner cone: intensity / d^2 * cos^beam.
+    LightSample in = at(0.2f, 2.f);
+    ASSERT_TRUE(in.valid);
+    EXPECT_NEAR(in.Cl.x, 4.f / 4.f * std::pow(std::cos(0.2f), 3.f), 1e-5f);
+    EXPECT_NEAR(in.dist, 2.f, 1e-6f);
+    // Between the cones: the RI smoothstep of the cosines.
+    const float mid = 0.45f;
+    const float t = (std::cos(mid) - std::cos(0.5f)) / (std::cos(0.4f) - std::cos(0.5f));
+    EXPECT_NEAR(at(mid, 1.f).Cl.x, 4.f * std::pow(std::cos(mid), 3.f) * t * t * (3 - 2 * t), 1e-4f);
+    // Outside the cone: no light.
+    EXPECT_FALSE(at(0.55f, 1.f).valid);
+}
+
+TEST(Shading, OnlyFrontFacingDirectLightsAskForVisibility) {
+    const std::vector<ShadingLight> lights = {
+        prepareLight(defaultLight(LightType::Ambient), Mat4{}), distantFrom({0, 0, -1}, {1, 1, 1}),
+        distantFrom({0, 0, 1}, {1, 1, 1})};
+    const Material mats[2] = {defaultMaterial(MaterialType::Matte), defaultMaterial(MaterialType::Constant)};
+    const Vec3 P[2] = {{0, 0, 5}, {0, 0, 5}}, N[2] = {{0, 0, -1}, {0, 0, -1}}, I[2] = {{0, 0, 1}, {0, 0, 1}};
+    const uint32_t mi[2] = {0, 1};
+    SurfacePoints pts{2, P, N, I, mi};
+    LightSamples ls;
+    sampleLights(lights, mats, pts, ls);
+    ASSERT_EQ(ls.lights, 3u);
+    EXPECT_EQ(ls.needsVisibility[ls.index(0, 0)], 0);  // ambient
+    EXPECT_EQ(ls.needsVisibility[ls.index(0, 1)], 1);  // in front
+    EXPECT_EQ(ls.needsVisibility[ls.index(0, 2)], 0);  // behind the surface
+    for (size_t l = 0; l < 3; ++l) EXPECT_EQ(ls.needsVisibility[ls.index(1, l)], 0);  // constant: unlit
+    // Occluding the one queried light leaves only the ambient term.
+    ls.visibility[ls.index(0, 1)] = 0.f;
+    Color Ci[2];
+    shadeSurfaces(mats, pts, ls, Ci);
+    EXPECT_NEAR(Ci[0].x, 1.f, 1e-6f);  // Ka * ambient (intensity 1) * Cs (1)
+}
+
+TEST(Shading, GlassSplitsTheWeightByFresnel) {
+    Material g = defaultMaterial(MaterialType::Glass);
+    TracedLobe lobes[2];
+    // Normal incidence from outside: F = ((eta - 1) / (eta + 1))^2; reflection + transmission = weight.
+    const int n = tracedLobes(g, Vec3{0, 0, 1}, Vec3{0, 0, -1}, Color{1, 1, 1}, 1e-4f, lobes);
+    ASSERT_EQ(n, 2);
+    const float F = std::pow((g.eta - 1) / (g.eta + 1), 2.f);
+    EXPECT_NEAR(lobes[0].weight.x, F, 1e-6f);
+    EXPECT_NEAR(lobes[1].weight.x, 1 - F, 1e-6f);
+    EXPECT_TRUE(lobes[1].transmitted);
+    EXPECT_NEAR(lobes[0].direction.z, -1.f, 1e-6f);
+    EXPECT_NEAR(lobes[1].direction.z, 1.f, 1e-6f);
+    // From inside beyond the critical angle: total internal reflection only.
+    const float a = 60.f * float(M_PI) / 180.f;  // sin 60 * 1.5 > 1
+    const int tir = tracedLobes(g, Vec3{std::sin(a), 0, std::cos(a)}, Vec3{0, 0, 1}, Color{1, 1, 1}, 1e-4f, lobes);
+    ASSERT_EQ(tir, 1);
+    EXPECT_NEAR(lobes[0].weight.x, 1.f, 1e-6f);
+    // Snell's law for a refracted lobe at 30 degrees from outside.
+    const float b = 30.f * float(M_PI) / 180.f;
+    ASSERT_EQ(tracedLobes(g, Vec3{std::sin(b), 0, std::cos(b)}, Vec3{0, 0, -1}, Color{1, 1, 1}, 0.f, lobes), 2);
+    EXPECT_NEAR(lobes[1].direction.x, std::sin(b) / g.eta, 1e-5f);
+    // Opaque surfaces have no traced lobes.
+    EXPECT_EQ(tracedLobes(defaultMaterial(MaterialType::Plastic), Vec3{0, 0, 1}, Vec3{0, 0, -1}, Color{1, 1, 1},
+                          0.f, lobes),
+              0);
+}
+
+TEST(ShaderRegistry, EveryEntryRoundTrips) {
+    for (const SurfaceShaderInfo& s : surfaceShaders()) {
+        const SurfaceShaderInfo* f = findSurfaceShader(s.name);
+        ASSERT_NE(f, nullptr) << s.name;
+        EXPECT_EQ(f->type, s.type);
+        EXPECT_EQ(surfaceShaderInfo(s.type).name, s.name);
+        EXPECT_EQ(defaultMaterial(s.type).type, s.type);
+        EXPECT_EQ(s.traced, surfaceHasTracedLobes(s.type)) << s.name;
+    }
+    for (const LightShaderInfo& l : lightShaders()) {
+        ASSERT_NE(findLightShader(l.name), nullptr) << l.name;
+        EXPECT_EQ(defaultLight(l.type).type, l.type);
+    }
+    EXPECT_EQ(findSurfaceShader("wood2"), nullptr);
+    EXPECT_EQ(findLightShader("arealight"), nullptr);
+}
