@@ -166,6 +166,8 @@ int runRender(const RenderArgs& a) {
     }
     double renderMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    if (!a.quiet)
+        for (const std::string& w : result.warnings) fmt::print(stderr, "warning: {}\n", w);
     if (result.cancelled) {
         fmt::print(stderr, "\ninterrupted after {:.0f} ms: no image written\n", renderMs);
         return 130;

@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <utility>
 
 namespace tessera {
 
-void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
+void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, uint32_t channels_,
+                       const std::vector<std::string>& aovNames_) {
     region = reg;
     nx = nx_;
     ny = ny_;
@@ -20,13 +23,142 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
     b.assign(n, 0.f);
     a.assign(n, 0.f);
     pixelHit.assign(pixels, 0);
+    channels = channels_;
+    auto sized = [&](auto& v, uint32_t bit, auto value) {
+        if (has(bit))
+            v.assign(n, value);
+        else
+            v.clear();
+    };
+    sized(objectId, kChannelObjectId, kNoObject);
+    sized(normalX, kChannelNormal, 0.f);
+    sized(normalY, kChannelNormal, 0.f);
+    sized(normalZ, kChannelNormal, 0.f);
+    sized(shadowCount, kChannelShadowCount, uint8_t(0));
+    sized(hasTexture, kChannelHasTexture, uint8_t(0));
+    aovNames = aovNames_;
+    aovValues.resize(aovNames.size());
+    for (auto& v : aovValues) v.assign(n, 0.f);
     size_t i = 0;
     for (int py = reg.y0; py < reg.y1; ++py)
         for (int px = reg.x0; px < reg.x1; ++px)
             for (int s = 0; s < spp; ++s, ++i) samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
 }
 
+void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovNames) {
+    const size_t n = size_t(width) * height;
+    auto add = [&](const char* name, int components, bool integer, float background) {
+        ImagePlane p;
+        p.name = name;
+        p.components = components;
+        p.integer = integer;
+        if (integer)
+            p.ids.assign(n, kNoObject);
+        else
+            p.values.assign(n * components, background);
+        planes.push_back(std::move(p));
+    };
+    if (channels & kChannelObjectId) add("id", 1, true, 0.f);
+    if (channels & kChannelDepth) add("z", 1, false, std::numeric_limits<float>::infinity());
+    if (channels & kChannelNormal) add("N", 3, false, 0.f);
+    if (channels & kChannelShadowCount) add("shadows", 1, false, 0.f);
+    if (channels & kChannelHasTexture) add("textured", 1, false, 0.f);
+    for (const std::string& a : aovNames) {
+        add("", 1, false, 0.f);
+        planes.back().name = a;
+    }
+}
+
+const ImagePlane* Image::plane(const std::string& name) const {
+    for (const ImagePlane& p : planes)
+        if (p.name == name) return &p;
+    return nullptr;
+}
+ImagePlane* Image::plane(const std::string& name) {
+    for (ImagePlane& p : planes)
+        if (p.name == name) return &p;
+    return nullptr;
+}
+
+size_t nearestSampleToCentre(const SampleTile& tile, int px, int py) {
+    const size_t first = (size_t(py - tile.region.y0) * tile.region.width() + (px - tile.region.x0)) * tile.spp;
+    const int64_t cx = (int64_t(px) << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const int64_t cy = (int64_t(py) << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    size_t best = first;
+    int64_t bestD = INT64_MAX;
+    for (size_t i = first; i < first + size_t(tile.spp); ++i) {
+        const int64_t dx = tile.sx[i] - cx, dy = tile.sy[i] - cy, d = dx * dx + dy * dy;
+        if (d < bestD) bestD = d, best = i;
+    }
+    return best;
+}
+
+namespace {
+
+// The planes beside RGBA for the pixels of `target`: nearest-sample planes (id, depth, has-texture) from the
+// pixel's sample nearest its centre; filtered planes (normal, shadow count, AOVs) with the pixel filter over
+// covered samples (weights times coverage, so background does not dilute them).
+void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
+    const int rx = filter.radiusX(), ry = filter.radiusY();
+    const int tw = tile.region.width(), spp = tile.spp;
+    ImagePlane* id = tile.has(kChannelObjectId) ? out.plane("id") : nullptr;
+    ImagePlane* depth = out.plane("z");
+    ImagePlane* textured = tile.has(kChannelHasTexture) ? out.plane("textured") : nullptr;
+    ImagePlane* normal = tile.has(kChannelNormal) ? out.plane("N") : nullptr;
+    ImagePlane* shadows = tile.has(kChannelShadowCount) ? out.plane("shadows") : nullptr;
+    std::vector<std::pair<ImagePlane*, const std::vector<float>*>> aovs;
+    for (size_t k = 0; k < tile.aovNames.size(); ++k)
+        if (ImagePlane* p = out.plane(tile.aovNames[k])) aovs.push_back({p, &tile.aovValues[k]});
+    const bool filtered = normal || shadows || !aovs.empty();
+    if (!id && !depth && !textured && !filtered) return;
+    std::vector<float> acc(3 + 1 + aovs.size());
+    for (int py = target.y0; py < target.y1; ++py) {
+        for (int px = target.x0; px < target.x1; ++px) {
+            const size_t pix = size_t(py) * out.width + px;
+            const size_t near = nearestSampleToCentre(tile, px, py);
+            const bool covered = tile.a[near] > 0.f;
+            if (id) id->ids[pix] = tile.objectId[near];
+            if (depth) depth->values[pix] = covered ? tile.z[near] : std::numeric_limits<float>::infinity();
+            if (textured) textured->values[pix] = covered ? float(tile.hasTexture[near]) : 0.f;
+            if (!filtered) continue;
+            const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
+            const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
+            const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+            const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+            std::fill(acc.begin(), acc.end(), 0.f);
+            float sw = 0.f;
+            for (int qy = qy0; qy <= qy1; ++qy) {
+                const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
+                const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+                for (size_t i = begin; i < end; ++i) {
+                    if (!(tile.a[i] > 0.f)) continue;
+                    const float w =
+                        filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy) * tile.a[i];
+                    sw += w;
+                    if (normal) {
+                        acc[0] += w * tile.normalX[i];
+                        acc[1] += w * tile.normalY[i];
+                        acc[2] += w * tile.normalZ[i];
+                    }
+                    if (shadows) acc[3] += w * float(tile.shadowCount[i]);
+                    for (size_t k = 0; k < aovs.size(); ++k) acc[4 + k] += w * (*aovs[k].second)[i];
+                }
+            }
+            if (!(sw != 0.f)) continue;
+            if (normal) {
+                const Vec3 N = normalize(Vec3{acc[0], acc[1], acc[2]});
+                normal->values[pix * 3] = N.x, normal->values[pix * 3 + 1] = N.y, normal->values[pix * 3 + 2] = N.z;
+            }
+            if (shadows) shadows->values[pix] = acc[3] / sw;
+            for (size_t k = 0; k < aovs.size(); ++k) aovs[k].first->values[pix] = acc[4 + k] / sw;
+        }
+    }
+}
+
+}  // namespace
+
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
+    if (!out.planes.empty()) reconstructPlanes(tile, filter, target, out);
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int tw = tile.region.width(), th = tile.region.height();
     const int spp = tile.spp;

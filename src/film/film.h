@@ -2,7 +2,9 @@
 // (position, depth, premultiplied colour and coverage per subpixel sample) and reconstruction of
 // pixels from samples with the pixel filter.
 #pragma once
+#include <algorithm>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/random.h"
@@ -11,14 +13,43 @@
 
 namespace tessera {
 
-// Final image: linear, premultiplied RGBA, row-major, top row first.
+// Per-sample attributes beyond colour, alpha and depth that a render can ask the film to carry (a bit set:
+// the output spec). Adaptive supersampling reads them per sample; AOV outputs read their pixel planes.
+enum FilmChannel : uint32_t {
+    kChannelObjectId = 1u << 0,     // RI object (primitive call) the sample sees; kNoObject for background
+    kChannelNormal = 1u << 1,       // unit shading normal, camera space, facing the viewer
+    kChannelShadowCount = 1u << 2,  // number of lights in shadow at the sample's shading point
+    kChannelHasTexture = 1u << 3,   // the surface the sample sees is textured
+    kChannelDepth = 1u << 4,        // camera-space depth as an image plane (the tile always has it)
+};
+constexpr uint32_t kAllFilmChannels = kChannelObjectId | kChannelNormal | kChannelShadowCount |
+                                      kChannelHasTexture | kChannelDepth;
+constexpr uint32_t kNoObject = 0xffffffffu;
+
+// A pixel plane of the image beside RGBA: filtered (normal, shadow count, AOVs) or taken from the sample
+// nearest the pixel centre (object id, depth, has-texture), where averaging would invent values.
+struct ImagePlane {
+    std::string name;  // "id", "N", "z", "shadows", "textured", or an AOV's name
+    int components = 1;
+    bool integer = false;         // data in `ids` (object ids), else in `values`
+    std::vector<float> values;    // width * height * components
+    std::vector<uint32_t> ids;    // width * height
+};
+
+// Final image: linear, premultiplied RGBA, row-major, top row first, plus the requested planes.
 struct Image {
     int width = 0, height = 0;
     std::vector<float> rgba;
+    std::vector<ImagePlane> planes;
     Image() = default;
     Image(int w, int h) : width(w), height(h), rgba(size_t(w) * h * 4, 0.f) {}
     float* pixel(int x, int y) { return &rgba[(size_t(y) * width + x) * 4]; }
     const float* pixel(int x, int y) const { return &rgba[(size_t(y) * width + x) * 4]; }
+    // Allocates the planes that `channels` and `aovNames` ask for (background values: id kNoObject,
+    // depth infinity, the rest 0).
+    void addPlanes(uint32_t channels, const std::vector<std::string>& aovNames = {});
+    const ImagePlane* plane(const std::string& name) const;
+    ImagePlane* plane(const std::string& name);
 };
 
 // Sub-pixel fixed point used by the rasterizer: positions snap to 1/256 pixel so that edge functions are
@@ -66,14 +97,33 @@ struct SampleTile {
     std::vector<int32_t> sx, sy;  // fixed-point raster positions
     std::vector<float> z, r, g, b, a;
     std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
+    // Per-sample attributes, present only for the FilmChannel bits in `channels` (empty otherwise).
+    uint32_t channels = 0;
+    std::vector<uint32_t> objectId;
+    std::vector<float> normalX, normalY, normalZ;  // shading normal
+    std::vector<uint8_t> shadowCount, hasTexture;
+    std::vector<std::string> aovNames;         // further channels a display asked for,
+    std::vector<std::vector<float>> aovValues;  // one float per sample each
 
     // (Re)initialise for a region without reallocating when the size fits.
-    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ);
+    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ, uint32_t channels = 0,
+               const std::vector<std::string>& aovNames = {});
     size_t sampleCount() const { return sx.size(); }
+    bool has(uint32_t channel) const { return (channels & channel) != 0; }
+    // Writes the attributes of a covered sample (colour, alpha and depth are written by the engine).
+    void setAttributes(size_t i, uint32_t object, Vec3 normal, int shadowedLights, bool textured) {
+        if (has(kChannelObjectId)) objectId[i] = object;
+        if (has(kChannelNormal)) normalX[i] = normal.x, normalY[i] = normal.y, normalZ[i] = normal.z;
+        if (has(kChannelShadowCount)) shadowCount[i] = uint8_t(std::min(shadowedLights, 255));
+        if (has(kChannelHasTexture)) hasTexture[i] = textured;
+    }
 };
 
 // Filter the tile's samples into the pixels of `out` inside `target` (which must lie inside the tile's
-// region shrunk by the filter radius, or touch the image border).
+// region shrunk by the filter radius, or touch the image border), and fill the image's planes.
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out);
+
+// Index of the sample of pixel (px, py) of the tile nearest the pixel centre (ties: the lower index).
+size_t nearestSampleToCentre(const SampleTile& tile, int px, int py);
 
 }  // namespace tessera

@@ -5,6 +5,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "film/film.h"
 #include "scene/scene.h"
@@ -25,6 +26,10 @@ struct RenderSettings {
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves
     // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
+    // Output spec: the film's attribute channels (FilmChannel bits) and further AOVs wanted; each becomes
+    // an image plane of the result.
+    uint32_t channels = 0;
+    std::vector<std::string> aovs;
     // Progress: called with (buckets done, total) from worker threads; must be thread-safe.
     std::function<void(int, int)> progress;
     // Set to true (e.g. by a SIGINT handler) to stop the render early.
@@ -35,6 +40,7 @@ struct RenderResult {
     Image image;
     nlohmann::json stats;  // engine counters; the CLI adds timing and memory
     bool cancelled = false;
+    std::vector<std::string> warnings;  // said once per render (e.g. effects an engine does not render)
 };
 
 // Throws std::invalid_argument for an unknown engine name.

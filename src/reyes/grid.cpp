@@ -98,6 +98,16 @@ void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& 
     sampleLights(shade.lights, material, points, lightSamples);
     // Visibility: Reyes has no shadows yet (shadow maps come later), so every query answers "visible".
     shadeSurfaces(material, points, lightSamples, Ci.data());
+    grid.objectId = shade.objectId;
+    if (shade.wantNormals) {
+        grid.NX.resize(count);
+        grid.NY.resize(count);
+        grid.NZ.resize(count);
+        for (int v = 0; v < count; ++v) {
+            const Vec3 Nf = faceForward(Ns[v], Is[v]);
+            grid.NX[v] = Nf.x, grid.NY[v] = Nf.y, grid.NZ[v] = Nf.z;
+        }
+    }
     for (int v = 0; v < count; ++v) {
         grid.R[v] = Ci[v].x;
         grid.G[v] = Ci[v].y;

@@ -17,6 +17,10 @@ struct Grid {
     std::vector<int32_t> X, Y;
     std::vector<float> Z, R, G, B;
     std::vector<uint8_t> front;  // vertex faces the camera (for one-sided surfaces)
+    // For the film's attribute channels: the object, and (when the film wants normals) the unit shading
+    // normal per vertex, facing the viewer.
+    uint32_t objectId = 0;
+    std::vector<float> NX, NY, NZ;
     int vertexCount() const { return (nu + 1) * (nv + 1); }
 };
 
@@ -25,6 +29,8 @@ struct ShadeInputs {
     bool twoSided;
     bool flipNormal;
     std::span<const ShadingLight> lights;  // camera space
+    uint32_t objectId = 0;
+    bool wantNormals = false;  // the film carries a normal channel
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

@@ -46,7 +46,9 @@ inline TriangleSetup setupTriangle(const Grid& g, int i0, int i1, int i2) {
     return t;
 }
 
-// Tests the sample against the triangle; on a hit writes the interpolated depth/colour if nearer.
+// Tests the sample against the triangle; on a hit writes the interpolated depth/colour if nearer (and the
+// film's attribute channels when it has any).
+template <bool kAttributes>
 inline bool shadeSampleIfInside(const TriangleSetup& t, const Grid& g, int64_t sx, int64_t sy, size_t i,
                                 SampleTile& tile, float nearZ) {
     const int64_t w0 = t.A[0] * sx + t.B[0] * sy + t.C[0];
@@ -63,12 +65,19 @@ inline bool shadeSampleIfInside(const TriangleSetup& t, const Grid& g, int64_t s
     tile.g[i] = l0 * g.G[a] + l1 * g.G[b] + l2 * g.G[c];
     tile.b[i] = l0 * g.B[a] + l1 * g.B[b] + l2 * g.B[c];
     tile.a[i] = 1.f;
+    if constexpr (kAttributes) {
+        Vec3 N;
+        if (!g.NX.empty())
+            N = normalize(Vec3{l0 * g.NX[a] + l1 * g.NX[b] + l2 * g.NX[c], l0 * g.NY[a] + l1 * g.NY[b] + l2 * g.NY[c],
+                               l0 * g.NZ[a] + l1 * g.NZ[b] + l2 * g.NZ[c]});
+        // Reyes has no shadows or textures yet: no lights in shadow, untextured.
+        tile.setAttributes(i, g.objectId, N, 0, false);
+    }
     return true;
 }
 
-}  // namespace
-
-uint64_t rasterizeGrid(const Grid& g, SampleTile& tile, float nearZ) {
+template <bool kAttributes>
+uint64_t rasterizeGridImpl(const Grid& g, SampleTile& tile, float nearZ) {
     uint64_t tests = 0;
     const Rect& reg = tile.region;
     const int stride = g.nu + 1;
@@ -107,14 +116,20 @@ uint64_t rasterizeGrid(const Grid& g, SampleTile& tile, float nearZ) {
                     const int64_t sx = tile.sx[si], sy = tile.sy[si];
                     ++tests;
                     if (sx < minX || sx > maxX || sy < minY || sy > maxY) continue;
-                    bool hit = (t0.valid && shadeSampleIfInside(t0, g, sx, sy, si, tile, nearZ)) ||
-                               (t1.valid && shadeSampleIfInside(t1, g, sx, sy, si, tile, nearZ));
+                    bool hit = (t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ)) ||
+                               (t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ));
                     if (hit) tile.pixelHit[pix] = 1;
                 }
             }
         }
     }
     return tests;
+}
+
+}  // namespace
+
+uint64_t rasterizeGrid(const Grid& g, SampleTile& tile, float nearZ) {
+    return tile.channels ? rasterizeGridImpl<true>(g, tile, nearZ) : rasterizeGridImpl<false>(g, tile, nearZ);
 }
 
 }  // namespace tessera

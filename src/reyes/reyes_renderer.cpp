@@ -46,6 +46,14 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     const Camera& cam = scene.camera;
     const int W = cam.width, H = cam.height;
     result.image = Image(W, H);
+    result.image.addPlanes(settings.channels, settings.aovs);
+    for (const Material& m : scene.materials)
+        if (surfaceHasTracedLobes(m.type)) {
+            // Mirror and glass get their local terms here; the traced part needs the ray tracer.
+            result.warnings.push_back("the scene has mirror or glass surfaces: Reyes renders their highlights only; "
+                                      "reflections and refractions need --engine rt");
+            break;
+        }
     const PixelFilter filter = makeFilter(scene.image);
     const int nx = std::max(1, scene.image.pixelSamplesX), ny = std::max(1, scene.image.pixelSamplesY);
 
@@ -136,7 +144,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
             return;
         }
         auto t0 = Clock::now();
-        tc.tile.reset(region, nx, ny, seed, std::numeric_limits<float>::infinity());
+        tc.tile.reset(region, nx, ny, seed, std::numeric_limits<float>::infinity(), settings.channels,
+                      settings.aovs);
         for (uint32_t k = begin; k < end; ++k) {
             const uint32_t pi = bucketPieces[k];
             GridSlot& slot = slots[pi];
@@ -144,7 +153,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                 auto td = Clock::now();
                 const Piece& piece = pieces[pi];
                 const PatchAttributes& attr = scene.attributes[piece.patch];
-                ShadeInputs in{&scene.materials[attr.material], attr.twoSided, attr.flipNormal, lights};
+                ShadeInputs in{&scene.materials[attr.material], attr.twoSided, attr.flipNormal, lights, attr.object,
+                               (settings.channels & kChannelNormal) != 0};
                 slot.grid = std::make_unique<Grid>();
                 diceAndShade(view, piece, in, *slot.grid);
                 ++tc.grids;

@@ -1,0 +1,134 @@
+// The multi-channel film: object ids and depth come from the sample nearest each pixel centre, exactly;
+// normals and shadow counts are filtered over covered samples.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "film/film.h"
+#include "render/render.h"
+#include "test_util.h"
+
+using namespace tessera;
+using namespace tessera::test;
+
+namespace {
+
+constexpr float kDepth[2] = {5.f, 4.f}, kCx[2] = {-0.5f, 0.3f}, kCy[2] = {0.f, 0.1f}, kHalf[2] = {0.8f, 0.6f};
+
+// Two overlapping squares: object 0 at depth 5 on the left, object 1 at depth 4 on the right, nearer.
+Scene twoSquares() {
+    Scene s = cameraSpaceScene(48, 32, 40.f);
+    s.image.pixelSamplesX = s.image.pixelSamplesY = 2;
+    addPatch(s, flatSquare(2 * kHalf[0], kDepth[0], kCx[0], kCy[0]), 0);
+    addPatch(s, flatSquare(2 * kHalf[1], kDepth[1], kCx[1], kCy[1]), 1);
+    return s;
+}
+
+// The object and depth seen by the camera ray through raster position (x, y), analytically.
+void seenAt(const Projector& proj, float x, float y, uint32_t& id, float& depth) {
+    const Vec3 d = proj.fromRaster(x, y);
+    auto inside = [&](int k) {
+        return std::abs(d.x * kDepth[k] - kCx[k]) <= kHalf[k] && std::abs(d.y * kDepth[k] - kCy[k]) <= kHalf[k];
+    };
+    if (inside(1)) {
+        id = 1, depth = kDepth[1];
+    } else if (inside(0)) {
+        id = 0, depth = kDepth[0];
+    } else {
+        id = kNoObject, depth = std::numeric_limits<float>::infinity();
+    }
+}
+
+// Distance in pixels from a raster position to the nearest square edge (to skip samples whose analytic
+// answer is within rounding of an edge).
+float edgeDistance(const Projector& proj, float x, float y) {
+    float best = 1e9f;
+    for (int k = 0; k < 2; ++k) {
+        for (float ex : {kCx[k] - kHalf[k], kCx[k] + kHalf[k]})
+            best = std::min(best, std::abs(x - proj.toRaster({ex, 0, kDepth[k]}).x));
+        for (float ey : {kCy[k] - kHalf[k], kCy[k] + kHalf[k]})
+            best = std::min(best, std::abs(y - proj.toRaster({0, ey, kDepth[k]}).y));
+    }
+    return best;
+}
+
+}  // namespace
+
+TEST(Film, IdAndDepthAreExactAtTheSampleNearestThePixelCentre) {
+    const Scene scene = twoSquares();
+    const Projector proj(scene.camera);
+    for (const char* engine : {"reyes", "rt"}) {
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        rs.channels = kAllFilmChannels;
+        const RenderResult r = render(scene, rs);
+        const ImagePlane* id = r.image.plane("id");
+        const ImagePlane* z = r.image.plane("z");
+        const ImagePlane* N = r.image.plane("N");
+        ASSERT_TRUE(id && z && N) << engine;
+        // The film's own sample positions (the same for both engines and every tile).
+        SampleTile tile;
+        tile.reset(Rect{0, 0, scene.camera.width, scene.camera.height}, 2, 2, rs.seed,
+                   std::numeric_limits<float>::infinity());
+        int checked = 0, ones = 0, zeros = 0, background = 0;
+        for (int py = 0; py < scene.camera.height; ++py)
+            for (int px = 0; px < scene.camera.width; ++px) {
+                const size_t near = nearestSampleToCentre(tile, px, py);
+                const float sx = tile.sx[near] / kSubpixelScale, sy = tile.sy[near] / kSubpixelScale;
+                if (edgeDistance(proj, sx, sy) < 0.02f) continue;  // on an edge: either answer is right
+                uint32_t wantId;
+                float wantZ;
+                seenAt(proj, sx, sy, wantId, wantZ);
+                const size_t pix = size_t(py) * scene.camera.width + px;
+                ASSERT_EQ(id->ids[pix], wantId) << engine << " pixel " << px << "," << py;
+                if (wantId == kNoObject) {
+                    EXPECT_TRUE(std::isinf(z->values[pix]));
+                    ++background;
+                } else {
+                    EXPECT_NEAR(z->values[pix], wantZ, 1e-3f) << engine << " pixel " << px << "," << py;
+                    // Flat squares facing the eye: the filtered normal is exactly -z.
+                    EXPECT_NEAR(N->values[pix * 3 + 2], -1.f, 1e-5f);
+                    (wantId ? ones : zeros)++;
+                }
+                ++checked;
+            }
+        EXPECT_GT(ones, 100) << engine;
+        EXPECT_GT(zeros, 100) << engine;
+        EXPECT_GT(background, 100) << engine;
+        EXPECT_GT(checked, 48 * 32 * 9 / 10) << engine;
+    }
+}
+
+TEST(Film, ReconstructionFiltersShadowCountsAndTakesIdsFromTheNearestSample) {
+    // A hand-filled 3x3 tile, 4 samples per pixel, box filter of one pixel: the centre pixel sees only
+    // its own samples.
+    SampleTile tile;
+    tile.reset(Rect{0, 0, 3, 3}, 2, 2, 7, std::numeric_limits<float>::infinity(), kAllFilmChannels);
+    for (size_t i = 0; i < tile.sampleCount(); ++i) {
+        tile.a[i] = 1.f;
+        tile.z[i] = 2.f + float(i);
+        tile.pixelHit[i / 4] = 1;
+        tile.setAttributes(i, uint32_t(100 + i), Vec3{0, 0, -1}, int(i % 4), (i % 2) != 0);
+    }
+    ImageOptions o;
+    o.filter = FilterType::Box;
+    o.filterWidthX = o.filterWidthY = 1.f;
+    const PixelFilter filter = makeFilter(o);
+    Image img(3, 3);
+    img.addPlanes(kAllFilmChannels);
+    reconstruct(tile, filter, Rect{0, 0, 3, 3}, img);
+    const size_t near = nearestSampleToCentre(tile, 1, 1);
+    ASSERT_GE(near, 16u);
+    ASSERT_LT(near, 20u);
+    EXPECT_EQ(img.plane("id")->ids[4], 100 + near);
+    EXPECT_FLOAT_EQ(img.plane("z")->values[4], 2.f + float(near));
+    EXPECT_FLOAT_EQ(img.plane("textured")->values[4], float(near % 2));
+    // The box filter of width 1 weighs the pixel's own four samples equally: mean of 0,1,2,3.
+    EXPECT_NEAR(img.plane("shadows")->values[4], 1.5f, 1e-6f);
+    // No channels asked: no planes, no per-sample attribute storage.
+    SampleTile plain;
+    plain.reset(Rect{0, 0, 3, 3}, 2, 2, 7, 1.f);
+    EXPECT_TRUE(plain.objectId.empty());
+    EXPECT_TRUE(plain.normalX.empty());
+}
