@@ -114,7 +114,7 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
     std::vector<float> acc(3 + 1 + aovs.size());
     for (int py = target.y0; py < target.y1; ++py) {
         for (int px = target.x0; px < target.x1; ++px) {
-            const size_t pix = size_t(py) * out.width + px;
+            const size_t pix = out.index(px, py);
             const size_t near = nearestSampleToCentre(tile, px, py);
             const bool covered = tile.a[near] > 0.f;
             if (id) id->ids[pix] = tile.objectId[near];

@@ -36,15 +36,26 @@ struct ImagePlane {
     std::vector<uint32_t> ids;    // width * height
 };
 
-// Final image: linear, premultiplied RGBA, row-major, top row first, plus the requested planes.
+struct Rect {
+    int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // half-open [x0,x1) x [y0,y1)
+    int width() const { return x1 - x0; }
+    int height() const { return y1 - y0; }
+};
+
+// Final image: linear, premultiplied RGBA, row-major, top row first, plus the requested planes. It covers
+// the raster pixels [x0, x0 + width) x [y0, y0 + height) of the camera (the whole image, a crop window or a
+// farm tile); pixel() takes raster coordinates.
 struct Image {
     int width = 0, height = 0;
+    int x0 = 0, y0 = 0;  // raster position of the first pixel
     std::vector<float> rgba;
     std::vector<ImagePlane> planes;
     Image() = default;
     Image(int w, int h) : width(w), height(h), rgba(size_t(w) * h * 4, 0.f) {}
-    float* pixel(int x, int y) { return &rgba[(size_t(y) * width + x) * 4]; }
-    const float* pixel(int x, int y) const { return &rgba[(size_t(y) * width + x) * 4]; }
+    explicit Image(Rect r) : width(r.width()), height(r.height()), x0(r.x0), y0(r.y0), rgba(size_t(width) * height * 4, 0.f) {}
+    size_t index(int x, int y) const { return size_t(y - y0) * width + (x - x0); }
+    float* pixel(int x, int y) { return &rgba[index(x, y) * 4]; }
+    const float* pixel(int x, int y) const { return &rgba[index(x, y) * 4]; }
     // Allocates the planes that `channels` and `aovNames` ask for (background values: id kNoObject,
     // depth infinity, the rest 0).
     void addPlanes(uint32_t channels, const std::vector<std::string>& aovNames = {});
@@ -82,12 +93,6 @@ inline void splitSamplesPerPixel(int n, int& nx, int& ny) {
         if (n % d == 0) nx = d;
     ny = n / nx;
 }
-
-struct Rect {
-    int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // half-open [x0,x1) x [y0,y1)
-    int width() const { return x1 - x0; }
-    int height() const { return y1 - y0; }
-};
 
 // Samples of a rectangle of pixels (a bucket plus the filter margin), structure of arrays.
 // Sample index = (pixel row within tile * tile width + pixel column) * spp + s.

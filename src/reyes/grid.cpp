@@ -17,9 +17,8 @@ int32_t toFixed(float v) {
 // round(i * segments / n), in integers so both neighbours compute the same thing.
 int snapIndex(int i, int n, int segments) { return (2 * i * segments + n) / (2 * n); }
 
-}  // namespace
-
-void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
+// Dice and shade a piece of a bicubic Bezier patch.
+void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     const BezierPatch& patch = view.patches[piece.patch];
     const PieceEdge* e = piece.edge;
     const int nu = std::max({e[0].segments(), e[2].segments(), 1});
@@ -112,6 +111,14 @@ void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& 
         grid.R[v] = Ci[v].x;
         grid.G[v] = Ci[v].y;
         grid.B[v] = Ci[v].z;
+    }
+}
+
+}  // namespace
+
+void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
+    switch (shade.kind) {
+        case SurfaceKind::BicubicBezier: diceAndShadeBezier(view, piece, shade, grid); return;
     }
 }
 

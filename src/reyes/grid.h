@@ -25,6 +25,7 @@ struct Grid {
 };
 
 struct ShadeInputs {
+    SurfaceKind kind;
     const Material* material;
     bool twoSided;
     bool flipNormal;

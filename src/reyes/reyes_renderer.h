@@ -1,6 +1,6 @@
 // The Reyes engine: bound, split, dice, shade, sample, filter; buckets in parallel with oneTBB.
 #pragma once
-#include "render/render.h"
+#include "engine/settings.h"
 
 namespace tessera {
 

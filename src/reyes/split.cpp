@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "scene/scene.h"
+
 namespace tessera {
 namespace {
 
@@ -214,6 +216,13 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
     }
     counters.pieces += out.size() - before;
     counters.patchCulled = out.size() == before;
+}
+
+void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
+                  std::vector<Piece>& out, SplitCounters& counters) {
+    switch (attr.kind) {
+        case SurfaceKind::BicubicBezier: splitPatch(view, index, micropolygonSide, out, counters); return;
+    }
 }
 
 }  // namespace tessera

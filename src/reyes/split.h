@@ -70,7 +70,12 @@ inline Vec2 latticeUV(const PieceEdge& e, int k) {
 // Position of lattice point k of an edge: from the boundary curve's control points or the patch.
 Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k);
 
-// Split and cull one patch into diceable pieces, appended to `out`.
+// Split and cull one surface into diceable pieces, appended to `out`: dispatches on the surface kind.
+struct PatchAttributes;
+void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
+                  std::vector<Piece>& out, SplitCounters& counters);
+
+// Split and cull one bicubic patch into diceable pieces, appended to `out`.
 void splitPatch(const ReyesView& view, uint32_t patchIndex, float micropolygonSide, std::vector<Piece>& out,
                 SplitCounters& counters);
 

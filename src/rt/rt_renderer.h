@@ -8,7 +8,7 @@
 #include <span>
 #include <vector>
 
-#include "render/render.h"
+#include "engine/settings.h"
 #include "rt/bvh.h"
 #include "rt/intersect.h"
 #include "rt/subpatch_tree.h"

@@ -44,8 +44,26 @@ struct Material {
     float Kr = 1.f, Kt = 1.f, eta = 1.5f;
 };
 
+// The closed set of surface kinds both engines handle. Reyes' bound/split/dice and the ray tracer's
+// bound/traverse/intersect dispatch on this tag at the surface level (a switch, no virtual calls in the
+// kernels). Bicubic Bezier today; bilinear patches, polygons and the RI quadrics are the next entries.
+enum class SurfaceKind : uint8_t { BicubicBezier };
+
+// Where a surface's motion keys live: `count` control-point sets Scene::motionPatches[first ...] at times
+// Scene::motionTimes[first ...] (deformation blur), and/or `count` object-to-world transforms
+// Scene::motionTransforms[first ...] (transformation blur). count 0: static (Scene::patches only).
+struct MotionKeys {
+    uint32_t first = 0, count = 0;
+    bool moving() const { return count > 1; }
+};
+
 // Per-primitive attributes the renderers need.
 struct PatchAttributes {
+    SurfaceKind kind = SurfaceKind::BicubicBezier;
+    MotionKeys motion;
+    // RI Attribute "displacementbound" "sphere": how far displacement may move a point (object-space
+    // units), so bounds can be grown before displacement runs. 0: not displaced.
+    float displacementBound = 0.f;
     uint32_t material = 0;
     uint32_t object = 0;        // object id (one per RIB primitive call / .bpt file)
     float shadingRate = 1.f;    // pixels of area per micropolygon
@@ -60,6 +78,10 @@ struct Scene {
     std::vector<Material> materials;
     std::vector<BezierPatch> patches;           // world space
     std::vector<PatchAttributes> attributes;    // one per patch
+    // Motion keys (filled by the motion-blur work; empty for static scenes), see MotionKeys.
+    std::vector<BezierPatch> motionPatches;
+    std::vector<float> motionTimes;
+    std::vector<Mat4> motionTransforms;
     uint32_t objectCount = 0;
     std::string sourcePath;
 

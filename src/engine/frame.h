@@ -1,0 +1,27 @@
+// The prologue both engines share: the film set-up (filter, samples per pixel, region, image with its
+// planes), the camera's projection and the lights in camera space.
+#pragma once
+#include <vector>
+
+#include "engine/settings.h"
+#include "film/filter.h"
+#include "shading/light.h"
+
+namespace tessera {
+
+struct FrameSetup {
+    PixelFilter filter;
+    int nx = 1, ny = 1;  // samples per pixel: nx x ny strata
+    Rect region;         // raster pixels this render writes
+    Projector projector;
+    std::vector<ShadingLight> lights;  // camera space
+
+    FrameSetup(const Scene& scene, const RenderSettings& settings);
+    int samplesPerPixel() const { return nx * ny; }
+    // The result image: the region, with the planes the output spec asks for.
+    Image makeImage(const RenderSettings& settings) const;
+    // Reset a tile for the samples of `pixels` with the output spec's channels.
+    void resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const;
+};
+
+}  // namespace tessera
