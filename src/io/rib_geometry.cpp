@@ -28,7 +28,8 @@ bool isBezier(const Basis& b) {
     return true;
 }
 
-// Reads one primitive request (RI spec 3.2, sec. 5.2: Patch, PatchMesh).
+// Reads one primitive request: Patch and PatchMesh (RI spec 3.2, sec. 5.2), NuPatch (sec. 5.3),
+// SubdivisionMesh (sec. 5.6).
 class PrimitiveReader {
   public:
     PrimitiveReader(const PrimitiveContext& c, const Request& r)
