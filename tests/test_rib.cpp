@@ -797,6 +797,16 @@ TEST(RibShaderTables, ParametersWithoutARowWarnOnceAndAreIgnored) {
     EXPECT_TRUE(sameMaterialFields(l.scene.materials[0], defaultMaterial(MaterialType::Matte)));
 }
 
+TEST(RibShaderTables, DeclareOverridesARowsDeclaration) {
+    // Declare replaces the predeclared type: the size check follows it, the row then wants 1 number.
+    std::string msg =
+        expectError(scene("Declare \"Kd\" \"uniform color\"", "Surface \"plastic\" \"Kd\" [1 2 3]"), 3);
+    EXPECT_TRUE(contains(msg, "Surface: parameter \"Kd\" needs 1 number, found an array of 3 numbers"))
+        << msg;
+    msg = expectError(scene("Declare \"Kd\" \"uniform color\"", "Surface \"plastic\" \"Kd\" [1]"), 3);
+    EXPECT_TRUE(contains(msg, "Surface: parameter \"Kd\" needs 3 values (1 x uniform color), got 1")) << msg;
+}
+
 TEST(RibShaderTables, ShaderNamesAndRowsAreUnique) {
     std::set<std::string> surfaces, lights;
     for (const rib::SurfaceShader& s : rib::surfaceShaders()) {
