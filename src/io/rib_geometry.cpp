@@ -1,0 +1,461 @@
+#include "io/rib_geometry.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/basis.h"
+#include "core/nurbs.h"
+#include "core/subdivision.h"
+
+namespace tessera::rib {
+
+namespace {
+
+bool sameMaterial(const Material& a, const Material& b) {
+    return a.type == b.type && a.Cs == b.Cs && a.Os == b.Os && a.Ka == b.Ka && a.Kd == b.Kd && a.Ks == b.Ks &&
+           a.roughness == b.roughness && a.specularColor == b.specularColor && a.Kr == b.Kr && a.Kt == b.Kt &&
+           a.eta == b.eta;
+}
+
+bool isBezier(const Basis& b) {
+    Basis z = bezierBasis();
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            if (b.m[i][j] != z.m[i][j]) return false;
+    return true;
+}
+
+// Reads one primitive request: Patch and PatchMesh (RI spec 3.2, sec. 5.2), NuPatch (sec. 5.3),
+// SubdivisionMesh (sec. 5.6).
+class PrimitiveReader {
+  public:
+    PrimitiveReader(const PrimitiveContext& c, const Request& r)
+        : scene_(c.scene), state_(c.state), decls_(c.decls), diag_(c.diag), requestLine_(r.line) {}
+
+    uint32_t materialIndex() {
+        for (size_t i = 0; i < scene_.materials.size(); ++i)
+            if (sameMaterial(scene_.materials[i], state_.attributes().surface)) return uint32_t(i);
+        scene_.materials.push_back(state_.attributes().surface);
+        return uint32_t(scene_.materials.size() - 1);
+    }
+
+    // Attributes shared by all patches of one primitive request (one object id per request).
+    PatchAttributes primitiveAttributes() {
+        PatchAttributes a;
+        a.material = materialIndex();
+        a.object = scene_.objectCount++;
+        a.shadingRate = state_.attributes().shadingRate;
+        a.twoSided = state_.attributes().twoSided;
+        // RI spec 4.2.4: the surface's outside depends on the orientation attribute and on the
+        // handedness of the current (object-to-camera) transformation.
+        bool mirrored = (scene_.camera.cameraFromWorld * state_.transform().matrix()).det3() < 0;
+        a.flipNormal = state_.attributes().rightHanded != mirrored;
+        return a;
+    }
+
+    void requireWorld(const Request& r) const {
+        if (!state_.inWorld()) diag_.fail(r.line, r.name + " outside WorldBegin/WorldEnd");
+    }
+
+    // Vertex positions from "P" (or "Pw" with w == 1); nullopt if the primitive must be skipped.
+    std::optional<std::vector<Vec3>> positions(const Request& r, const std::vector<Param>& ps, size_t n,
+                                               const std::string& what) {
+        std::optional<std::vector<Vec3>> out;
+        for (const Param& p : ps) {
+            const std::vector<double>& v = p.value->nums;
+            if (p.name == "P") {
+                if (!p.value->numeric() || v.size() != 3 * n)
+                    diag_.fail(p.line, what + ": \"P\" needs " + std::to_string(3 * n) + " numbers (" +
+                                           std::to_string(n) + " points), got " +
+                                           std::to_string(p.value->size()));
+                out.emplace();
+                for (size_t i = 0; i < n; ++i)
+                    out->push_back({float(v[3 * i]), float(v[3 * i + 1]), float(v[3 * i + 2])});
+            } else if (p.name == "Pw") {
+                if (!p.value->numeric() || v.size() != 4 * n)
+                    diag_.fail(p.line, what + ": \"Pw\" needs " + std::to_string(4 * n) + " numbers (" +
+                                           std::to_string(n) + " homogeneous points), got " +
+                                           std::to_string(p.value->size()));
+                out.emplace();
+                for (size_t i = 0; i < n; ++i) {
+                    if (std::fabs(v[4 * i + 3] - 1.0) > 1e-9)
+                        diag_.fail(p.line,
+                                   what + ": rational patches are not supported (\"Pw\" with w != 1)");
+                    out->push_back({float(v[4 * i]), float(v[4 * i + 1]), float(v[4 * i + 2])});
+                }
+            } else if (p.name == "Pz") {
+                diag_.warnOnce("Pz", p.line,
+                               what + ": \"Pz\" height fields are not supported; primitive skipped");
+                return std::nullopt;
+            } else {
+                warnIgnoredParam(p, r.name, diag_);
+            }
+        }
+        if (!out) diag_.fail(r.line, what + ": missing the position parameter \"P\"");
+        return out;
+    }
+
+    void addPatch(const Vec3 g[16], bool bicubic, const PatchAttributes& a) {
+        BezierPatch b;
+        if (!bicubic) {
+            // Degree elevation of the bilinear patch: its bicubic Bezier control net samples the
+            // bilinear map at thirds, which is exact (linear precision of Bernstein polynomials).
+            for (int v = 0; v < 4; ++v)
+                for (int u = 0; u < 4; ++u) {
+                    float s = u / 3.f, t = v / 3.f;
+                    Vec3 lo = u == 3 ? g[1] : (u == 0 ? g[0] : lerp(g[0], g[1], s));
+                    Vec3 hi = u == 3 ? g[3] : (u == 0 ? g[2] : lerp(g[2], g[3], s));
+                    b.at(u, v) = v == 0 ? lo : (v == 3 ? hi : lerp(lo, hi, t));
+                }
+        } else if (isBezier(state_.attributes().uBasis) && isBezier(state_.attributes().vBasis)) {
+            for (int k = 0; k < 16; ++k) b.cp[k] = g[k];
+        } else {
+            b = toBezier(g, state_.attributes().uBasis, state_.attributes().vBasis);
+        }
+        // Bezier patches are affinely invariant: transforming the control points transforms the surface.
+        for (Vec3& c : b.cp) c = state_.transform().point(c);
+        checkFinite(b);
+        scene_.patches.push_back(b);
+        scene_.attributes.push_back(a);
+    }
+
+    bool patchType(const Request& r, const std::string& type) const {
+        if (type == "bicubic") return true;
+        if (type != "bilinear")
+            diag_.fail(r.args[0].line,
+                       r.name + ": type must be \"bicubic\" or \"bilinear\", found \"" + type + "\"");
+        return false;
+    }
+
+    void patch(const Request& r) {
+        Arguments args(r, diag_);
+        args.atLeast(1, "type ...parameterlist...");
+        bool bicubic = patchType(r, args.string(0));
+        size_t nv = bicubic ? 16 : 4;
+        auto ps = parseParams(r, 1, decls_, diag_, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex" || cls == "facevertex") return nv;
+            if (cls == "varying" || cls == "facevarying") return 4;
+            return 1;
+        });
+        requireWorld(r);
+        std::string what = "Patch \"" + args.string(0) + "\"";
+        auto pts = positions(r, ps, nv, what);
+        if (!pts) return;
+        Vec3 g[16];
+        if (bicubic) {
+            for (int k = 0; k < 16; ++k) g[k] = (*pts)[k];
+        } else {
+            for (int k = 0; k < 4; ++k) g[k] = (*pts)[k];
+        }
+        addPatch(g, bicubic, primitiveAttributes());
+    }
+
+    // Patches along one direction of a PatchMesh (RI spec 5.2: RiPatchMesh).
+    int meshPatches(const Request& r, bool bicubic, int n, bool periodic, int step, const char* dir) const {
+        if (!bicubic) {
+            if (n < (periodic ? 1 : 2))
+                diag_.fail(r.line,
+                           std::string("PatchMesh: n") + dir + " = " + std::to_string(n) + " is too small");
+            return periodic ? n : n - 1;
+        }
+        if (periodic) {
+            if (n < 1 || n % step != 0)
+                diag_.fail(r.line, std::string("PatchMesh: periodic n") + dir + " = " + std::to_string(n) +
+                                       " must be a positive multiple of the " + dir + "step " +
+                                       std::to_string(step));
+            return n / step;
+        }
+        if (n < 4 || (n - 4) % step != 0)
+            diag_.fail(r.line, std::string("PatchMesh: nonperiodic n") + dir + " = " + std::to_string(n) +
+                                   " must be 4 + k * " + std::to_string(step) + " (the " + dir + "step)");
+        return (n - 4) / step + 1;
+    }
+    bool wrapArg(const Request& r, size_t i) const {
+        const std::string& w = Arguments(r, diag_).string(i);
+        if (w == "periodic") return true;
+        if (w == "nonperiodic") return false;
+        diag_.fail(r.args[i].line,
+                   "PatchMesh: wrap mode must be \"periodic\" or \"nonperiodic\", found \"" + w + "\"");
+    }
+
+    void patchMesh(const Request& r) {
+        Arguments args(r, diag_);
+        args.atLeast(5, "type nu uwrap nv vwrap ...parameterlist...");
+        bool bicubic = patchType(r, args.string(0));
+        int nu = args.integer(1), nv = args.integer(3);
+        bool uper = wrapArg(r, 2), vper = wrapArg(r, 4);
+        int ustep = bicubic ? state_.attributes().uBasis.step : 1,
+            vstep = bicubic ? state_.attributes().vBasis.step : 1;
+        int npu = meshPatches(r, bicubic, nu, uper, ustep, "u");
+        int npv = meshPatches(r, bicubic, nv, vper, vstep, "v");
+        size_t nverts = size_t(nu) * size_t(nv);
+        // Varying values sit at the patch corners: one per patch boundary in each direction.
+        size_t nvaryings = size_t(npu + (uper ? 0 : 1)) * size_t(npv + (vper ? 0 : 1));
+        auto ps = parseParams(r, 5, decls_, diag_, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex" || cls == "facevertex") return nverts;
+            if (cls == "varying" || cls == "facevarying") return nvaryings;
+            if (cls == "uniform") return size_t(npu) * size_t(npv);
+            return 1;
+        });
+        requireWorld(r);
+        auto pts = positions(r, ps, nverts, "PatchMesh \"" + args.string(0) + "\"");
+        if (!pts) return;
+        PatchAttributes a = primitiveAttributes();
+        int order = bicubic ? 4 : 2;
+        for (int pv = 0; pv < npv; ++pv)
+            for (int pu = 0; pu < npu; ++pu) {
+                Vec3 g[16];
+                for (int j = 0; j < order; ++j)
+                    for (int i = 0; i < order; ++i) {
+                        int u = (pu * ustep + i) % nu, v = (pv * vstep + j) % nv;  // periodic meshes wrap
+                        g[j * order + i] = (*pts)[size_t(v) * nu + u];
+                    }
+                addPatch(g, bicubic, a);
+            }
+    }
+
+    // Huge coordinates or transformations can overflow single precision: reject them rather than render NaNs.
+    void checkFinite(const BezierPatch& b) const {
+        for (const Vec3& c : b.cp)
+            if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
+                diag_.fail(requestLine_,
+                           "control point out of range after transformation (overflows single precision)");
+    }
+
+    // Appends a patch that is already in Bezier form (object space), ignoring the current Basis.
+    void addBezier(const BezierPatch& patch, const PatchAttributes& a) {
+        BezierPatch b = patch;
+        for (Vec3& c : b.cp) c = state_.transform().point(c);
+        checkFinite(b);
+        scene_.patches.push_back(b);
+        scene_.attributes.push_back(a);
+    }
+
+    // RiNuPatch (RI spec 3.2, sec. 5.3): non-rational NURBS, converted exactly to Bezier patches.
+    void nuPatch(const Request& r) {
+        Arguments args(r, diag_);
+        args.atLeast(10, "nu uorder uknot umin umax nv vorder vknot vmin vmax ...parameterlist...");
+        NurbsSurface s;
+        s.nu = args.integer(0);
+        s.uorder = args.integer(1);
+        s.uknot = args.numberArray(2, "uknot");
+        s.umin = args.number(3);
+        s.umax = args.number(4);
+        s.nv = args.integer(5);
+        s.vorder = args.integer(6);
+        s.vknot = args.numberArray(7, "vknot");
+        s.vmin = args.number(8);
+        s.vmax = args.number(9);
+        if (s.nu < 1 || s.nv < 1 || s.nu > 1000000 || s.nv > 1000000)
+            diag_.fail(r.line, "NuPatch: nu and nv must be positive");
+        size_t nverts = size_t(s.nu) * size_t(s.nv);
+        size_t segu = size_t(std::max(1, s.nu - s.uorder + 1)),
+               segv = size_t(std::max(1, s.nv - s.vorder + 1));
+        auto ps = parseParams(r, 10, decls_, diag_, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex") return nverts;
+            if (cls == "varying" || cls == "facevarying" || cls == "facevertex")
+                return (segu + 1) * (segv + 1);
+            if (cls == "uniform") return segu * segv;
+            return 1;
+        });
+        requireWorld(r);
+        // Check the knots before the points, so that a bad knot vector is reported as such.
+        try {
+            NurbsSurface k = s;
+            // Placeholders for the points "P"/"Pw" hold (params() checked their size): without them,
+            // nu * nv alone could ask for terabytes.
+            size_t given = 0;
+            for (const Param& p : ps)
+                if (p.name == "P" || p.name == "Pw") given = p.value->size() / (p.name == "P" ? 3 : 4);
+            k.cp.assign(std::min(given, nverts), Vec3{});
+            validateNurbs(k);
+        } catch (const NurbsError& e) {
+            diag_.fail(r.line, std::string("NuPatch: ") + e.what());
+        }
+        for (const Param& p : ps)
+            if (p.name == "Pw" && p.value->numeric() && p.value->nums.size() == 4 * nverts)
+                for (size_t i = 0; i < nverts; ++i)
+                    if (std::fabs(p.value->nums[4 * i + 3] - 1.0) > 1e-9)
+                        diag_.fail(p.line,
+                                   "NuPatch: rational NURBS (\"Pw\" with w != 1) are not supported; only "
+                                   "non-rational "
+                                   "surfaces (all weights 1) convert exactly to bicubic Bezier patches");
+        auto pts = positions(r, ps, nverts, "NuPatch");
+        if (!pts) return;
+        s.cp = std::move(*pts);
+        std::vector<BezierPatch> patches;
+        try {
+            patches = nurbsToBezier(s);
+        } catch (const NurbsError& e) {
+            diag_.fail(r.line, std::string("NuPatch: ") + e.what());
+        }
+        PatchAttributes a = primitiveAttributes();
+        for (const BezierPatch& b : patches) addBezier(b, a);
+    }
+
+    // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted by subdivToBezier().
+    void subdivisionMesh(const Request& r) {
+        Arguments args(r, diag_);
+        args.atLeast(3, "scheme nvertices vertices [tags nargs intargs floatargs] ...parameterlist...");
+        const std::string& scheme = args.string(0);
+        std::vector<int> nverts = args.intArray(1, "nvertices");
+        std::vector<int> verts = args.intArray(2, "vertices");
+        if (!r.args[1].isArray() || !r.args[2].isArray())
+            diag_.fail(r.line, "SubdivisionMesh: nvertices and vertices must be arrays");
+        size_t start = 3;
+        SubdivMesh mesh;
+        mesh.boundary = BoundaryMode::None;  // RenderMan default without "interpolateboundary"
+        size_t total = 0;
+        for (size_t f = 0; f < nverts.size(); ++f) {
+            if (nverts[f] < 3)
+                diag_.fail(r.args[1].line, "SubdivisionMesh: face " + std::to_string(f) + " has " +
+                                               std::to_string(nverts[f]) +
+                                               " vertices; a face needs at least 3");
+            total += size_t(nverts[f]);
+        }
+        if (nverts.empty()) diag_.fail(r.args[1].line, "SubdivisionMesh: no faces");
+        if (total != verts.size())
+            diag_.fail(r.args[2].line, "SubdivisionMesh: nvertices adds up to " + std::to_string(total) +
+                                           " vertex indices, but vertices has " +
+                                           std::to_string(verts.size()));
+        int maxIndex = -1;
+        for (int v : verts) {
+            if (v < 0)
+                diag_.fail(r.args[2].line, "SubdivisionMesh: negative vertex index " + std::to_string(v));
+            maxIndex = std::max(maxIndex, v);
+        }
+        size_t npoints = size_t(maxIndex) + 1;
+        struct Tag {
+            std::string name;
+            std::vector<int> ints;
+            std::vector<double> floats;
+            int line;
+        };
+        std::vector<Tag> tags;
+        if (r.args.size() > 3 && r.args[3].isArray()) {
+            if (r.args.size() < 7)
+                diag_.fail(r.line, "SubdivisionMesh: tags need the arrays tags nargs intargs floatargs");
+            const Value& tv = r.args[3];
+            if (tv.numeric() && !tv.nums.empty())
+                diag_.fail(tv.line, "SubdivisionMesh: tags must be an array of strings");
+            std::vector<int> nargs = args.intArray(4, "nargs");
+            std::vector<int> ints = args.intArray(5, "intargs");
+            std::vector<double> floats = args.numberArray(6, "floatargs");
+            if (nargs.size() != 2 * tv.strs.size())
+                diag_.fail(r.args[4].line, "SubdivisionMesh: nargs needs 2 numbers per tag (" +
+                                               std::to_string(2 * tv.strs.size()) + "), got " +
+                                               std::to_string(nargs.size()));
+            size_t io = 0, fo = 0;
+            for (size_t t = 0; t < tv.strs.size(); ++t) {
+                int ni = nargs[2 * t], nf = nargs[2 * t + 1];
+                if (ni < 0 || nf < 0 || io + size_t(ni) > ints.size() || fo + size_t(nf) > floats.size())
+                    diag_.fail(r.args[4].line, "SubdivisionMesh: nargs for tag \"" + tv.strs[t] +
+                                                   "\" asks for more intargs/floatargs than given");
+                Tag tag{tv.strs[t],
+                        {ints.begin() + long(io), ints.begin() + long(io + size_t(ni))},
+                        {floats.begin() + long(fo), floats.begin() + long(fo + size_t(nf))},
+                        tv.line};
+                io += size_t(ni);
+                fo += size_t(nf);
+                tags.push_back(std::move(tag));
+            }
+            start = 7;
+        }
+        auto ps = parseParams(r, start, decls_, diag_, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex" || cls == "varying") return npoints;
+            if (cls == "facevarying" || cls == "facevertex") return verts.size();
+            if (cls == "uniform") return nverts.size();
+            return 1;
+        });
+        requireWorld(r);
+        if (scheme != "catmull-clark") {
+            diag_.warnOnce("subdiv:" + scheme, r.line,
+                           "SubdivisionMesh scheme \"" + scheme +
+                               "\" is not supported (only \"catmull-clark\"); "
+                               "primitive skipped");
+            return;
+        }
+        auto pts = positions(r, ps, npoints, "SubdivisionMesh");
+        if (!pts) return;
+        mesh.points = std::move(*pts);
+        mesh.faceSizes = std::move(nverts);
+        mesh.faceVerts = std::move(verts);
+        for (const Tag& t : tags) {
+            auto checkVertex = [&](int v) {
+                if (v < 0 || size_t(v) >= npoints)
+                    diag_.fail(t.line, "SubdivisionMesh: tag \"" + t.name + "\" names vertex " +
+                                           std::to_string(v) + ", outside 0.." + std::to_string(npoints - 1));
+            };
+            if (t.name == "interpolateboundary") {
+                int mode = t.ints.empty() ? 1 : t.ints[0];
+                mesh.boundary = mode == 0
+                                    ? BoundaryMode::None
+                                    : (mode == 2 ? BoundaryMode::EdgesOnly : BoundaryMode::EdgesAndCorners);
+            } else if (t.name == "crease") {
+                if (t.ints.size() < 2 || t.floats.empty())
+                    diag_.fail(t.line,
+                               "SubdivisionMesh: a \"crease\" tag needs at least 2 vertices and 1 sharpness");
+                for (int v : t.ints) checkVertex(v);
+                for (size_t i = 0; i + 1 < t.ints.size(); ++i)
+                    mesh.creases.push_back(
+                        {t.ints[i], t.ints[i + 1],
+                         float(t.floats.size() == 1 ? t.floats[0]
+                                                    : t.floats[std::min(i, t.floats.size() - 1)])});
+            } else if (t.name == "corner") {
+                if (t.floats.empty())
+                    diag_.fail(t.line, "SubdivisionMesh: a \"corner\" tag needs a sharpness");
+                for (size_t i = 0; i < t.ints.size(); ++i) {
+                    checkVertex(t.ints[i]);
+                    mesh.corners.push_back({t.ints[i], float(t.floats[std::min(i, t.floats.size() - 1)])});
+                }
+            } else if (t.name == "hole") {
+                for (int f : t.ints) {
+                    if (f < 0 || size_t(f) >= mesh.faceSizes.size())
+                        diag_.fail(t.line, "SubdivisionMesh: \"hole\" names face " + std::to_string(f) +
+                                               ", outside 0.." + std::to_string(mesh.faceSizes.size() - 1));
+                    mesh.holes.push_back(f);
+                }
+            } else {
+                diag_.warnOnce("subdivtag:" + t.name, t.line,
+                               "SubdivisionMesh tag \"" + t.name + "\" is not supported; ignored");
+            }
+        }
+        SubdivResult res;
+        try {
+            res = subdivToBezier(mesh);
+        } catch (const SubdivError& e) {
+            diag_.fail(r.line, std::string("SubdivisionMesh: ") + e.what());
+        }
+        for (const std::string& w : res.warnings)
+            diag_.warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
+        PatchAttributes a = primitiveAttributes();
+        for (const BezierPatch& b : res.patches) addBezier(b, a);
+    }
+
+  private:
+    Scene& scene_;
+    const GraphicsState& state_;
+    const Declarations& decls_;
+    Diagnostics& diag_;
+    int requestLine_;  // line of the request being read
+};
+
+}  // namespace
+
+void readPatch(const Request& r, const PrimitiveContext& c) {
+    PrimitiveReader(c, r).patch(r);
+}
+void readPatchMesh(const Request& r, const PrimitiveContext& c) {
+    PrimitiveReader(c, r).patchMesh(r);
+}
+void readNuPatch(const Request& r, const PrimitiveContext& c) {
+    PrimitiveReader(c, r).nuPatch(r);
+}
+void readSubdivisionMesh(const Request& r, const PrimitiveContext& c) {
+    PrimitiveReader(c, r).subdivisionMesh(r);
+}
+
+}  // namespace tessera::rib

@@ -1,0 +1,93 @@
+// The RIB graphics state (RI spec 3.2, sec. 4): the current attributes and transformation, the
+// stack of Frame/World/Attribute/Transform blocks that save and restore them, and the named
+// coordinate systems. Options (sec. 4.1) are frame-wide and never saved by a block here: the
+// dispatcher writes them straight into Scene::camera and Scene::image.
+#pragma once
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/basis.h"
+#include "core/transform.h"
+#include "io/rib_request.h"
+#include "scene/scene.h"
+
+namespace tessera::rib {
+
+// The current transformation, object to world inside the world block and object to camera before
+// it (RI spec 3.2, sec. 4.3). A value type saved and restored whole by the block stack; a motion
+// block (sec. 6, MotionBegin/MotionEnd) will make it hold one matrix per time key, which the
+// operations below then apply key by key. Today it holds one matrix.
+class Transform {
+  public:
+    Transform() = default;  // identity
+    explicit Transform(const Mat4& m) : matrix_(m) {}
+
+    const Mat4& matrix() const { return matrix_; }
+    // Each transformation request concatenates on the object side: CTM = CTM * m.
+    void concatenate(const Mat4& m) { matrix_ = matrix_ * m; }
+    bool isIdentity() const;
+    bool isFinite() const;
+    Vec3 point(Vec3 p) const { return matrix_.point(p); }
+
+  private:
+    Mat4 matrix_;
+};
+
+// Attributes that primitives take from the graphics state (RI spec 3.2, sec. 4.2).
+struct Attributes {
+    // The RI default surface is "defaultsurface"; matte is the closest standard shader.
+    Material surface = defaultMaterial(MaterialType::Matte);
+    float shadingRate = 1.f;
+    bool twoSided = true;      // RI default: Sides 2
+    bool rightHanded = false;  // Orientation "rh"/"inside"; the initial "outside" counts as "lh"
+    Basis uBasis = bezierBasis(), vBasis = bezierBasis();
+    std::string identifier;
+};
+
+enum class Block { Frame, World, Attribute, Transform };
+
+// The request that opens a block, e.g. "AttributeBegin".
+const char* blockName(Block b);
+
+class GraphicsState {
+  public:
+    struct Saved {
+        Block block;
+        std::string file;  // where the block was opened, for mismatch messages
+        int line;
+        Transform transform;
+        Attributes attributes;
+    };
+
+    Attributes& attributes() { return attributes_; }
+    const Attributes& attributes() const { return attributes_; }
+    Transform& transform() { return transform_; }
+    const Transform& transform() const { return transform_; }
+
+    // Opens a block at file:line, saving the attributes and the transformation.
+    void begin(Block b, const std::string& file, int line);
+    // Closes block `b` for the request `r` (e.g. AttributeEnd): an error unless `b` is the innermost
+    // open block. Transform blocks restore the transformation only, all others also the attributes.
+    void end(Block b, const Request& r, const Diagnostics& diag);
+    // WorldBegin (RI spec 3.2, sec. 4.1.1): the CTM becomes the camera transformation (stored in
+    // `camera`), the coordinate systems "camera" and "world" are defined, and the CTM is reset.
+    void beginWorld(const Request& r, Camera& camera, const Diagnostics& diag);
+
+    bool inWorld() const;
+    // The innermost open block, nullptr if none (for the end-of-file error).
+    const Saved* innermostBlock() const { return stack_.empty() ? nullptr : &stack_.back(); }
+
+    // CoordinateSystem / CoordSysTransform (RI spec 3.2, sec. 4.3.2): named copies of the CTM.
+    void defineCoordinateSystem(const std::string& name) { coordinateSystems_[name] = transform_; }
+    const Transform* coordinateSystem(const std::string& name) const;
+
+  private:
+    Attributes attributes_;
+    Transform transform_;
+    std::vector<Saved> stack_;
+    std::map<std::string, Transform> coordinateSystems_;
+};
+
+}  // namespace tessera::rib
