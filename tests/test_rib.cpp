@@ -349,9 +349,9 @@ TEST(RibLights, StandardLightsInWorldSpace) {
 }
 
 TEST(RibLights, UnsupportedLightAndIlluminateWarn) {
-    Loaded l = load(scene("", "LightSource \"spotlight\" 1\nIlluminate 1 0\nIlluminate 1 1"));
+    Loaded l = load(scene("", "LightSource \"arealight\" 1\nIlluminate 1 0\nIlluminate 1 1"));
     EXPECT_TRUE(l.scene.lights.empty());
-    EXPECT_EQ(countWarnings(l.warnings, "spotlight"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "arealight"), 1);
     EXPECT_EQ(countWarnings(l.warnings, "Illuminate"), 1);
 }
 

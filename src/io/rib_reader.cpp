@@ -388,6 +388,9 @@ class RibReader {
         light.color = params.lightcolor * params.intensity;
         light.from = state_.transform().point(params.from);
         light.to = state_.transform().point(params.to);
+        light.coneAngle = params.coneangle;
+        light.coneDeltaAngle = params.conedeltaangle;
+        light.beamDistribution = params.beamdistribution;
         if (!isFinite(light.color) || !isFinite(light.from) || !isFinite(light.to))
             diag_.fail(
                 r.line,

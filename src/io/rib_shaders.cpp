@@ -29,6 +29,10 @@ constexpr SurfaceParam kPlasticParams[] = {kKa, kKd, kKs, kRoughness, kSpecularC
                                            kKt, kEta};
 constexpr SurfaceParam kMetalParams[] = {kKa, kKs, kRoughness, /* also */ kKd, kSpecularColor,
                                          kKr, kKt, kEta};
+// shinymetal's texturename and paintedplastic's texturename are strings for the texture work to come: until
+// then they are warned about and ignored like any parameter without a row.
+constexpr SurfaceParam kShinyMetalParams[] = {kKa, kKs, kKr, kRoughness, /* also */ kKd, kSpecularColor,
+                                              kKt, kEta};
 constexpr SurfaceParam kConstantParams[] = {/* also */ kKa, kKd, kKs, kRoughness,
                                             kSpecularColor, kKr, kKt, kEta};
 constexpr SurfaceParam kMirrorParams[] = {kKr,        /* also */ kKa, kKd, kKs,
@@ -40,6 +44,8 @@ constexpr SurfaceShader kSurfaceShaders[] = {
     {"matte", MaterialType::Matte, kMatteParams},    {"plastic", MaterialType::Plastic, kPlasticParams},
     {"metal", MaterialType::Metal, kMetalParams},    {"constant", MaterialType::Constant, kConstantParams},
     {"mirror", MaterialType::Mirror, kMirrorParams}, {"glass", MaterialType::Glass, kGlassParams},
+    {"shinymetal", MaterialType::ShinyMetal, kShinyMetalParams},
+    {"paintedplastic", MaterialType::PaintedPlastic, kPlasticParams},
 };
 
 // Light parameters (RI spec 3.2, appendix A): "from" is the position of point and distant lights,
@@ -52,11 +58,17 @@ constexpr LightParam kTo{"to", kPoint, &LightShaderParams::to};
 constexpr LightParam kAmbientParams[] = {kIntensity, kLightColor};
 constexpr LightParam kDistantParams[] = {kIntensity, kLightColor, kFrom, kTo};
 constexpr LightParam kPointParams[] = {kIntensity, kLightColor, kFrom};
+constexpr LightParam kConeAngle{"coneangle", &LightShaderParams::coneangle};
+constexpr LightParam kConeDeltaAngle{"conedeltaangle", &LightShaderParams::conedeltaangle};
+constexpr LightParam kBeamDistribution{"beamdistribution", &LightShaderParams::beamdistribution};
+constexpr LightParam kSpotParams[] = {kIntensity, kLightColor,     kFrom,           kTo,
+                                      kConeAngle, kConeDeltaAngle, kBeamDistribution};
 
 constexpr LightShader kLightShaders[] = {
     {"ambientlight", LightType::Ambient, kAmbientParams},
     {"distantlight", LightType::Distant, kDistantParams},
     {"pointlight", LightType::Point, kPointParams},
+    {"spotlight", LightType::Spot, kSpotParams},
 };
 
 template <class Shader>

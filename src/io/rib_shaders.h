@@ -46,6 +46,8 @@ struct LightShaderParams {
     Color lightcolor{1, 1, 1};
     Vec3 from{0, 0, 0};
     Vec3 to{0, 0, 1};
+    // spotlight: radians(30), radians(5), 2
+    float coneangle = 0.5235988f, conedeltaangle = 0.0872665f, beamdistribution = 2.f;
 };
 
 struct LightShader {
