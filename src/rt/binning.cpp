@@ -8,6 +8,7 @@
 namespace tessera::rt {
 namespace {
 
+// The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
 // ray's candidates sorted by entry distance (stable), in the chunks of kChunk rays the Newton stage
 // expects (the traversal's output format). `start`, `next`: scratch.
 void groupCandidates(const std::vector<Candidate>& found, size_t n, std::vector<uint32_t>& start,
@@ -101,8 +102,8 @@ void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, S
     }
 }
 
-// ray and box; ties in entry distance keep this stage's order instead of the traversal's.
-
+// Raster rectangle containing the projection of box b, grown for rounding (the rays' own raster
+// positions are rounded too); false when the box reaches behind the eye (no finite rectangle).
 inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
     x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
     for (int c = 0; c < 8; ++c) {

@@ -17,6 +17,7 @@ namespace tessera::rt {
 // candidates; a candidate whose leaf rectangle contains a root already found on the same patch for this
 // ray is skipped (its start would converge to that root again); the surface derivatives are evaluated
 // once per ray, at the closest hit. Results do not depend on which lane a ray runs in.
+//
 // Each ray follows its kind's rules (optionsFor; `cull`: --cull-backfaces for camera rays); `anyHit` makes
 // every ray stop at its first accepted hit. Runs tbb over the chunks.
 void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks,

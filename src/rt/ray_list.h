@@ -96,6 +96,8 @@ inline void sortSegmentByEntry(Candidate* cand, size_t begin, size_t end) {
     }
 }
 
+// The candidates of kChunk consecutive rays of a list (chunk ci: rays ci * kChunk ..), grouped by ray: the
+// output of every candidate stage and the input of the Newton stage.
 struct Chunk {
     // Written through a raw pointer by the traversal (grown without zeroing), read by index.
     std::vector<Candidate, DefaultInitAllocator<Candidate>> cand;
@@ -103,6 +105,7 @@ struct Chunk {
     StageCounters c;               // counters of this chunk (merged in chunk order)
 };
 
+// The rules of a ray of `kind` (`cull`: --cull-backfaces), as the scalar path's TraceOptions.
 inline TraceOptions optionsFor(uint8_t kind, uint32_t ignore, float offset, bool cull) {
     TraceOptions o;
     o.anyHit = kind == kShadow;

@@ -34,6 +34,7 @@ namespace rt {
 // turns into the same order as hit order would. For an odd depth the nodes of the last level above the
 // leaves test their two children as a pair. Where the CPU has AVX2, the whole chunk runs AVX2 code (two
 // quads per 8-wide test); the results are the same.
+//
 // `cull`: camera rays skip back-facing subpatches (--cull-backfaces). Runs tbb over chunks of kChunk rays.
 void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull);
 
