@@ -877,25 +877,26 @@ TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
             hitCount += got;
             if (got != hits[r].hit || (got && !(std::fabs(h.h.t - hits[r].h.t) <= 1e-4f * size))) ++disagree;
         }
+        // Occluded rays per the scalar path, and how many of `blocked` disagree.
+        auto countOccluded = [&](const RayList& rl, const std::vector<uint8_t>& blocked, int& disagreeing) {
+            int occluded = 0;
+            disagreeing = 0;
+            for (size_t r = 0; r < rl.size(); ++r) {
+                RayHit h;
+                const bool got = scalar(rl, r, h);
+                occluded += got;
+                disagreeing += got != bool(blocked[r]);
+            }
+            return occluded;
+        };
         std::vector<uint8_t> blocked, blockedBinned, blockedPerRay;
         perRay.occluded(shadow, blocked);
-        int occ = 0, disagreeOcc = 0;
-        for (size_t r = 0; r < shadow.size(); ++r) {
-            RayHit h;
-            const bool got = scalar(shadow, r, h);
-            occ += got;
-            disagreeOcc += got != bool(blocked[r]);
-        }
+        int disagreeOcc = 0, disagreeBinned = 0;
+        const int occ = countOccluded(shadow, blocked, disagreeOcc);
         binned.occluded(shadowBinned, runs, blockedBinned);
         perRay.occluded(shadowBinned, blockedPerRay);
-        int occBinned = 0, disagreeBinned = 0;
-        for (size_t r = 0; r < shadowBinned.size(); ++r) {
-            RayHit h;
-            const bool got = scalar(shadowBinned, r, h);
-            occBinned += got;
-            disagreeBinned += got != bool(blockedBinned[r]);
-            EXPECT_EQ(blockedBinned[r], blockedPerRay[r]) << name << " shadow ray " << r;  // same candidates
-        }
+        const int occBinned = countOccluded(shadowBinned, blockedBinned, disagreeBinned);
+        EXPECT_EQ(blockedBinned, blockedPerRay) << name << ": binned and per-ray shadow rays differ";
         std::printf(
             "%s: trace %d/%zu hits, %d disagree; occluded %d/%zu, %d disagree; binned %d/%zu, %d "
             "disagree (binned lists %llu)\n",
