@@ -22,7 +22,7 @@
 #include "film/film.h"
 #include "io/image_io.h"
 #include "io/scene_loader.h"
-#include "scene/shading.h"
+#include "shading/surface.h"
 
 using namespace tessera;
 using Clock = std::chrono::steady_clock;
@@ -203,22 +203,31 @@ int main(int argc, char** argv) {
                 const Material& m = scene.materials[attr.material];
                 Vec3 Ng = normalize(Vec3{rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z});
                 Vec3 offset = (dot(Ng, dir) < 0 ? Ng : -Ng) * (1e-3f * std::max(1.f, length(P - eye)));
-                Color c = shadeLocal(m, P, N, dir, lights, [&](size_t li, Vec3, Vec3 L, float dist) -> float {
-                    if (!shadows) return 1.f;
+                // The same light samples and surface shading as Tessera's engines (src/shading); the
+                // visibility queries are answered by Embree's occlusion rays.
+                LightSample samples[64];
+                float vis[64];
+                const size_t nL = std::min<size_t>(lights.size(), 64);
+                const Vec3 Nf = faceForward(N, dir);
+                for (size_t li = 0; li < nL; ++li) {
+                    samples[li] = sampleLight(lights[li], P);
+                    vis[li] = 1.f;
+                    const LightSample& ls = samples[li];
+                    if (!shadows || !ls.valid || ls.ambient || dot(Nf, ls.L) <= 0.f) continue;
                     RTCRay sr{};
                     Vec3 o = P + offset;
                     sr.org_x = o.x, sr.org_y = o.y, sr.org_z = o.z;
-                    sr.dir_x = L.x, sr.dir_y = L.y, sr.dir_z = L.z;
+                    sr.dir_x = ls.L.x, sr.dir_y = ls.L.y, sr.dir_z = ls.L.z;
                     sr.tnear = 0.f;
-                    sr.tfar = std::isfinite(dist) ? dist * 0.9999f : std::numeric_limits<float>::infinity();
+                    sr.tfar = std::isfinite(ls.dist) ? ls.dist * 0.9999f : std::numeric_limits<float>::infinity();
                     sr.mask = 0xffffffff;
                     RTCIntersectContext sctx;
                     rtcInitIntersectContext(&sctx);
                     rtcOccluded1(rscene, &sctx, &sr);
                     ++nShadow;
-                    (void)li;
-                    return sr.tfar < 0.f ? 0.f : 1.f;
-                });
+                    vis[li] = sr.tfar < 0.f ? 0.f : 1.f;
+                }
+                Color c = shadeSurfacePoint(m, N, dir, samples, vis, nL);
                 tile.r[i] = c.x, tile.g[i] = c.y, tile.b[i] = c.z, tile.a[i] = 1.f;
                 tile.z[i] = rh.ray.tfar;
                 tile.pixelHit[i / tile.spp] = 1;

@@ -817,3 +817,100 @@ TEST(RtHierarchy, LeafMaxCoefficientBoundsTheLeaf) {
     }
     EXPECT_GT(leaves, 500);
 }
+
+TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
+    // The trace service over random ray lists through the teapot and the killeroo: trace() (closest hit,
+    // camera and secondary rules) and occluded() (any hit; per ray, and binned light by light for a
+    // distant and a point light) against traceRayScalar ray by ray.
+    using namespace tessera::rt;
+    for (const char* name : {"teapot", "killeroo"}) {
+        const Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib",
+                                  [](const std::string&) {});
+        RtAccel acc;
+        buildRtAccel(s, s.camera.cameraFromWorld, 6, false, acc);
+        const Vec3 lo = acc.bounds.lo, hi = acc.bounds.hi, c = (lo + hi) * 0.5f;
+        const float size = length(hi - lo);
+        std::mt19937 rng(5);
+        std::uniform_real_distribution<float> U(0.f, 1.f);
+        auto inBox = [&](float grow) {
+            const Vec3 q{U(rng), U(rng), U(rng)};
+            return c + Vec3{(hi.x - lo.x) * (q.x - 0.5f), (hi.y - lo.y) * (q.y - 0.5f),
+                            (hi.z - lo.z) * (q.z - 0.5f)} *
+                           grow;
+        };
+        const int n = 1500;
+        const Vec3 lightDir = normalize(Vec3{0.3f, -0.8f, -0.5f}),
+                   lightPos = c + Vec3{0.2f, 0.9f, -0.6f} * size;
+        RayList closest, shadow, shadowBinned;
+        for (int i = 0; i < n; ++i) {
+            // Closest hit: camera rules (one-sided) for the first half, secondary rules for the rest.
+            const Vec3 o = inBox(2.5f), d = normalize(inBox(0.8f) - o);
+            closest.push(o, d, 0.f, INFINITY, 0, {1, 1, 1}, kNone, i < n / 2 ? kPrimary : kReflection, 0);
+            // Any hit over a finite segment from inside the box.
+            const Vec3 so = inBox(1.f), sd = normalize(inBox(1.f) - so);
+            shadow.push(so, sd, 0.f, 0.5f * size * U(rng), 0, {}, kNone, kShadow, 0);
+        }
+        // Shadow rays towards a distant light (one direction), then towards a point light.
+        for (int i = 0; i < n; ++i) {
+            const Vec3 o = inBox(1.f);
+            shadowBinned.push(o, -lightDir, 0.f, INFINITY, 0, {}, kNone, kShadow, 0);
+        }
+        for (int i = 0; i < n; ++i) {
+            const Vec3 o = inBox(1.f), toL = lightPos - o;
+            shadowBinned.push(o, normalize(toL), 0.f, length(toL), 0, {}, kNone, kShadow, 0);
+        }
+        const std::vector<ShadowRun> runs = {{0, size_t(n), false, {}},
+                                             {size_t(n), size_t(2 * n), true, lightPos}};
+
+        auto scalar = [&](const RayList& rl, size_t r, RayHit& h) {
+            const TraceOptions opt = optionsFor(rl.kind[r], rl.ignore[r], acc.offset, false);
+            return traceRayScalar(acc, Ray{rl.o[r], rl.d[r], rl.tmin[r], rl.tmax[r]}, opt, h);
+        };
+        TraceService perRay(acc), binned(acc, {false, true});
+        std::vector<RayHit> hits;
+        perRay.trace(closest, hits);
+        ASSERT_EQ(hits.size(), closest.size());
+        int hitCount = 0, disagree = 0;
+        for (size_t r = 0; r < closest.size(); ++r) {
+            RayHit h;
+            const bool got = scalar(closest, r, h);
+            hitCount += got;
+            if (got != hits[r].hit || (got && !(std::fabs(h.h.t - hits[r].h.t) <= 1e-4f * size))) ++disagree;
+        }
+        // Occluded rays per the scalar path, and how many of `blocked` disagree.
+        auto countOccluded = [&](const RayList& rl, const std::vector<uint8_t>& blocked, int& disagreeing) {
+            int occluded = 0;
+            disagreeing = 0;
+            for (size_t r = 0; r < rl.size(); ++r) {
+                RayHit h;
+                const bool got = scalar(rl, r, h);
+                occluded += got;
+                disagreeing += got != bool(blocked[r]);
+            }
+            return occluded;
+        };
+        std::vector<uint8_t> blocked, blockedBinned, blockedPerRay;
+        perRay.occluded(shadow, blocked);
+        int disagreeOcc = 0, disagreeBinned = 0;
+        const int occ = countOccluded(shadow, blocked, disagreeOcc);
+        binned.occluded(shadowBinned, runs, blockedBinned);
+        perRay.occluded(shadowBinned, blockedPerRay);
+        const int occBinned = countOccluded(shadowBinned, blockedBinned, disagreeBinned);
+        EXPECT_EQ(blockedBinned, blockedPerRay) << name << ": binned and per-ray shadow rays differ";
+        std::printf(
+            "%s: trace %d/%zu hits, %d disagree; occluded %d/%zu, %d disagree; binned %d/%zu, %d "
+            "disagree (binned lists %llu)\n",
+            name, hitCount, closest.size(), disagree, occ, shadow.size(), disagreeOcc, occBinned,
+            shadowBinned.size(), disagreeBinned, (unsigned long long)binned.counters().shadowListsBinned);
+        EXPECT_GT(hitCount, n / 4);
+        EXPECT_GT(occ, n / 20);
+        EXPECT_GT(occBinned, n / 20);
+        EXPECT_EQ(binned.counters().shadowListsBinned, 1u);
+        // Float Newton from other starts than the scalar path's: allow a grazing ray or two in a thousand.
+        EXPECT_LE(disagree, n / 500);
+        EXPECT_LE(disagreeOcc, n / 500);
+        EXPECT_LE(disagreeBinned, n / 250);
+        EXPECT_EQ(perRay.counters().rays[kPrimary], uint64_t(n / 2));
+        EXPECT_EQ(perRay.counters().rays[kShadow], uint64_t(n + 2 * n));
+    }
+}

@@ -25,8 +25,13 @@ void sampleLights(std::span<const ShadingLight> lights, std::span<const Material
 
 void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
                    Color* Ci) {
+    shadeSurfaces(materials, points, ls, 0, points.count, Ci);
+}
+
+void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
+                   size_t begin, size_t end, Color* Ci) {
     const size_t nL = ls.lights;
-    for (size_t i = 0; i < points.count; ++i)
+    for (size_t i = begin; i < end; ++i)
         Ci[i] = shadeSurfacePoint(materials[points.materialOf(i)], points.N[i], points.I[i], &ls.sample[i * nL],
                                   &ls.visibility[i * nL], nL);
 }

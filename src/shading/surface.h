@@ -51,6 +51,9 @@ void sampleLights(std::span<const ShadingLight> lights, std::span<const Material
 // traced lobes of mirror and glass come from tracedLobes()).
 void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
                    Color* Ci);
+// The same for points [begin, end) of the batch (Ci indexed like the batch), for parallel loops.
+void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
+                   size_t begin, size_t end, Color* Ci);
 
 // The local response of one point: shared by the batch loop and by tests that check both engines get the
 // same radiance for the same hit.

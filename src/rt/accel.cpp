@@ -1,0 +1,88 @@
+#include "rt/accel.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace tessera {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+}  // namespace
+
+Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
+    Vec3 N = cross(h.dpdu, h.dpdv);
+    const float scale = dot(h.dpdu, h.dpdu) + dot(h.dpdv, h.dpdv);
+    if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(acc.patches[patch], h.u, h.v);
+    N = normalize(N);
+    if (!isFinite(N) || dot(N, N) == 0.f) N = Vec3{0, 0, 1};
+    return acc.flip[patch] ? -N : N;
+}
+
+void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
+                  RtAccel& acc) {
+    const size_t n = scene.patches.size();
+    acc.patches.resize(n);
+    acc.flip.resize(n);
+    acc.twoSided.resize(n);
+    acc.material.resize(n);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        // Surface kinds: the accel holds bicubic Bezier patches (the subpatch trees and the Newton stage are
+        // written for them); a new kind gets its case here and its own bound/intersect stage.
+        switch (scene.attributes[i].kind) {
+            case SurfaceKind::BicubicBezier:
+                for (int k = 0; k < 16; ++k) acc.patches[i].cp[k] = toSpace.point(scene.patches[i].cp[k]);
+                break;
+        }
+        acc.flip[i] = scene.attributes[i].flipNormal;
+        acc.twoSided[i] = scene.attributes[i].twoSided;
+        acc.material[i] = scene.attributes[i].material;
+    });
+    auto t0 = Clock::now();
+    buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip);
+    acc.subpatchMs = msSince(t0);
+    acc.patchSoa.resize(n);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        PatchSoa& ps = acc.patchSoa[i];
+        for (int k = 0; k < 16; ++k)
+            ps.x[k] = acc.patches[i].cp[k].x, ps.y[k] = acc.patches[i].cp[k].y,
+            ps.z[k] = acc.patches[i].cp[k].z;
+        const Bounds3& b = acc.forest.tree(uint32_t(i))[0];
+        float mag = 0.f;
+        for (int k = 0; k < 3; ++k) mag = std::max({mag, std::fabs(b.lo[k]), std::fabs(b.hi[k])});
+        ps.boxMagnitude = mag;
+        ps.boxExtent = maxComponent(b.diagonal());
+    });
+    auto t1 = Clock::now();
+    // Patches with non-finite control points (possible in scenes built in code; the loaders reject them)
+    // are left out of the BVH, so no ray ever reaches them.
+    std::vector<Bounds3> roots;
+    std::vector<uint32_t> ids;
+    Bounds3 all;
+    for (size_t i = 0; i < n; ++i) {
+        const Bounds3& b = acc.forest.tree(uint32_t(i))[0];
+        if (!isFinite(b.lo) || !isFinite(b.hi)) continue;
+        roots.push_back(b);
+        ids.push_back(uint32_t(i));
+        all.extend(b);
+    }
+    buildBvh(roots, acc.bvh);
+    for (uint32_t& p : acc.bvh.prims) p = ids[p];
+    std::vector<Bounds3> patchBox(n);
+    for (size_t i = 0; i < n; ++i) patchBox[i] = acc.forest.tree(uint32_t(i))[0];
+    collapseBvh4(acc.bvh, patchBox);
+    acc.bounds = all;
+    acc.bvhMs = msSince(t1);
+    float mag = 0.f;
+    if (!all.empty())
+        for (int k = 0; k < 3; ++k) mag = std::max({mag, std::fabs(all.lo[k]), std::fabs(all.hi[k])});
+    acc.offset = 2e-5f * mag + 1e-6f;
+}
+
+}  // namespace tessera

@@ -1,0 +1,465 @@
+#include "rt/binning.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "rt/simd_kernels.h"
+
+namespace tessera::rt {
+namespace {
+
+// The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
+// ray's candidates sorted by entry distance (stable), in the chunks of kChunk rays the Newton stage
+// expects (the traversal's output format). `start`, `next`: scratch.
+void groupCandidates(const std::vector<Candidate>& found, size_t n, std::vector<uint32_t>& start,
+                     std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests,
+                     bool sortByEntry = true) {
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    if (chunks.size() < nChunks) chunks.resize(nChunks);
+    // start[r]: first candidate of ray r; start[n]: total
+    start.assign(n + 1, 0);
+    for (const Candidate& c : found) ++start[c.ray + 1];
+    for (size_t r = 0; r < n; ++r) start[r + 1] += start[r];
+    next.assign(start.begin(), start.end() - 1);
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        Chunk& ch = chunks[ci];
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        ch.cand.resize(start[r1] - start[r0]);
+        ch.segEnd.resize(r1 - r0);
+        for (size_t r = r0; r < r1; ++r) ch.segEnd[r - r0] = start[r + 1] - start[r0];
+        ch.c = StageCounters();
+        ch.c.candidates = ch.cand.size();
+    }
+    if (nChunks > 0) chunks[0].c.boxTests = boxTests;
+    for (const Candidate& c : found) {
+        const size_t ci = c.ray / kChunk;
+        chunks[ci].cand[next[c.ray]++ - start[ci * kChunk]] = c;
+    }
+    if (!sortByEntry) return;
+    for (size_t ci = 0; ci < nChunks; ++ci) {
+        Candidate* cd = chunks[ci].cand.data();
+        const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+        for (size_t r = r0; r < r1; ++r)
+            sortSegmentByEntry(cd, start[r] - start[r0], start[r + 1] - start[r0]);
+    }
+}
+
+// Visits the leaf boxes of every patch top down, through the 4-wide BVH and then each subpatch tree,
+// children in increasing `nearKey(box)` (so each ray's candidates come out nearly sorted), dropping every
+// box that `overlaps(box, rect)` rejects (it also yields the box's clipped rectangle) and every subpatch
+// node that `skip(patch, node)` rejects; `leaf(patch, node, box, rect)` gets the rest.
+template <class NearKey, class Overlaps, class Skip, class Leaf>
+void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, Skip&& skip, Leaf&& leaf) {
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    auto visitPatch = [&](uint32_t patch) {
+        const Bounds3* tree = forest.tree(patch);
+        uint32_t stack[64];
+        int sp = 0;
+        stack[sp++] = 0;
+        while (sp > 0) {
+            const uint32_t n = stack[--sp];
+            if (skip(patch, n)) continue;
+            Rect2 rect;
+            if (!overlaps(tree[n], rect)) continue;
+            if (n >= firstLeaf) {
+                leaf(patch, n, tree[n], rect);
+                continue;
+            }
+            const bool lowFirst = nearKey(tree[2 * n + 1]) <= nearKey(tree[2 * n + 2]);
+            stack[sp++] = lowFirst ? 2 * n + 2 : 2 * n + 1;
+            stack[sp++] = lowFirst ? 2 * n + 1 : 2 * n + 2;
+        }
+    };
+    uint32_t stack[kBvh4Stack];
+    int sp = 0;
+    if (!acc.bvh.wide.empty()) stack[sp++] = 0;
+    while (sp > 0) {
+        const Bvh4Node& nd = acc.bvh.wide[stack[--sp]];
+        Bounds3 box[4];
+        float key[4];
+        uint32_t order[4] = {0, 1, 2, 3};
+        for (uint32_t c = 0; c < nd.count; ++c) {
+            box[c].lo = {nd.lo[0][c], nd.lo[1][c], nd.lo[2][c]};
+            box[c].hi = {nd.hi[0][c], nd.hi[1][c], nd.hi[2][c]};
+            key[c] = nearKey(box[c]);
+        }
+        for (uint32_t i = 1; i < nd.count; ++i)
+            for (uint32_t j = i; j > 0 && key[order[j]] < key[order[j - 1]]; --j)
+                std::swap(order[j], order[j - 1]);
+        // Patches are visited in this order; inner nodes are pushed far first.
+        uint32_t inner[4], nInner = 0;
+        for (uint32_t k = 0; k < nd.count; ++k) {
+            const uint32_t c = order[k];
+            Rect2 rect;
+            if (!overlaps(box[c], rect)) continue;
+            if (nd.child[c] & kBvh4Patch)
+                visitPatch(nd.child[c] & ~kBvh4Patch);
+            else
+                inner[nInner++] = nd.child[c];
+        }
+        while (nInner > 0) stack[sp++] = inner[--nInner];
+    }
+}
+
+// Raster rectangle containing the projection of box b, grown for rounding (the rays' own raster
+// positions are rounded too); false when the box reaches behind the eye (no finite rectangle).
+inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
+    x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
+    for (int c = 0; c < 8; ++c) {
+        const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
+        if (proj.perspective && !(p.z > 0.f)) return false;
+        const Vec3 r = proj.toRaster(p);
+        x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+    }
+    const float m = 1e-2f + 1e-5f * std::max({std::fabs(x0), std::fabs(x1), std::fabs(y0), std::fabs(y1)});
+    x0 -= m, x1 += m, y0 -= m, y1 += m;
+    return std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1);
+}
+
+// Rays that share one direction (shadow rays towards a distant light): the traversal stage by binning
+// in the plane orthogonal to the direction. A ray projects to a point there, and it can only hit a box
+// whose projection contains that point, so the rays' points are sorted into a grid, the BVH and subpatch
+// boxes are culled top down by their projected bounding rectangles against the points' bounds, and each
+// leaf box is slab-tested (the traversal's arithmetic, with its self-intersection cut) against the rays
+// in the grid cells its rectangle covers. Candidates are the traversal's; appended to `found` unordered.
+
+bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t r1, ParallelBinning& pb,
+                     std::vector<Candidate>& found, uint64_t& boxTests, const Vec3* light = nullptr) {
+    const size_t n = r1 - r0;
+    if (n == 0) return true;
+    // Projection: along the shared direction, or (point light) centrally from the light onto a plane
+    // orthogonal to the mean direction from the light to the origins. Every point of a shadow ray lies
+    // on the segment from its origin towards the light, so it projects to the origin's point.
+    const Vec3 C = light ? *light : Vec3{0, 0, 0};
+    Vec3 w;
+    if (light) {
+        Vec3 sum{0, 0, 0};
+        for (size_t r = r0; r < r1; ++r) sum += normalize(rays.o[r] - C);
+        w = normalize(sum);
+        // Every origin well in front of the light's plane (else: the per-ray traversal).
+        for (size_t r = r0; r < r1; ++r) {
+            const Vec3 q = rays.o[r] - C;
+            if (!(dot(w, q) > 0.05f * length(q))) return false;
+        }
+    } else {
+        w = normalize(rays.d[r0]);
+    }
+    if (!isFinite(w) || dot(w, w) == 0.f) return false;
+    const Vec3 a = std::fabs(w.x) > 0.9f ? Vec3{0, 1, 0} : Vec3{1, 0, 0};
+    const Vec3 eu = normalize(cross(a, w)), ev = cross(w, eu);
+    auto project = [&](Vec3 x, float& px, float& py) {
+        if (light) {
+            const Vec3 q = x - C;
+            const float iz = 1.f / dot(w, q);
+            px = dot(eu, q) * iz, py = dot(ev, q) * iz;
+        } else {
+            px = dot(eu, x), py = dot(ev, x);
+        }
+    };
+    // Points and their bounds; the grid: about 4 rays per cell.
+    float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+    for (size_t r = r0; r < r1; ++r) {
+        float x, y;
+        project(rays.o[r], x, y);
+        x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+    }
+    if (!(std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))) return false;
+    const int g = std::clamp(int(std::sqrt(double(n) / 4.0)), 1, 1024);
+    const float cw = std::max((x1 - x0) / float(g), 1e-30f), ch = std::max((y1 - y0) / float(g), 1e-30f);
+    auto cellX = [&](float x) { return int(std::clamp((x - x0) / cw, 0.f, float(g - 1))); };
+    auto cellY = [&](float y) { return int(std::clamp((y - y0) / ch, 0.f, float(g - 1))); };
+    pb.cellStart.assign(size_t(g) * g + 1, 0);
+    pb.cellOf.resize(n);
+    for (size_t r = r0; r < r1; ++r) {
+        float x, y;
+        project(rays.o[r], x, y);
+        const uint32_t c = uint32_t(cellY(y) * g + cellX(x));
+        pb.cellOf[r - r0] = c;
+        ++pb.cellStart[c + 1];
+    }
+    // Summed-area table of the rays per cell: a box whose rectangle covers no ray is culled at once
+    // (a tile's points often form separate clusters in the light's view).
+    pb.sat.assign(size_t(g + 1) * (g + 1), 0);
+    for (int cy = 0; cy < g; ++cy)
+        for (int cx = 0; cx < g; ++cx)
+            pb.sat[size_t(cy + 1) * (g + 1) + cx + 1] =
+                pb.cellStart[size_t(cy) * g + cx + 1] + pb.sat[size_t(cy) * (g + 1) + cx + 1] +
+                pb.sat[size_t(cy + 1) * (g + 1) + cx] - pb.sat[size_t(cy) * (g + 1) + cx];
+    for (size_t c = 0; c < size_t(g) * g; ++c) pb.cellStart[c + 1] += pb.cellStart[c];
+    for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.ix, &pb.iy, &pb.iz, &pb.tmin, &pb.tmax})
+        v->assign(n + 4, 0.f);
+    std::fill(pb.px.begin() + n, pb.px.end(), NAN);  // padding: never inside a rectangle
+    pb.ray.assign(n + 4, 0), pb.ignore.assign(n + 4, kNone);
+    {
+        std::vector<uint32_t>& next = pb.cellOf;  // reused: cell -> next slot, after reading the cell
+        std::vector<uint32_t> slot(pb.cellStart.begin(), pb.cellStart.end() - 1);
+        for (size_t r = r0; r < r1; ++r) {
+            const uint32_t s = slot[next[r - r0]]++;
+            const Vec3 o = rays.o[r];
+            const Vec3 inv = safeInverse(rays.d[r]);
+            pb.ray[s] = uint32_t(r), pb.ignore[s] = rays.ignore[r];
+            project(o, pb.px[s], pb.py[s]);
+            pb.ox[s] = o.x, pb.oy[s] = o.y, pb.oz[s] = o.z;
+            pb.ix[s] = inv.x, pb.iy[s] = inv.y, pb.iz[s] = inv.z;
+            pb.tmin[s] = rays.tmin[r], pb.tmax[s] = rays.tmax[r];
+        }
+    }
+    // Where each ray starts along its way (increasing towards the light): a box entirely before the
+    // starts of all the rays in its rectangle cannot be hit. Per cell the smallest start, and a min
+    // pyramid over the cells (2x2 blocks per level) for rectangles of any size.
+    auto startOf = [&](Vec3 p) { return light ? -dot(w, p - C) : dot(w, p); };
+    pb.minStart.assign(1, std::vector<float>(size_t(g) * g, INFINITY));
+    for (size_t s = 0; s < n; ++s) {
+        const uint32_t c = uint32_t(cellY(pb.py[s]) * g + cellX(pb.px[s]));
+        float& m = pb.minStart[0][c];
+        m = std::min(m, startOf(Vec3{pb.ox[s], pb.oy[s], pb.oz[s]}));
+    }
+    for (int gk = g; gk > 1;) {
+        const int gn = (gk + 1) / 2;
+        const std::vector<float>& lower = pb.minStart.back();
+        std::vector<float> upper(size_t(gn) * gn, INFINITY);
+        for (int y = 0; y < gk; ++y)
+            for (int x = 0; x < gk; ++x) {
+                float& m = upper[size_t(y / 2) * gn + x / 2];
+                m = std::min(m, lower[size_t(y) * gk + x]);
+            }
+        pb.minStart.push_back(std::move(upper));
+        gk = gn;
+    }
+    auto minStartIn = [&](int cx0, int cx1, int cy0, int cy1) {
+        int k = 0;
+        while ((cx1 >> k) - (cx0 >> k) > 1 || (cy1 >> k) - (cy0 >> k) > 1) ++k;
+        const std::vector<float>& lv = pb.minStart[size_t(k)];
+        const int gk = (g + (1 << k) - 1) >> k;
+        float m = INFINITY;
+        for (int y = cy0 >> k; y <= (cy1 >> k); ++y)
+            for (int x = cx0 >> k; x <= (cx1 >> k); ++x) m = std::min(m, lv[size_t(y) * gk + x]);
+        return m;
+    };
+    const Vec3 d = light ? -w : rays.d[r0];  // visit order: nearer boxes along the rays first
+    // Point light: the magnitude of the coordinates involved (the light, the origins), for the margins.
+    float reach = maxComponent(Vec3{std::fabs(C.x), std::fabs(C.y), std::fabs(C.z)});
+    if (light)
+        for (size_t r = r0; r < r1; ++r) reach = std::max(reach, length(rays.o[r] - C));
+    const float ignoreT = 8.f * acc.offset;
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+
+    // Projected bounding rectangle of a box, grown for rounding, clipped to the points' bounds.
+    auto overlaps = [&](const Bounds3& b, Rect2& rect) {
+        float rx0 = INFINITY, rx1 = -INFINITY, ry0 = INFINITY, ry1 = -INFINITY;
+        int behind = 0;
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
+            if (light && !(dot(w, p - C) > 0.f)) {
+                ++behind;
+                continue;
+            }
+            float x, y;
+            project(p, x, y);
+            rx0 = std::min(rx0, x), rx1 = std::max(rx1, x), ry0 = std::min(ry0, y), ry1 = std::max(ry1, y);
+        }
+        if (behind == 8) return false;  // behind the light: no segment towards it gets there
+        if (behind > 0) {               // around the light's plane: any ray may hit it
+            rect = {x0, x1, y0, y1};
+            return true;
+        }
+        float m = 1e-5f * std::max({std::fabs(rx0), std::fabs(rx1), std::fabs(ry0), std::fabs(ry1), rx1 - rx0,
+                                    ry1 - ry0}) +
+                  1e-30f;
+        if (light) {
+            // Central projection: rounding of a ray point at distance h from the light moves its projection
+            // by ~ulp(coordinates) / h, largest at the box's nearest corner.
+            float h = INFINITY;
+            for (int c = 0; c < 8; ++c)
+                h = std::min(h, dot(w, Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y,
+                                            c & 4 ? b.hi.z : b.lo.z} -
+                                           C));
+            m += 1e-6f * reach / h;
+        }
+        rx0 -= m, rx1 += m, ry0 -= m, ry1 += m;
+        rect = {rx0, rx1, ry0, ry1};
+        if (!(std::isfinite(rx0) && std::isfinite(rx1) && std::isfinite(ry0) && std::isfinite(ry1))) {
+            rect = {x0, x1, y0, y1};  // (nearly) on the light's plane: any ray may hit it
+            return true;
+        }
+        if (!(rx0 <= x1 && rx1 >= x0 && ry0 <= y1 && ry1 >= y0)) return false;
+        const int cx0 = cellX(rx0), cx1 = cellX(rx1), cy0 = cellY(ry0), cy1 = cellY(ry1);
+        const size_t G = size_t(g) + 1;
+        if (pb.sat[size_t(cy1 + 1) * G + cx1 + 1] - pb.sat[size_t(cy0) * G + cx1 + 1] -
+                pb.sat[size_t(cy1 + 1) * G + cx0] + pb.sat[size_t(cy0) * G + cx0] ==
+            0)
+            return false;  // no ray in the rectangle
+        // Box entirely before every start in the rectangle (margin for rounding).
+        float reachOfBox = -INFINITY, mag = 0.f;
+        for (int c = 0; c < 8; ++c) {
+            const float v =
+                startOf(Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z});
+            reachOfBox = std::max(reachOfBox, v), mag = std::max(mag, std::fabs(v));
+        }
+        const float first = minStartIn(cx0, cx1, cy0, cy1);
+        return !(reachOfBox < first - (1e-5f * (mag + std::fabs(first)) + 1e-30f));
+    };
+    // Near side of a box along the direction (visit order, so that candidates come out nearly sorted).
+    auto nearDepth = [&](const Bounds3& b) {
+        return (d.x > 0 ? b.lo.x : b.hi.x) * d.x + (d.y > 0 ? b.lo.y : b.hi.y) * d.y +
+               (d.z > 0 ? b.lo.z : b.hi.z) * d.z;
+    };
+    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, const Rect2& rect) {
+        const int cx0 = cellX(rect.x0), cx1 = cellX(rect.x1), cy0 = cellY(rect.y0), cy1 = cellY(rect.y1);
+        const uint32_t leaf = node - firstLeaf;
+#if defined(__SSE2__)
+        const LeafBox4 b4(box, rect);
+        const __m128 vself = _mm_set1_ps(ignoreT);
+        const __m128i vpatch = _mm_set1_epi32(int32_t(patch));
+#endif
+        for (int cy = cy0; cy <= cy1; ++cy) {
+            const size_t b = pb.cellStart[size_t(cy) * g + cx0], e = pb.cellStart[size_t(cy) * g + cx1 + 1];
+            if (b == e) continue;
+            boxTests += e - b;
+            size_t k = found.size();
+            found.resize(k + (e - b) + 4);
+#if defined(__SSE2__)
+            for (size_t i = b; i < e; i += 4) {
+                __m128 te, tx;
+                const __m128 hit =
+                    leafBox4Hits(b4, _mm_loadu_ps(&pb.px[i]), _mm_loadu_ps(&pb.py[i]),
+                                 _mm_loadu_ps(&pb.ox[i]), _mm_loadu_ps(&pb.oy[i]), _mm_loadu_ps(&pb.oz[i]),
+                                 _mm_loadu_ps(&pb.ix[i]), _mm_loadu_ps(&pb.iy[i]), _mm_loadu_ps(&pb.iz[i]),
+                                 _mm_loadu_ps(&pb.tmin[i]), _mm_loadu_ps(&pb.tmax[i]), te, tx);
+                // The ray's own patch: boxes it leaves before the self-intersection distance are skipped.
+                const __m128 own = _mm_castsi128_ps(_mm_cmpeq_epi32(
+                    _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pb.ignore[i])), vpatch));
+                const __m128 selfCut = _mm_and_ps(own, _mm_cmplt_ps(tx, vself));
+                int mask = _mm_movemask_ps(_mm_andnot_ps(selfCut, hit));
+                if (e - i < 4) mask &= (1 << (e - i)) - 1;
+                if (mask) k += emitLanes(found.data() + k, mask, te, &pb.ray[i], patch, leaf);
+            }
+#else
+            for (size_t i = b; i < e; ++i) {
+                if (!(pb.px[i] >= rect.x0 && pb.px[i] <= rect.x1 && pb.py[i] >= rect.y0 &&
+                      pb.py[i] <= rect.y1))
+                    continue;
+                float te, tx;
+                if (!rayBoxInterval(box, {pb.ox[i], pb.oy[i], pb.oz[i]}, {pb.ix[i], pb.iy[i], pb.iz[i]},
+                                    pb.tmin[i], pb.tmax[i], te, tx))
+                    continue;
+                if (pb.ignore[i] == patch && tx < ignoreT) continue;
+                found[k++] = {pb.ray[i], patch, leaf, te};
+            }
+#endif
+            found.resize(k);
+        }
+    };
+    descendCulled(
+        acc, nearDepth, overlaps, [](uint32_t, uint32_t) { return false; }, testLeaf);
+    return true;
+}
+
+}  // namespace
+
+// Camera rays: the traversal stage by screen-space binning. A camera ray passes through its sample's
+// raster position, so it can only hit a box whose projection contains that position. The tile's region is
+// tested against the projected bounding rectangles of the 4-wide BVH's boxes and of the subpatch boxes,
+// top down, and each leaf box is slab-tested (the traversal's arithmetic) only against the rays of the
+// samples inside its rectangle. A ray hits a leaf box only if it hits every box above it (they contain
+// it), so the candidates are exactly the traversal's, found once per tile and box instead of once per
+// ray and box; ties in entry distance keep this stage's order instead of the traversal's.
+void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples& cs, BinningScratch& bin,
+                   std::vector<Chunk>& chunks, bool cull) {
+    const Projector& proj = *cs.proj;
+    const PixelRect reg = cs.region;
+    const int tw = reg.width(), spp = cs.spp;
+    const float rx0 = float(reg.x0), rx1 = float(reg.x1), ry0 = float(reg.y0), ry1 = float(reg.y1);
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    const bool useBack = cull && !forest.backfacing.empty();
+    std::vector<Candidate>& found = bin.found;
+    found.clear();
+    uint64_t boxTests = 0;
+
+    // Whether the rectangle of box b can hold a sample of the tile, and the rectangle clipped to the
+    // region (the whole region when the box reaches behind the eye).
+    auto overlaps = [&](const Bounds3& b, Rect2& rect) {
+        if (!screenRect(proj, b, rect.x0, rect.x1, rect.y0, rect.y1)) {
+            rect = {rx0, rx1, ry0, ry1};
+            return true;
+        }
+        rect = {std::max(rect.x0, rx0), std::min(rect.x1, rx1), std::max(rect.y0, ry0),
+                std::min(rect.y1, ry1)};
+        return rect.x0 <= rect.x1 && rect.y0 <= rect.y1;
+    };
+    // The rays of the samples inside the rectangle against one leaf box, four samples of a row at a time
+    // (per-sample structure of arrays; camera rays start at z = 0).
+    const float tmin = proj.nearClip, tmax = proj.farClip;
+    auto testLeaf = [&](uint32_t patch, uint32_t node, const Bounds3& box, const Rect2& rect) {
+        const int px0 = std::max(reg.x0, int(std::floor(rect.x0))),
+                  px1 = std::min(reg.x1 - 1, int(std::floor(rect.x1)));
+        const int py0 = std::max(reg.y0, int(std::floor(rect.y0))),
+                  py1 = std::min(reg.y1 - 1, int(std::floor(rect.y1)));
+        if (px0 > px1 || py0 > py1) return;
+        const uint32_t leaf = node - firstLeaf;
+        // Room for every sample of the rectangle's rows plus a full group of 4 (trimmed at the end).
+        size_t k = found.size();
+        found.resize(k + size_t(px1 - px0 + 1) * size_t(py1 - py0 + 1) * size_t(spp) + 4);
+#if defined(__SSE2__)
+        const LeafBox4 b4(box, rect);
+        const __m128 t0 = _mm_set1_ps(tmin), t1 = _mm_set1_ps(tmax), zero = _mm_setzero_ps();
+#endif
+        for (int py = py0; py <= py1; ++py) {
+            const size_t rowBase = (size_t(py - reg.y0) * tw + size_t(px0 - reg.x0)) * spp;
+            const size_t rowEnd = rowBase + size_t(px1 - px0 + 1) * spp;
+            boxTests += rowEnd - rowBase;
+#if defined(__SSE2__)
+            for (size_t i = rowBase; i < rowEnd; i += 4) {
+                __m128 te, tx;
+                const __m128 hit =
+                    leafBox4Hits(b4, _mm_loadu_ps(&cs.sampleX[i]), _mm_loadu_ps(&cs.sampleY[i]),
+                                 _mm_loadu_ps(&cs.originX[i]), _mm_loadu_ps(&cs.originY[i]), zero,
+                                 _mm_loadu_ps(&cs.invX[i]), _mm_loadu_ps(&cs.invY[i]),
+                                 _mm_loadu_ps(&cs.invZ[i]), t0, t1, te, tx);
+                int mask = _mm_movemask_ps(hit);
+                if (rowEnd - i < 4) mask &= (1 << (rowEnd - i)) - 1;
+                if (mask) k += emitLanes(found.data() + k, mask, te, &cs.rayOfSample[i], patch, leaf);
+            }
+#else
+            for (size_t i = rowBase; i < rowEnd; ++i) {
+                const uint32_t ray = cs.rayOfSample[i];
+                const float x = cs.sampleX[i], y = cs.sampleY[i];
+                if (ray == kNone || !(x >= rect.x0 && x <= rect.x1 && y >= rect.y0 && y <= rect.y1)) continue;
+                float te, tx;
+                if (rayBoxInterval(box, rays.o[ray], safeInverse(rays.d[ray]), tmin, tmax, te, tx))
+                    found[k++] = {ray, patch, leaf, te};
+            }
+#endif
+        }
+        found.resize(k);
+    };
+    // Nearer boxes (smaller depth) first; back-facing subpatch nodes skipped (--cull-backfaces).
+    descendCulled(
+        acc, [](const Bounds3& b) { return b.lo.z; }, overlaps,
+        [&](uint32_t patch, uint32_t n) {
+            const uint8_t* back = useBack ? forest.backfaceBits(patch) : nullptr;
+            return back && back[n];
+        },
+        testLeaf);
+
+    groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests);
+}
+
+bool binShadowRays(const RtAccel& acc, const RayList& rays, std::span<const ShadowRun> runs,
+                   BinningScratch& bin, std::vector<Chunk>& chunks) {
+    bin.found.clear();
+    uint64_t boxTests = 0;
+    bool binned = true;
+    for (const ShadowRun& run : runs)
+        binned = binned && binParallelRays(acc, rays, run.begin, run.end, bin.parallel, bin.found, boxTests,
+                                           run.point ? &run.position : nullptr);
+    // Shadow rays stop at any accepted hit: their candidates need no order.
+    if (binned)
+        groupCandidates(bin.found, rays.size(), bin.start, bin.next, chunks, boxTests, /*sortByEntry=*/false);
+    return binned;
+}
+
+}  // namespace tessera::rt

@@ -1,0 +1,282 @@
+#include "rt/newton_stage.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "rt/newton_lanes.h"
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+namespace tessera::rt {
+
+void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks,
+                std::vector<RayHit>& hits, bool cull, bool anyHit) {
+    const size_t n = rays.size();
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    // Only the flag: the rest of a RayHit is written when the ray gets one, and read only then.
+    hits.resize(n);
+    for (RayHit& h : hits) h.hit = false;
+    float hu, hv;
+    leafHalfSize(acc.forest.depth, hu, hv);
+    // A root within this margin of a leaf counts as inside it (Newton from the leaf centre finds it).
+    const float du = 1.01f * hu, dv = 1.01f * hv;
+    const Vec2* leafCentre = acc.forest.leafCentre.data();
+    const LeafBasis* leafBasis = acc.forest.leafBasis.data();
+    const LeafBasis* quarterBasis = acc.forest.quarterBasis.data();
+
+    // The ray a lane is working on.
+    struct LaneRay {
+        uint32_t r = kNone;         // ray index (kNone: the lane looks for the next ray)
+        uint32_t cur = 0, end = 0;  // cursor in the chunk's candidates, end of the ray's segment
+        Ray ray;
+        TraceOptions opt;
+        RayPlanes pl;
+        float invDD = 0.f, eps = 0.f, bestU = 0.f, bestV = 0.f;
+        uint32_t projected = kNone, bestPatch = kNone;
+        // Last converged root (accepted or not) per patch run, for the duplicate-start test. A secondary
+        // ray starts (offset) on its originating patch at a known (u,v): that is the root a start near it
+        // converges to (rejected by the self-intersection rules), so it seeds the test.
+        uint32_t rootPatch = kNone;
+        float rootU = 0.f, rootV = 0.f;
+        int attempt = 0;  // 0: leaf centre; 1..4: quarter centres (originating patch only)
+        // Originating patch: its control points' heights (X - o).n over the plane through the origin
+        // orthogonal to originN (only when the ray leaves that plane: d.n > 0).
+        Vec3 originN;
+        bool selfPlane = false;
+        float selfHeight[16];
+        bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
+        SurfacePoint bestSp;
+        ProjectedPatch<float> pp;
+        alignas(16) float depth[16];  // the control points' distances along the ray (t units)
+    };
+
+    tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
+        Chunk& ch = chunks[ci];
+        const size_t r0 = ci * kChunk;
+        const uint32_t nRays = uint32_t(ch.segEnd.size());
+        uint64_t runs = 0, iterTotal = 0, culled = 0;
+        NewtonLanes lanes;
+        LaneRay lane[kNewtonLanes];
+        uint32_t nextRay = 0;
+
+        // The patch projected on the ray's planes (as projectPatch, 4 control points at a time) into the
+        // lane's column and the ray's own copy; the Newton tolerance as newtonTolerance.
+        auto projectLane = [](const PatchSoa& ps, LaneRay& s, NewtonLanes& L, int l) {
+            const RayPlanes& pl = s.pl;
+#if defined(__SSE2__)
+            const __m128 n1x = _mm_set1_ps(pl.n1.x), n1y = _mm_set1_ps(pl.n1.y), n1z = _mm_set1_ps(pl.n1.z),
+                         n2x = _mm_set1_ps(pl.n2.x), n2y = _mm_set1_ps(pl.n2.y), n2z = _mm_set1_ps(pl.n2.z),
+                         d1 = _mm_set1_ps(pl.d1), d2 = _mm_set1_ps(pl.d2);
+            const __m128 ox = _mm_set1_ps(s.ray.o.x), oy = _mm_set1_ps(s.ray.o.y),
+                         oz = _mm_set1_ps(s.ray.o.z), dx = _mm_set1_ps(s.ray.d.x),
+                         dy = _mm_set1_ps(s.ray.d.y), dz = _mm_set1_ps(s.ray.d.z), idd = _mm_set1_ps(s.invDD);
+            for (int q = 0; q < 16; q += 4) {
+                const __m128 x = _mm_load_ps(ps.x + q), y = _mm_load_ps(ps.y + q), z = _mm_load_ps(ps.z + q);
+                const __m128 a1 = _mm_add_ps(
+                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(n1x, x), _mm_mul_ps(n1y, y)), _mm_mul_ps(n1z, z)), d1);
+                const __m128 a2 = _mm_add_ps(
+                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(n2x, x), _mm_mul_ps(n2y, y)), _mm_mul_ps(n2z, z)), d2);
+                _mm_store_ps(s.pp.a1 + q, a1);
+                _mm_store_ps(s.pp.a2 + q, a2);
+                // Distance along the ray, (P - o).d / d.d: t of a root without evaluating the patch again.
+                const __m128 a3 = _mm_mul_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(x, ox), dx),
+                                                                   _mm_mul_ps(_mm_sub_ps(y, oy), dy)),
+                                                        _mm_mul_ps(_mm_sub_ps(z, oz), dz)),
+                                             idd);
+                _mm_store_ps(s.depth + q, a3);
+            }
+#else
+            for (int k = 0; k < 16; ++k) {
+                s.pp.a1[k] = pl.n1.x * ps.x[k] + pl.n1.y * ps.y[k] + pl.n1.z * ps.z[k] + pl.d1;
+                s.pp.a2[k] = pl.n2.x * ps.x[k] + pl.n2.y * ps.y[k] + pl.n2.z * ps.z[k] + pl.d2;
+                s.depth[k] = ((ps.x[k] - s.ray.o.x) * s.ray.d.x + (ps.y[k] - s.ray.o.y) * s.ray.d.y +
+                              (ps.z[k] - s.ray.o.z) * s.ray.d.z) *
+                             s.invDD;
+            }
+#endif
+            for (int k = 0; k < 16; ++k) L.a1[k][l] = s.pp.a1[k], L.a2[k][l] = s.pp.a2[k];
+            const Vec3 o = s.ray.o;
+            const float mag = std::max({ps.boxMagnitude, std::fabs(o.x), std::fabs(o.y), std::fabs(o.z)});
+            s.eps = 2e-6f * mag + 1e-6f * ps.boxExtent + 1e-30f;
+        };
+        auto finishRay = [&](LaneRay& s) {
+            if (s.bestPatch != kNone) {
+                RayHit& best = hits[s.r];
+                const SurfacePoint sp =
+                    s.bestHasDeriv ? s.bestSp : evalPatchDeriv(acc.patches[s.bestPatch], s.bestU, s.bestV);
+                best.hit = true;
+                best.patch = s.bestPatch;
+                best.h.hit = true;
+                best.h.t = s.ray.tmax;
+                best.h.u = s.bestU;
+                best.h.v = s.bestV;
+                best.h.p = sp.p;
+                best.h.dpdu = sp.dpdu;
+                best.h.dpdv = sp.dpdv;
+            }
+            s.r = kNone;
+        };
+        auto beginRay = [&](LaneRay& s) -> bool {
+            for (; nextRay < nRays; ++nextRay) {
+                const uint32_t begin = nextRay == 0 ? 0 : ch.segEnd[nextRay - 1];
+                if (begin == ch.segEnd[nextRay]) continue;
+                const size_t r = r0 + nextRay;
+                s.r = uint32_t(r);
+                s.cur = begin;
+                s.end = ch.segEnd[nextRay++];
+                s.ray = Ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
+                s.opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
+                if (anyHit) s.opt.anyHit = true;
+                s.pl = makeRayPlanes(s.ray.o, s.ray.d);
+                s.invDD = 1.f / dot(s.ray.d, s.ray.d);
+                s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false;
+                s.originN = rays.originN[r];
+                s.selfPlane = false;
+                s.rootPatch = kNone;
+                if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
+                    s.rootPatch = rays.ignore[r], s.rootU = rays.ignoreUV[r].x, s.rootV = rays.ignoreUV[r].y;
+                return true;
+            }
+            return false;
+        };
+        // Finds lane l's next Newton start (finishing rays and taking new ones as needed) and starts it;
+        // false when the chunk has no work left for the lane.
+        auto startNext = [&](int l) -> bool {
+            LaneRay& s = lane[l];
+            for (;;) {
+                if (s.r == kNone && !beginRay(s)) return false;
+                if (s.cur >= s.end) {
+                    finishRay(s);
+                    continue;
+                }
+                const Candidate& c = ch.cand[s.cur];
+                if (c.tEnter > s.ray.tmax) {
+                    finishRay(s);
+                    continue;
+                }
+                const Vec2 c0 = leafCentre[c.leaf];
+                if (c.patch == s.rootPatch && std::fabs(s.rootU - c0.x) <= du &&
+                    std::fabs(s.rootV - c0.y) <= dv) {
+                    ++s.cur;
+                    continue;
+                }
+                if (c.patch != s.projected) {
+                    projectLane(acc.patchSoa[c.patch], s, lanes, l);
+                    s.projected = c.patch;
+                    if (c.patch == s.opt.ignorePatch && dot(s.originN, s.ray.d) > 0.f) {
+                        const PatchSoa& ps = acc.patchSoa[c.patch];
+                        const Vec3 o = s.ray.o, nrm = s.originN;
+                        for (int k = 0; k < 16; ++k)
+                            s.selfHeight[k] =
+                                (ps.x[k] - o.x) * nrm.x + (ps.y[k] - o.y) * nrm.y + (ps.z[k] - o.z) * nrm.z;
+                        s.selfPlane = true;
+                    }
+                }
+                // On the ray's originating patch, leaves next to its origin converge to the origin itself
+                // (rejected as self-intersection): there the ray-frame hull test of the leaf sub-patch
+                // (exact: a leaf whose hull stays off the ray cannot hold a root) removes most of them. On
+                // other patches it costs more than the Newton runs it saves (measured, docs/rt.md).
+                // Leaves of the originating patch below the plane through the origin (the ray only moves
+                // away from it: exact, by the convex hull of the leaf's Bernstein coefficients; this
+                // removes the starts that would converge back to the origin on convex and flat parts), or
+                // whose ray-frame hull stays off the ray, cannot hold a root.
+                // The plane test is repeated on the leaf's quarters (their control nets bulge 4x less) when
+                // the whole leaf's net reaches above the plane.
+                auto belowPlane = [&](uint32_t leaf) {
+                    const float lim = -4.f * s.eps;
+                    if (leafMaxCoefficient(s.selfHeight, leafBasis[leaf]) < lim) return true;
+                    for (int q = 0; q < 4; ++q)
+                        if (!(leafMaxCoefficient(s.selfHeight, quarterBasis[4 * leaf + q]) < lim))
+                            return false;
+                    return true;
+                };
+                if (c.patch == s.opt.ignorePatch && ((s.selfPlane && belowPlane(c.leaf)) ||
+                                                     !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps))) {
+                    ++culled;
+                    ++s.cur;
+                    continue;
+                }
+                s.attempt = 0;
+                lanes.start(l, c0.x, c0.y, s.eps);
+                return true;
+            }
+        };
+        // Lane l's start has finished: take its root (or retry), then move the lane on. Returns whether
+        // the lane still has work.
+        auto finishStart = [&](int l) -> bool {
+            LaneRay& s = lane[l];
+            const Candidate& c = ch.cand[s.cur];
+            const int iters = int(lanes.evals[l]);
+            ++runs;
+            iterTotal += uint32_t(iters);
+            ++ch.c.hist[std::min(iters, kHistBins - 1)];
+            float uc = 0.f, vc = 0.f;
+            const bool found = lanes.status[l] == kLaneConverged &&
+                               acceptRootDomain<float>(s.pp, s.eps, lanes.u[l], lanes.v[l], 1e-4f, uc, vc);
+            if (!found && c.patch == s.opt.ignorePatch) {
+                // On the originating patch, where the hull test removed the neighbouring starts that could
+                // also reach a root of this leaf, a failed start (a fold, a seam root just outside the
+                // domain) is retried from the centres of the leaf's quarters whose own hull passes the test.
+                for (int q = s.attempt; q < 4; ++q) {  // quarter q: bit 0 high u, bit 1 high v
+                    if (!leafMayHit(s.pp, quarterBasis[4 * c.leaf + q], 4.f * s.eps)) continue;
+                    const Vec2 c0 = leafCentre[c.leaf];
+                    s.attempt = q + 1;
+                    lanes.start(l, c0.x + (q & 1 ? 0.5f : -0.5f) * hu, c0.y + (q & 2 ? 0.5f : -0.5f) * hv,
+                                s.eps);
+                    return true;
+                }
+            }
+            if (found) {
+                s.rootPatch = c.patch, s.rootU = uc, s.rootV = vc;
+                const BezierPatch& patch = acc.patches[c.patch];
+                float bu[4], bv[4];
+                bernstein3(uc, bu);
+                bernstein3(vc, bv);
+                float t = 0.f;
+                for (int j = 0; j < 4; ++j)
+                    t += bv[j] * (s.depth[4 * j] * bu[0] + s.depth[4 * j + 1] * bu[1] +
+                                  s.depth[4 * j + 2] * bu[2] + s.depth[4 * j + 3] * bu[3]);
+                bool ok =
+                    t > s.ray.tmin && t < s.ray.tmax && !(c.patch == s.opt.ignorePatch && t < s.opt.ignoreT);
+                bool haveDeriv = false;
+                if (ok && s.opt.respectSides && !acc.twoSided[c.patch]) {
+                    s.bestSp = evalPatchDeriv(patch, uc, vc);
+                    haveDeriv = true;
+                    Vec3 N = cross(s.bestSp.dpdu, s.bestSp.dpdv);
+                    if (acc.flip[c.patch]) N = -N;
+                    ok = dot(N, s.ray.d) <= 0.f;  // back face of a one-sided surface: rejected
+                }
+                if (ok) {
+                    s.bestPatch = c.patch, s.bestU = uc, s.bestV = vc, s.bestHasDeriv = haveDeriv;
+                    s.ray.tmax = t;
+                    if (s.opt.anyHit) s.cur = s.end - 1;  // shadow rays stop at the first hit
+                }
+            }
+            ++s.cur;
+            return startNext(l);
+        };
+
+        unsigned active = 0;
+        for (int l = 0; l < kNewtonLanes; ++l) {
+            for (int k = 0; k < 16; ++k) lanes.a1[k][l] = lanes.a2[k][l] = 0.f;
+            lanes.start(l, 0.5f, 0.5f, 0.f);
+            if (startNext(l)) active |= 1u << l;
+        }
+        while (active) {
+            for (unsigned done = newtonLanesStep(lanes) & active; done; done &= done - 1) {
+                const int l = __builtin_ctz(done);
+                if (!finishStart(l)) active &= ~(1u << l);
+            }
+        }
+        ch.c.newtonRuns = runs;
+        ch.c.hullCulled = culled;
+        ch.c.newtonIterations = iterTotal;
+    });
+}
+
+// How the traversal stage finds a list's candidates: per ray (traverseList), or by binning the camera rays
+
+}  // namespace tessera::rt

@@ -1,0 +1,359 @@
+#include "rt/traversal.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstring>
+#include <limits>
+
+#include "rt/simd_kernels.h"
+
+namespace tessera {
+namespace rt {
+namespace {
+
+// A subpatch traversal item: a (ray, patch) pair of the current batch (bits 12 and up) and a quad of its
+// tree (bits 0-11; for an odd depth also a node of the last level above the leaves, past the quads).
+constexpr uint32_t kItemQuadBits = 12, kItemQuadMask = (1u << kItemQuadBits) - 1u;
+constexpr uint32_t kMaxBatchPairs = 1u << (32 - kItemQuadBits);
+static_assert(((1u << (2 * (kMaxSubpatchDepth / 2))) - 1) / 3 <= kItemQuadMask);  // items of every level
+
+// out[0..3] = first + h.order[0..3] (entries past the hit count are scratch).
+inline void storeItems4(uint32_t* out, const HitOrder& h, uint32_t first) {
+#if defined(__SSE2__)
+    int32_t ord;
+    std::memcpy(&ord, h.order, 4);
+    const __m128i z = _mm_setzero_si128();
+    const __m128i o = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(ord), z), z);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_add_epi32(o, _mm_set1_epi32(int(first))));
+#else
+    for (int i = 0; i < 4; ++i) out[i] = first + h.order[i];
+#endif
+}
+
+// One patch whose root box a ray hits, and what its subpatch traversal needs.
+struct PatchPair {
+    F4 selfT4;  // leaves the ray exits before this distance are dropped
+    const SubpatchQuad* quads;
+    const uint8_t* qback;  // backface bits per quad (primary rays with culling), else null
+    const uint8_t* back;   // backface bits per node (same condition)
+    uint32_t rayId;        // the ray's index in the list, then the patch: its candidates' first half
+    uint32_t patch;
+    uint32_t ray;  // index in the chunk
+    float te;      // entry distance of the root box
+    float selfT;
+};
+static_assert(sizeof(PatchPair) == 64);
+
+// Per-thread scratch of the traversal, reused from chunk to chunk.
+struct TraverseScratch {
+    std::vector<Ray4> ray4;
+    std::vector<PatchPair> pairs;
+    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> items, next;
+    std::vector<uint32_t> count;  // candidates per ray of the chunk
+};
+
+// One level of the subpatch traversal: the items' quads tested, items[0, n). innerLevel appends the hit
+// children of each item to `next` in hit order and returns their number; leafLevel writes the candidates
+// of each item in lane order at cand + used (counted per ray in count[]) and returns the new `used`. `next`
+// and `cand` need room for 4 entries per item and one more. The AVX2 versions do the same, two items per
+// 8-wide test.
+struct LevelIn {
+    const uint32_t* items;
+    uint32_t n;
+    const PatchPair* pairs;
+    const Ray4* ray4;
+};
+
+inline uint32_t innerLevelTail(const LevelIn& in, uint32_t j, uint32_t* next, uint32_t nNext) {
+    for (; j < in.n; ++j) {
+        const uint32_t it = in.items[j], quad = it & kItemQuadMask;
+        const PatchPair& pp = in.pairs[it >> kItemQuadBits];
+        F4 te4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        if (pp.qback) mask &= ~int(pp.qback[quad]);
+        storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
+        nNext += kPop4[mask];
+    }
+    return nNext;
+}
+
+inline size_t leafLevelTail(const LevelIn& in, uint32_t j, uint32_t leafQuadFirst, Candidate* cand,
+                            size_t used, uint32_t* count) {
+    for (; j < in.n; ++j) {
+        const uint32_t it = in.items[j], quad = it & kItemQuadMask;
+        const PatchPair& pp = in.pairs[it >> kItemQuadBits];
+        F4 te4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        if (pp.qback) mask &= ~int(pp.qback[quad]);
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], &pp.rayId, 4 * (quad - leafQuadFirst), te4);
+        used += kPop4[mask];
+        count[pp.ray] += kPop4[mask];
+    }
+    return used;
+}
+
+uint32_t innerLevel(const LevelIn& in, uint32_t* next) {
+    return innerLevelTail(in, 0, next, 0);
+}
+
+size_t leafLevel(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, size_t used, uint32_t* count) {
+    return leafLevelTail(in, 0, leafQuadFirst, cand, used, count);
+}
+
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 uint32_t innerLevelAvx2(const LevelIn& in, uint32_t* next) {
+    uint32_t j = 0, nNext = 0;
+    for (; j + 1 < in.n; j += 2) {
+        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
+        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
+        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
+        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        __m256 te8;
+        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
+                             pb.selfT4, te8);
+        if (pa.qback) mask &= ~int(pa.qback[qa]);
+        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const HitOrder *ha, *hb;
+        hitOrder2(mask, te8, ha, hb);
+        storeItems4(next + nNext, *ha, (ia & ~kItemQuadMask) + 4 * qa + 1);
+        nNext += kPop4[mask & 15];
+        storeItems4(next + nNext, *hb, (ib & ~kItemQuadMask) + 4 * qb + 1);
+        nNext += kPop4[mask >> 4];
+    }
+    return innerLevelTail(in, j, next, nNext);
+}
+
+TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, size_t used,
+                                  uint32_t* count) {
+    uint32_t j = 0;
+    for (; j + 1 < in.n; j += 2) {
+        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
+        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
+        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
+        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        __m256 te8;
+        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
+                             pb.selfT4, te8);
+        if (pa.qback) mask &= ~int(pa.qback[qa]);
+        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const int ma = mask & 15, mb = mask >> 4;
+        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], &pa.rayId, 4 * (qa - leafQuadFirst),
+                         _mm256_castps256_ps128(te8));
+        used += kPop4[ma];
+        count[pa.ray] += kPop4[ma];
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], &pb.rayId, 4 * (qb - leafQuadFirst),
+                         _mm256_extractf128_ps(te8, 1));
+        used += kPop4[mb];
+        count[pb.ray] += kPop4[mb];
+    }
+    return leafLevelTail(in, j, leafQuadFirst, cand, used, count);
+}
+#endif
+
+// Whether the AVX2 kernels run: the CPU has AVX2 and rtUseAvx2 has not turned them off.
+std::atomic<bool> gAvx2Allowed{true};
+bool cpuHasAvx2() {
+#if TESSERA_RT_AVX2
+    static const bool has = __builtin_cpu_supports("avx2");
+    return has;
+#else
+    return false;
+#endif
+}
+
+// One chunk of traverseList (see there), for the SSE2 or the AVX2 kernels: inlined into the two entry
+// points below, so that the AVX2 one is compiled for AVX2 throughout.
+template <bool kAvx2>
+[[gnu::always_inline]] inline void traverseChunk(const RtAccel& acc, const RayList& rays, Chunk& ch,
+                                                 size_t ci, bool cull) {
+    const size_t n = rays.size();
+    const Bvh& bvh = acc.bvh;
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    const uint32_t depth = uint32_t(forest.depth);
+    const float ignoreT = 8.f * acc.offset;
+    const uint32_t nQuads = forest.quadsPerPatch;
+    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
+    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
+    const Bvh4Node* wide = bvh.wide.data();
+    thread_local TraverseScratch scratch;
+    TraverseScratch& sc = scratch;
+    ch.c = StageCounters();
+    uint64_t boxTests = 0;
+    const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
+    const uint32_t nr = uint32_t(r1 - r0);
+    sc.ray4.resize(nr);
+    sc.count.assign(nr, 0);
+    sc.pairs.clear();
+
+    // BVH: per ray, the patches it visits (depth first; the hit children in order of entry: inner nodes
+    // pushed far first, patches listed near first).
+    for (uint32_t rl = 0; rl < nr; ++rl) {
+        const size_t r = r0 + rl;
+        sc.ray4[rl] = Ray4(rays.o[r], safeInverse(rays.d[r]), rays.tmin[r], rays.tmax[r]);
+        const Ray4& r4 = sc.ray4[rl];
+        const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
+        const uint32_t ignore = rays.ignore[r];
+        uint32_t stack[kBvh4Stack];
+        int sp = 0;
+        if (!bvh.wide.empty()) stack[sp++] = 0;
+        while (sp > 0) {
+            const Bvh4Node& nd = wide[stack[--sp]];
+            F4 te4, tx4;
+            const int mask = rayBox4(nd, r4, te4, tx4);
+            boxTests += nd.count;
+            if (!mask) continue;
+            // The hit inner children and the hit patches, each in order of entry.
+            const int pb = pairBits(te4);
+            const int inner = mask & int(nd.innerMask), patches = mask & ~int(nd.innerMask);
+            if (inner) {
+                const HitOrder& h = kHitOrder[size_t(inner | pb)];
+                for (int q = kPop4[inner] - 1; q >= 0; --q) stack[sp++] = nd.child[h.order[q]];
+            }
+            if (!patches) continue;
+            float te[4], tx[4];
+            storeF4(te, te4);
+            storeF4(tx, tx4);
+            const HitOrder& h = kHitOrder[size_t(patches | pb)];
+            for (int q = 0, k = kPop4[patches]; q < k; ++q) {
+                const int i = h.order[q];
+                const uint32_t patch = nd.child[i] & ~kBvh4Patch;
+                const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
+                if (tx[i] < selfT || (back && back[0])) continue;
+                sc.pairs.push_back({splatF4(selfT), forest.quadTree(patch),
+                                    cullRay ? forest.quadBackBits(patch) : nullptr, back, uint32_t(r), patch,
+                                    rl, te[i], selfT});
+            }
+        }
+    }
+
+    // Subpatch trees of all pairs, level by level, in batches of pairs; candidates in pair order. All
+    // candidates of a batch are written by one level (the leaves' parents).
+    const uint32_t nPairs = uint32_t(sc.pairs.size());
+    Candidate* cand = nullptr;
+    size_t used = 0;
+    auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
+        if (ch.cand.capacity() < used + more) ch.cand.reserve(std::max(used + more, 2 * ch.cand.capacity()));
+        ch.cand.resize(ch.cand.capacity());
+        cand = ch.cand.data();
+    };
+    for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
+        const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
+        const PatchPair* pairs = sc.pairs.data() + pb;
+        if (firstLeaf == 0) {
+            candRoom(nb);
+            for (uint32_t p = 0; p < nb; ++p) {
+                cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
+                ++sc.count[pairs[p].ray];
+            }
+            continue;
+        }
+        if (sc.items.size() < nb) sc.items.resize(nb);
+        for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
+        uint32_t nItems = nb, lvl = 0;
+        for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
+            boxTests += 4 * uint64_t(nItems);
+            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
+            if (lvl + 2 < depth) {
+                // Inner level: the hit children in hit order.
+                if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
+#if TESSERA_RT_AVX2
+                if constexpr (kAvx2)
+                    nItems = innerLevelAvx2(in, sc.next.data());
+                else
+#endif
+                    nItems = innerLevel(in, sc.next.data());
+                std::swap(sc.items, sc.next);
+                continue;
+            }
+            // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
+            // entry distance gives the same order, as equal distances keep their lane order either way).
+            // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
+            const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
+            candRoom(4 * size_t(nItems) + 1);
+#if TESSERA_RT_AVX2
+            if constexpr (kAvx2)
+                used = leafLevelAvx2(in, leafQuadFirst, cand, used, sc.count.data());
+            else
+#endif
+                used = leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
+            nItems = 0;
+        }
+        // Odd depth: the pairs of leaves below the nodes of level depth - 1.
+        boxTests += 2 * uint64_t(nItems);
+        if (nItems > 0) candRoom(2 * size_t(nItems));
+        for (uint32_t j = 0; j < nItems; ++j) {
+            const uint32_t it = sc.items[j];
+            const PatchPair& pp = pairs[it >> kItemQuadBits];
+            const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
+            const size_t r = r0 + pp.ray;
+            const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
+            float tn[2], tf[2];
+            const int mask = rayBoxPair(forest.tree(pp.patch) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
+            const float ta = tn[0], tb = tn[1];
+            const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
+            const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
+            const bool swap = hb && (!ha || tb < ta);
+            const size_t u0 = used;
+            if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
+            if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            sc.count[pp.ray] += uint32_t(used - u0);
+        }
+    }
+
+    // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
+    // nearly sorted).
+    ch.segEnd.resize(nr);
+    uint32_t end = 0;
+    for (uint32_t rl = 0; rl < nr; ++rl) {
+        const uint32_t begin = end;
+        end += sc.count[rl];
+        ch.segEnd[rl] = end;
+        sortSegmentByEntry(cand, begin, end);
+    }
+    ch.cand.resize(used);
+    ch.c.candidates = used;
+    ch.c.boxTests = boxTests;
+}
+
+void traverseChunkSse2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci, bool cull) {
+    traverseChunk<false>(acc, rays, ch, ci, cull);
+}
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 void traverseChunkAvx2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci,
+                                    bool cull) {
+    traverseChunk<true>(acc, rays, ch, ci, cull);
+}
+#endif
+
+}  // namespace
+
+void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull) {
+    const size_t n = rays.size();
+    const size_t nChunks = (n + kChunk - 1) / kChunk;
+    if (chunks.size() < nChunks) chunks.resize(nChunks);
+#if TESSERA_RT_AVX2
+    if (cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed)) {
+        tbb::parallel_for(size_t(0), nChunks,
+                          [&](size_t ci) { traverseChunkAvx2(acc, rays, chunks[ci], ci, cull); });
+        return;
+    }
+#endif
+    tbb::parallel_for(size_t(0), nChunks,
+                      [&](size_t ci) { traverseChunkSse2(acc, rays, chunks[ci], ci, cull); });
+}
+
+// The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
+
+}  // namespace rt
+
+bool rtUseAvx2(bool allow) {
+    rt::gAvx2Allowed.store(allow, std::memory_order_relaxed);
+    return allow && rt::cpuHasAvx2();
+}
+
+}  // namespace tessera

@@ -1,0 +1,42 @@
+// The per-ray traversal stage: candidates (Newton starts) of every ray of a list, through the 4-wide BVH
+// and then all (ray, patch) pairs of a chunk down their subpatch trees level by level.
+#pragma once
+#include <vector>
+
+#include "rt/accel.h"
+#include "rt/ray_list.h"
+
+namespace tessera {
+
+// The traversal's subpatch kernels use AVX2 where the CPU has it (chosen at run time; same results as the
+// SSE2 kernels). allow = false forces the SSE2 kernels (tests), true allows AVX2 again; returns whether
+// AVX2 kernels will run.
+bool rtUseAvx2(bool allow);
+
+namespace rt {
+
+// Traversal of the ray list, chunk by chunk, emitting candidates. Each ray's candidates are
+// emitted in depth-first order (both hierarchies, children near first, ties by index; under a BVH node its
+// patches before its inner children), then sorted by entry distance (stable), so leaves come out nearly
+// sorted and the order is fixed. Leaves of the ray's originating patch whose box the ray leaves before the
+// self-intersection distance are not emitted: every root inside such a leaf would be rejected anyway.
+//
+// Per ray, the BVH's depth-first traversal lists the patches it visits (plain branches: neighbouring rays
+// take the same paths). Then all (ray, patch) pairs of the chunk go down their subpatch trees together,
+// level by level, two levels per 4-wide test (the odd level in between only contributes its backface bit:
+// a grandchild's box lies inside its parent's, so the hit set is the same), through the quads
+// (SubpatchQuad, numbered as a 4-ary heap: the children of quad q are 4q+1..4q+4). The tests of one level
+// are independent and their work is branch free: the hit lanes are filtered in the SIMD mask (exit
+// distance, precomputed backface bits), and all four outputs are written (the ones past the hit count land
+// in scratch slots and are overwritten). Each item's hit children are appended in hit order (a table
+// lookup), so every level stays grouped by pair in visit order and in depth-first order within a pair; the
+// leaves' candidates of one quad are written in lane order, which the final stable sort by entry distance
+// turns into the same order as hit order would. For an odd depth the nodes of the last level above the
+// leaves test their two children as a pair. Where the CPU has AVX2, the whole chunk runs AVX2 code (two
+// quads per 8-wide test); the results are the same.
+//
+// `cull`: camera rays skip back-facing subpatches (--cull-backfaces). Runs tbb over chunks of kChunk rays.
+void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull);
+
+}  // namespace rt
+}  // namespace tessera
