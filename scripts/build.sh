@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
-          libfmt-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev)
+          libfmt-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev python3)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null

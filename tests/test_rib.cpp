@@ -16,6 +16,7 @@
 #include "io/rib_shaders.h"
 #include "io/scene_loader.h"
 #include "test_support.h"
+#include "shading/registry.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -844,4 +845,21 @@ TEST(RibFiles, ShippedScenesKeepTheirContent) {
         EXPECT_EQ(s.lights.size(), c.lights);
         EXPECT_EQ(s.materials.size(), c.materials);
     }
+}
+
+// The RIB parameter tables and the shader registry name the same shaders with the same kinds, so a shader
+// registered for the engines can be used from RIB and vice versa.
+TEST(RibShaderTables, MatchTheShaderRegistry) {
+    for (const SurfaceShaderInfo& s : tessera::surfaceShaders()) {
+        const rib::SurfaceShader* t = rib::findSurfaceShader(s.name);
+        ASSERT_NE(t, nullptr) << s.name;
+        EXPECT_EQ(t->type, s.type) << s.name;
+    }
+    for (const rib::SurfaceShader& t : rib::surfaceShaders()) EXPECT_NE(tessera::findSurfaceShader(t.name), nullptr);
+    for (const LightShaderInfo& l : tessera::lightShaders()) {
+        const rib::LightShader* t = rib::findLightShader(l.name);
+        ASSERT_NE(t, nullptr) << l.name;
+        EXPECT_EQ(t->type, l.type) << l.name;
+    }
+    for (const rib::LightShader& t : rib::lightShaders()) EXPECT_NE(tessera::findLightShader(t.name), nullptr);
 }

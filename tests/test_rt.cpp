@@ -12,6 +12,7 @@
 #include "io/scene_loader.h"
 #include "rt/rt_renderer.h"
 #include "test_util.h"
+#include "shading/registry.h"
 
 using namespace tessera;
 using namespace tessera::test;

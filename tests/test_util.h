@@ -6,6 +6,7 @@
 
 #include "render/render.h"
 #include "scene/scene.h"
+#include "shading/registry.h"
 
 namespace tessera::test {
 

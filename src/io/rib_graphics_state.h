@@ -12,6 +12,7 @@
 #include "core/transform.h"
 #include "io/rib_request.h"
 #include "scene/scene.h"
+#include "shading/registry.h"
 
 namespace tessera::rib {
 

@@ -19,6 +19,7 @@
 #include "io/rib_params.h"
 #include "io/rib_request.h"
 #include "io/rib_shaders.h"
+#include "shading/registry.h"
 
 namespace tessera {
 
@@ -352,7 +353,7 @@ class RibReader {
         args.atLeast(1, "name ...parameterlist...");
         const std::string& name = args.string(0);
         auto ps = parseParams(r, 1, decls_, diag_);
-        const SurfaceShader* shader = findSurfaceShader(name);
+        const SurfaceShader* shader = rib::findSurfaceShader(name);
         if (!shader) {
             diag_.warnOnce("surface:" + name, r.line,
                            "surface shader \"" + name + "\" is not supported; keeping the previous surface");
@@ -375,7 +376,7 @@ class RibReader {
             diag_.warn(r.line, "LightSource before WorldBegin is ignored");
             return;
         }
-        const LightShader* shader = findLightShader(name);
+        const LightShader* shader = rib::findLightShader(name);
         if (!shader) {
             diag_.warnOnce("light:" + name, r.line,
                            "light shader \"" + name + "\" is not supported; light ignored");

@@ -9,6 +9,7 @@
 #include "io/obj_reader.h"
 #include "io/rib_lexer.h"
 #include "io/rib_reader.h"
+#include "shading/registry.h"
 
 namespace tessera {
 

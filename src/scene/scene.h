@@ -96,9 +96,3 @@ enum class UpAxis { Y, Z };
 void frameSceneDefault(Scene& scene, int width, int height, UpAxis up = UpAxis::Z);
 
 }  // namespace tessera
-
-namespace tessera {
-// Defaults of the RI standard shaders (RI spec 3.2, appendix A) for a material type; defined with the
-// shader registry (src/shading/registry.cpp).
-Material defaultMaterial(MaterialType type);
-}  // namespace tessera

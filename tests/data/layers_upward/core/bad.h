@@ -1,0 +1,3 @@
+// Fixture for LayeringCheckCatchesAnUpwardInclude: core must not include render.
+#pragma once
+#include "render/render.h"
