@@ -5,7 +5,9 @@
 namespace tessera {
 
 FrameSetup::FrameSetup(const Scene& scene, const RenderSettings& settings)
-    : filter(makeFilter(scene.image)),
+    : start(EngineClock::now()),
+      camera(scene.camera),
+      filter(makeFilter(scene.image)),
       nx(std::max(1, scene.image.pixelSamplesX)),
       ny(std::max(1, scene.image.pixelSamplesY)),
       region(renderRegion(scene.camera, settings)),
@@ -13,10 +15,11 @@ FrameSetup::FrameSetup(const Scene& scene, const RenderSettings& settings)
     for (const Light& l : scene.lights) lights.push_back(prepareLight(l, scene.camera.cameraFromWorld));
 }
 
-Image FrameSetup::makeImage(const RenderSettings& settings) const {
-    Image img(region);
-    img.addPlanes(settings.channels, settings.aovs);
-    return img;
+RenderResult FrameSetup::startResult(const RenderSettings& settings) const {
+    RenderResult result;
+    result.image = Image(region);
+    result.image.addPlanes(settings.channels, settings.aovs);
+    return result;
 }
 
 void FrameSetup::resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const {

@@ -3,6 +3,7 @@
 #pragma once
 #include <vector>
 
+#include "engine/clock.h"
 #include "engine/settings.h"
 #include "film/filter.h"
 #include "shading/light.h"
@@ -10,6 +11,8 @@
 namespace tessera {
 
 struct FrameSetup {
+    EngineClock::time_point start;  // when the engine began (engine_ms)
+    const Camera& camera;
     PixelFilter filter;
     int nx = 1, ny = 1;  // samples per pixel: nx x ny strata
     Rect region;         // raster pixels this render writes
@@ -18,8 +21,8 @@ struct FrameSetup {
 
     FrameSetup(const Scene& scene, const RenderSettings& settings);
     int samplesPerPixel() const { return nx * ny; }
-    // The result image: the region, with the planes the output spec asks for.
-    Image makeImage(const RenderSettings& settings) const;
+    // An empty result whose image is the region, with the planes the output spec asks for.
+    RenderResult startResult(const RenderSettings& settings) const;
     // Reset a tile for the samples of `pixels` with the output spec's channels.
     void resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const;
 };

@@ -7,20 +7,15 @@
 #include <tbb/task_arena.h>
 
 #include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <span>
 
+#include "engine/clock.h"
 #include "engine/settings.h"
 #include "film/film.h"
 
 namespace tessera {
-
-using EngineClock = std::chrono::steady_clock;
-inline double msSince(EngineClock::time_point t0) {
-    return std::chrono::duration<double, std::milli>(EngineClock::now() - t0).count();
-}
 
 // Square buckets of `size` pixels covering `region`, numbered in scanline order.
 struct BucketLayout {

@@ -45,11 +45,9 @@ uint64_t estimatedMicropolygons(const Piece& p) {
 }  // namespace
 
 RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
-    const auto tStart = EngineClock::now();
-    RenderResult result;
-    const Camera& cam = scene.camera;
     const FrameSetup frame(scene, settings);
-    result.image = frame.makeImage(settings);
+    RenderResult result = frame.startResult(settings);
+    const Camera& cam = frame.camera;
     for (const Material& m : scene.materials)
         if (surfaceHasTracedLobes(m.type)) {
             // Mirror and glass get their local terms here; the traced part needs the ray tracer.
@@ -201,7 +199,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                      {"dice_shade_cpu", total.diceMs},
                      {"sample_cpu", total.sampleMs},
                      {"filter_cpu", total.filterMs}};
-    s["engine_ms"] = msSince(tStart);
+    s["engine_ms"] = msSince(frame.start);
     return result;
 }
 

@@ -257,11 +257,9 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
 }  // namespace
 
 RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
-    const auto tStart = EngineClock::now();
-    RenderResult result;
-    const Camera& cam = scene.camera;
     const FrameSetup frame(scene, settings);
-    result.image = frame.makeImage(settings);
+    RenderResult result = frame.startResult(settings);
+    const Camera& cam = frame.camera;
     const int nx = frame.nx, ny = frame.ny;
 
     // Build: camera space (eye at the origin), both levels of the hierarchy.
@@ -376,7 +374,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
                      {"newton_cpu", total.newtonMs},
                      {"shading_cpu", shadeMs},
                      {"filter_cpu", filterMs}};
-    s["engine_ms"] = msSince(tStart);
+    s["engine_ms"] = msSince(frame.start);
     return result;
 }
 
