@@ -12,7 +12,8 @@ namespace tessera::cli {
 //  - set-up before the first report (splitting, BVH build) counts as if it were work, so early estimates
 //    are too long: the rate here is measured from the first report on;
 //  - work is not uniform in cost, so the rate wanders: the estimated finish time is smoothed with a time
-//    constant of `smoothingSeconds`, which keeps the shown value from jumping at every report.
+//    constant of a quarter of the time since the first report (at most `smoothingSeconds`), which keeps
+//    the shown value from jumping at every report at any render length.
 class TimeLeftEstimate {
   public:
     explicit TimeLeftEstimate(double smoothingSeconds = 2.0) : tau_(smoothingSeconds) {}
@@ -39,7 +40,8 @@ class TimeLeftEstimate {
             finish_ = finish;
             hasFinish_ = true;
         } else {
-            const double alpha = tau_ > 0 ? std::min(1.0, (seconds - lastTime_) / tau_) : 1.0;
+            const double tau = std::min(tau_, 0.25 * dt);
+            const double alpha = tau > 0 ? std::min(1.0, std::max(0.0, seconds - lastTime_) / tau) : 1.0;
             finish_ += alpha * (finish - finish_);
         }
         lastTime_ = std::max(lastTime_, seconds);
