@@ -31,6 +31,11 @@ struct SceneCase {
     double minCoverage;  // fraction of the frame the model covers at least
 };
 
+// Readable and stable CTest names (the default printer shows the struct's bytes, pointers included).
+[[maybe_unused]] void PrintTo(const SceneCase& c, std::ostream* os) {
+    *os << c.name << " " << c.engine;
+}
+
 class ShippedScenes : public ::testing::TestWithParam<SceneCase> {};
 
 }  // namespace
