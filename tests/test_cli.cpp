@@ -209,7 +209,8 @@ TEST(Cli, UnknownCommandIsNamed) {
 TEST(Cli, RangeErrorsPrintReadableNumbers) {
     for (const char* args : {"--shading-rate 0", "--shading-rate -1", "--threads -1", "--spp 0", "--spp 2.5",
                              "--bucket-size 2", "--max-depth 100"}) {
-        CommandResult r = run("render " + kTeapot + " -q -o never.png " + args);
+        CommandResult r =
+            run("render " + kTeapot + " -q -o " + (tempDir() / "never.png").string() + " " + args);
         EXPECT_EQ(r.exitCode, 2) << args << ": " << r.output;
         EXPECT_NE(r.output.find("must be"), std::string::npos) << args << ": " << r.output;
         // No number longer than 8 digits (CLI11's own checks print DBL_MAX in full).
@@ -220,20 +221,29 @@ TEST(Cli, RangeErrorsPrintReadableNumbers) {
         }
         EXPECT_LE(longest, 8u) << args << ": " << r.output;
     }
+    fs::remove_all(tempDir());
 }
 
 TEST(Cli, UpAppliesOnlyToInputsWithoutACamera) {
-    const std::string bpt = std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt";
+    // One bump patch standing on z = 0, centred on the z axis: z is up by the data.
+    const std::string bpt = (tempDir() / "bump.bpt").string();
+    {
+        std::ofstream f(bpt);
+        f << "1\n3 3\n";
+        for (int k = 0; k < 16; ++k)
+            f << (k % 4) - 1.5 << " " << (k / 4) - 1.5 << " " << ((k % 4) % 3 && (k / 4) % 3) << "\n";
+    }
     CommandResult r = run("info " + bpt);
     EXPECT_NE(r.output.find("framing:  default camera, up z (chosen from the data)"), std::string::npos)
         << r.output;
     r = run("info " + bpt + " --up y");
     EXPECT_NE(r.output.find("up y (--up)"), std::string::npos) << r.output;
-    r = run("render " + kTeapot + " --up y -q -o never.png");
+    r = run("render " + kTeapot + " --up y -q -o " + (tempDir() / "never.png").string());
     EXPECT_EQ(r.exitCode, 2) << r.output;
     EXPECT_NE(r.output.find("has its own camera"), std::string::npos) << r.output;
-    r = run("render " + bpt + " --up w -q -o never.png");
+    r = run("render " + bpt + " --up w -q -o " + (tempDir() / "never.png").string());
     EXPECT_EQ(r.exitCode, 2) << r.output;
+    fs::remove_all(tempDir());
 }
 
 // --progress: "progress N%" lines on stderr, N strictly increasing from 0 to 100, nothing else on them.

@@ -94,7 +94,7 @@ void checkWritableOrFail(const std::string& path, const char* what) {
     if (!why.empty()) fail(fmt::format("{}: error: cannot write the {} there: {}", path, what, why));
 }
 
-// Writes `text` to a temporary file beside `path`; commitFile() renames it into place.
+// Writes `text` to a temporary file beside `path` and returns its name; the caller renames it into place.
 std::string writeTemporary(const std::string& path, const std::string& text) {
     fs::path p(path);
     std::string tmp = (p.parent_path() / fmt::format(".{}.tmp{}", p.filename().string(), getpid())).string();
