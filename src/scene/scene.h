@@ -17,8 +17,8 @@ struct ImageOptions {
     FilterType filter = FilterType::Gaussian;  // RI default gaussian 2 x 2
     float filterWidthX = 2.f, filterWidthY = 2.f;
     float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
-    bool srgbOutput = false;                        // used for scenes without a RIB (.bpt)
-    std::string displayName;                        // RIB Display name ("" if none)
+    bool srgbOutput = false;                         // used for scenes without a RIB (.bpt)
+    std::string displayName;                         // RIB Display name ("" if none)
 };
 
 enum class LightType { Ambient, Distant, Point };
@@ -45,10 +45,10 @@ struct Material {
 // Per-primitive attributes the renderers need.
 struct PatchAttributes {
     uint32_t material = 0;
-    uint32_t object = 0;      // object id (one per RIB primitive call / .bpt file)
-    float shadingRate = 1.f;  // pixels of area per micropolygon
-    bool twoSided = true;     // Sides 2
-    bool flipNormal = false;  // orientation disagrees with dPdu x dPdv
+    uint32_t object = 0;        // object id (one per RIB primitive call / .bpt file)
+    float shadingRate = 1.f;    // pixels of area per micropolygon
+    bool twoSided = true;       // Sides 2
+    bool flipNormal = false;    // orientation disagrees with dPdu x dPdv
 };
 
 struct Scene {
@@ -56,8 +56,8 @@ struct Scene {
     ImageOptions image;
     std::vector<Light> lights;
     std::vector<Material> materials;
-    std::vector<BezierPatch> patches;         // world space
-    std::vector<PatchAttributes> attributes;  // one per patch
+    std::vector<BezierPatch> patches;           // world space
+    std::vector<PatchAttributes> attributes;    // one per patch
     uint32_t objectCount = 0;
     std::string sourcePath;
 
