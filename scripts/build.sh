@@ -1,12 +1,21 @@
 #!/usr/bin/env bash
 # Installs the Debian packages Tessera needs (only those missing), then configures and builds a Release
-# build in build/. Usage: bash scripts/build.sh [extra cmake args...]
+# build in build/.
+# Usage: bash scripts/build.sh [TARGET...] [-DCMAKE_OPTION=...]
+#   no target: everything (the CLI, the tests, the benchmarks); `tessera`: only the CLI and its library,
+#   which is all that rendering needs (the README's first command). Words starting with '-' go to cmake.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+TARGETS=()
+CMAKE_ARGS=()
+for a in "$@"; do
+  if [[ $a == -* ]]; then CMAKE_ARGS+=("$a"); else TARGETS+=(--target "$a"); fi
+done
 
 PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
           libfmt-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev python3)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
-cmake --build build -j"$(nproc)"
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "${CMAKE_ARGS[@]}" >/dev/null
+cmake --build build -j"$(nproc)" "${TARGETS[@]}"

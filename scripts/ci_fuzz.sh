@@ -33,7 +33,7 @@ for t in "${TARGETS[@]}"; do
   art=$B/artifacts/$t
   mkdir -p "$work" "$seeds" "$art" $B/run
   case $t in
-    rib) cp scenes/*.rib "$seeds"/ 2>/dev/null || true
+    rib) cp scenes/*.rib scenes/archives/*.rib "$seeds"/ 2>/dev/null || true
          find ../shared/data -name '*.rib' -size -16k -exec cp {} "$seeds"/ \; 2>/dev/null || true ;;
     bpt) find ../shared/data -name '*.bpt' -size -16k -exec cp {} "$seeds"/ \; 2>/dev/null || true ;;
     obj) find ../shared/data -name '*.obj' -size -16k -exec cp {} "$seeds"/ \; 2>/dev/null || true ;;

@@ -55,7 +55,7 @@ def bigguy_grid(name, cols, rows):
             x, z = (c - (cols - 1) / 2) * sx, (r - (rows - 1) / 2) * sz
             hue = (0.55 + 0.3 * ((r * cols + c) % 3) / 2, 0.6, 0.5 + 0.2 * (c % 2))
             body += (f"AttributeBegin\nTranslate {x:g} 0 {z:g}\nColor [ {hue[0]:.3g} {hue[1]:.3g} {hue[2]:.3g} ]\n"
-                     'ReadArchive "bigguy_patches.rib"\nAttributeEnd\n')
+                     'ReadArchive "archives/bigguy_patches.rib"\nAttributeEnd\n')
     extent = max(cols * sx, rows * sz)
     eye = [0.3 * extent, 0.45 * extent, 1.3 * extent]
     write(name, f"{cols * rows} Big Guys ({cols * rows * 3570} bicubic patches) on a {cols}x{rows} grid",
@@ -69,13 +69,13 @@ Surface "matte" "Ka" [ 1 ] "Kd" [ 1 ]
 AttributeBegin
 Translate 0 -130 0
 Color [ 0.82 0.8 0.76 ]
-ReadArchive "killeroo_model.rib"
+ReadArchive "archives/killeroo_model.rib"
 AttributeEnd
 AttributeBegin
 Translate 40 150 0
 Rotate 180 0 0 1
 Color [ 0.7 0.75 0.82 ]
-ReadArchive "killeroo_model.rib"
+ReadArchive "archives/killeroo_model.rib"
 AttributeEnd
 """
     write("killeroo2", "two Killeroos (23064 bicubic patches)", 1024, 768, 40, [-560, 40, 200], [10, 10, -40],
@@ -102,7 +102,7 @@ Surface "matte" "Ka" [ 1 ] "Kd" [ 0.9 ]
         body += f"AttributeBegin # {name}\nColor [ {col[0]} {col[1]} {col[2]} ]\n" + quad(pts) + "AttributeEnd\n"
     body += ('AttributeBegin # Big Guy\nColor [ 0.8 0.62 0.5 ]\n'
              'Surface "plastic" "Ka" [ 1 ] "Kd" [ 0.8 ] "Ks" [ 0.35 ] "roughness" [ 0.15 ]\n'
-             'ReadArchive "bigguy_patches.rib"\nAttributeEnd\n')
+             'ReadArchive "archives/bigguy_patches.rib"\nAttributeEnd\n')
     write("bigguy_box", "Big Guy (3570 patches) in a five-walled box (a Cornell-box-like set for lighting work)",
           800, 800, 48, [0, 2.5, 17.5], [0, 2, 0], [0, 1, 0], 0.5, 1000, body)
 

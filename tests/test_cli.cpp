@@ -2,12 +2,17 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <sstream>
+#include <vector>
 
+#include "../apps/tessera/progress.h"
 #include "io/image_io.h"
 
 namespace fs = std::filesystem;
@@ -46,7 +51,8 @@ TEST(Cli, RendersTeapotToPngAndExr) {
     fs::path dir = tempDir();
     std::string png = (dir / "teapot.png").string(), exr = (dir / "teapot.exr").string();
     std::string stats = (dir / "stats.json").string();
-    CommandResult r = run("render " + kTeapot + " -o " + png + " --res 200x150 --stats " + stats + " --quiet");
+    CommandResult r =
+        run("render " + kTeapot + " -o " + png + " --res 200x150 --stats " + stats + " --quiet");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     EXPECT_EQ(r.output.find('\r'), std::string::npos) << "no progress bar when stderr is not a terminal";
     r = run("render " + kTeapot + " -o " + exr + " --res 200x150 --quiet");
@@ -78,8 +84,8 @@ TEST(Cli, RendersTeapotToPngAndExr) {
 
     std::ifstream sf(stats);
     nlohmann::json j = nlohmann::json::parse(sf);
-    for (const char* key : {"engine", "width", "height", "spp", "threads", "patches_in", "patches_culled", "splits",
-                            "grids", "micropolygons", "sample_tests", "render_ms", "peak_rss_mb"})
+    for (const char* key : {"engine", "width", "height", "spp", "threads", "patches_in", "patches_culled",
+                            "splits", "grids", "micropolygons", "sample_tests", "render_ms", "peak_rss_mb"})
         EXPECT_TRUE(j.contains(key)) << key;
     EXPECT_EQ(j["patches_in"].get<int>(), 32);
     EXPECT_EQ(j["spp"].get<int>(), 16);
@@ -107,7 +113,8 @@ TEST(Cli, InfoPrintsCountsBoundsAndCamera) {
 TEST(Cli, BadInputExitsWithTwoAndAClearMessage) {
     fs::path dir = tempDir();
     fs::path bad = dir / "bad.rib";
-    std::ofstream(bad) << "WorldBegin\nAttributeBegin\nPatch \"bicubic\" \"P\" [0 0 0]\nAttributeEnd\nWorldEnd\n";
+    std::ofstream(bad)
+        << "WorldBegin\nAttributeBegin\nPatch \"bicubic\" \"P\" [0 0 0]\nAttributeEnd\nWorldEnd\n";
     std::string out = (dir / "never.png").string();
     CommandResult r = run("render " + bad.string() + " -o " + out);
     EXPECT_EQ(r.exitCode, 2);
@@ -162,8 +169,187 @@ TEST(Cli, ConvertWritesARibThatRendersTheSameImage) {
     ASSERT_EQ(run("render " + rib + " --res 160x120 -q -o " + b).exitCode, 0);
     Image ia = readExr(a), ib = readExr(b);
     double maxDiff = 0;
-    for (size_t i = 0; i < ia.rgba.size(); ++i) maxDiff = std::max(maxDiff, double(std::fabs(ia.rgba[i] - ib.rgba[i])));
+    for (size_t i = 0; i < ia.rgba.size(); ++i)
+        maxDiff = std::max(maxDiff, double(std::fabs(ia.rgba[i] - ib.rgba[i])));
     EXPECT_LT(maxDiff, 2e-3) << "same geometry, camera, lights and material after the round trip";
     EXPECT_EQ(run("convert " + bpt + " -o " + (dir / "x.png").string()).exitCode, 2);
     fs::remove_all(dir);
+}
+
+// ---- first run: version, help, mistakes caught before the render, progress ------------------------
+
+TEST(Cli, VersionNamesTheVersionAndBuildType) {
+    CommandResult r = run("--version");
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("tessera 0."), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(" build)"), std::string::npos) << r.output;
+}
+
+TEST(Cli, RenderHelpListsEveryInputFormatAndTheDefaults) {
+    CommandResult r = run("render --help");
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    for (const char* format : {"RIB", ".rib.gz", ".bpt", "OBJ", "Micropolis"})
+        EXPECT_NE(r.output.find(format), std::string::npos) << format << "\n" << r.output;
+    for (const char* option :
+         {"--engine TEXT:{reyes,rt}=reyes", "--bucket-size INT:(4..1024)=32", "--max-grid INT:(1..256)=16",
+          "--subpatch-depth INT:(0..12)=6", "--max-depth INT:(0..64)=4", "--threads INT:(0..4096)=0",
+          "--format", "--up", "--progress"})
+        EXPECT_NE(r.output.find(option), std::string::npos) << option << "\n" << r.output;
+}
+
+TEST(Cli, UnknownCommandIsNamed) {
+    CommandResult r = run("rendr " + kTeapot);
+    EXPECT_EQ(r.exitCode, 2);
+    EXPECT_NE(r.output.find("unknown command 'rendr'"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("did you mean 'render'"), std::string::npos) << r.output;
+    r = run("");
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+}
+
+TEST(Cli, RangeErrorsPrintReadableNumbers) {
+    for (const char* args : {"--shading-rate 0", "--shading-rate -1", "--threads -1", "--spp 0", "--spp 2.5",
+                             "--bucket-size 2", "--max-depth 100"}) {
+        CommandResult r =
+            run("render " + kTeapot + " -q -o " + (tempDir() / "never.png").string() + " " + args);
+        EXPECT_EQ(r.exitCode, 2) << args << ": " << r.output;
+        EXPECT_NE(r.output.find("must be"), std::string::npos) << args << ": " << r.output;
+        // No number longer than 8 digits (CLI11's own checks print DBL_MAX in full).
+        size_t run = 0, longest = 0;
+        for (char c : r.output) {
+            run = std::isdigit(static_cast<unsigned char>(c)) ? run + 1 : 0;
+            longest = std::max(longest, run);
+        }
+        EXPECT_LE(longest, 8u) << args << ": " << r.output;
+    }
+    fs::remove_all(tempDir());
+}
+
+TEST(Cli, UpAppliesOnlyToInputsWithoutACamera) {
+    // One bump patch standing on z = 0, centred on the z axis: z is up by the data.
+    const std::string bpt = (tempDir() / "bump.bpt").string();
+    {
+        std::ofstream f(bpt);
+        f << "1\n3 3\n";
+        for (int k = 0; k < 16; ++k)
+            f << (k % 4) - 1.5 << " " << (k / 4) - 1.5 << " " << ((k % 4) % 3 && (k / 4) % 3) << "\n";
+    }
+    CommandResult r = run("info " + bpt);
+    EXPECT_NE(r.output.find("framing:  default camera, up z (chosen from the data)"), std::string::npos)
+        << r.output;
+    r = run("info " + bpt + " --up y");
+    EXPECT_NE(r.output.find("up y (--up)"), std::string::npos) << r.output;
+    r = run("render " + kTeapot + " --up y -q -o " + (tempDir() / "never.png").string());
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("has its own camera"), std::string::npos) << r.output;
+    r = run("render " + bpt + " --up w -q -o " + (tempDir() / "never.png").string());
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    fs::remove_all(tempDir());
+}
+
+// --progress: "progress N%" lines on stderr, N strictly increasing from 0 to 100, nothing else on them.
+TEST(Cli, ProgressLinesArePrintedOncePerPercent) {
+    fs::path dir = tempDir() / "progress";
+    fs::create_directories(dir);
+    for (const char* engine : {"reyes", "rt"}) {
+        CommandResult r = run("render " + kTeapot + " --res 320x240 --spp 1 -q --progress --bucket-size 8 " +
+                              "--engine " + engine + " -o " + (dir / "p.png").string());
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        std::istringstream lines(r.output);
+        std::string line;
+        std::vector<int> percents;
+        while (std::getline(lines, line)) {
+            int p = -1;
+            char pct = 0, extra = 0;
+            if (std::sscanf(line.c_str(), "progress %d%c%c", &p, &pct, &extra) == 2 && pct == '%')
+                percents.push_back(p);
+            else
+                ADD_FAILURE() << "unexpected line '" << line << "'";
+        }
+        ASSERT_GE(percents.size(), 2u) << r.output;
+        EXPECT_EQ(percents.front(), 0);
+        EXPECT_EQ(percents.back(), 100);
+        for (size_t i = 1; i < percents.size(); ++i) EXPECT_GT(percents[i], percents[i - 1]) << r.output;
+    }
+    fs::remove_all(dir);
+}
+
+// Every exit status the CLI uses is listed in the README.
+TEST(Cli, ReadmeListsEveryExitStatus) {
+    std::ifstream f(std::string(TESSERA_SOURCE_DIR) + "/README.md");
+    std::stringstream ss;
+    ss << f.rdbuf();
+    const std::string readme = ss.str();
+    size_t at = readme.find("Exit status");
+    ASSERT_NE(at, std::string::npos);
+    // The list item: up to the next item or paragraph, line breaks read as blanks.
+    std::string line = readme.substr(at, std::min(readme.find("\n- ", at), readme.find("\n\n", at)) - at);
+    std::replace(line.begin(), line.end(), '\n', ' ');
+    for (const char* status : {"0 ", "1 ", "2 ", "130 "})
+        EXPECT_NE(line.find(status), std::string::npos) << status << " missing from: " << line;
+}
+
+// ---- the time-left estimate and the percent steps, fed with made-up clocks -------------------------
+
+// Constant work rate after 2 s of set-up (what the engines do before their first tile): the estimate is
+// the true time left from the second report on, and it only goes down. The naive elapsed * (1 - f) / f
+// would count the set-up as work and start 2 s * (1 - f) / f too high.
+TEST(ProgressEstimate, SetUpTimeDoesNotInflateTheEstimate) {
+    tessera::cli::TimeLeftEstimate e;
+    const double setup = 2.0, rate = 1000.0;  // units per second
+    const int64_t total = 10000;
+    double previous = 1e30;
+    for (int64_t done = 100; done <= total; done += 100) {
+        const double t = setup + done / rate;
+        e.update(t, done, total);
+        std::optional<double> left = e.secondsLeft(t);
+        if (done == 100) {
+            EXPECT_FALSE(left.has_value()) << "one report gives no rate";
+            continue;
+        }
+        ASSERT_TRUE(left.has_value());
+        EXPECT_NEAR(*left, (total - done) / rate, 1e-9) << done;
+        EXPECT_LE(*left, previous);
+        previous = *left;
+    }
+    EXPECT_EQ(*e.secondsLeft(setup + total / rate), 0.0);
+}
+
+// Uneven work (tiles alternate between cheap and expensive, reports come in bursts): the estimated finish
+// time stays within 10% of the true one after the first tenth, and it never moves by more than 5% of the
+// total time between two reports, where the naive estimate swings with every expensive tile.
+TEST(ProgressEstimate, UnevenWorkGivesASteadyEstimate) {
+    tessera::cli::TimeLeftEstimate e;
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> jitter(0.5, 1.5);
+    const int tiles = 400;
+    std::vector<double> cost(tiles);
+    double totalTime = 0;
+    for (int i = 0; i < tiles; ++i) totalTime += cost[i] = (i % 8 < 4 ? 1.0 : 3.0) * jitter(rng) * 0.01;
+    double t = 0, lastFinish = -1;
+    for (int i = 0; i < tiles; ++i) {
+        t += cost[i];
+        e.update(t, i + 1, tiles);
+        std::optional<double> left = e.secondsLeft(t);
+        if (!left || i < tiles / 10) continue;
+        const double finish = t + *left;
+        EXPECT_NEAR(finish, totalTime, 0.1 * totalTime) << "tile " << i;
+        if (lastFinish >= 0) {
+            EXPECT_LT(std::fabs(finish - lastFinish), 0.05 * totalTime) << "tile " << i;
+        }
+        lastFinish = finish;
+    }
+}
+
+TEST(ProgressEstimate, PercentStepsAreWholeIncreasingAndOnce) {
+    tessera::cli::PercentSteps steps;
+    steps.markReported(0);
+    std::vector<int> seen;
+    const int64_t total = int64_t(16384) * 16384 * 1024;  // more samples than an int holds
+    for (int64_t done = 0; done <= total; done += total / 997)
+        if (std::optional<int> p = steps.step(done, total)) seen.push_back(*p);
+    if (std::optional<int> p = steps.step(total, total)) seen.push_back(*p);
+    ASSERT_EQ(seen.size(), 100u);
+    for (int i = 0; i < 100; ++i) EXPECT_EQ(seen[i], i + 1);
+    EXPECT_FALSE(steps.step(total / 2, total).has_value()) << "never backwards";
+    EXPECT_FALSE(steps.step(total, total).has_value()) << "100% once";
 }

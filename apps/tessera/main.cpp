@@ -1,23 +1,35 @@
-// tessera: the command-line driver. `tessera render SCENE` and `tessera info SCENE`.
+// tessera: the command-line driver. `tessera render SCENE`, `tessera info SCENE`, `tessera convert`.
+#include <fcntl.h>
 #include <fmt/core.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <optional>
+#include <vector>
 
 #include "io/diagnostics.h"
 #include "io/image_io.h"
 #include "io/rib_writer.h"
 #include "io/scene_loader.h"
+#include "progress.h"
 #include "render/render.h"
+
+#ifndef TESSERA_VERSION
+#define TESSERA_VERSION "unknown"
+#endif
+#ifndef TESSERA_BUILD_TYPE
+#define TESSERA_BUILD_TYPE "unknown"
+#endif
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -44,14 +56,61 @@ double peakRssMb() {
 }
 
 struct RenderArgs {
-    std::string scene, output, engine = "reyes", res, stats, format = "auto";
+    std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
-    bool quiet = false, cullBackfaces = false, noRayBinning = false;
+    bool quiet = false, cullBackfaces = false, noRayBinning = false, progressLines = false;
 };
 
-Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatName = "auto") {
+std::optional<UpAxis> parseUp(const std::string& up) {
+    if (up.empty()) return std::nullopt;
+    if (up == "x") return UpAxis::X;
+    if (up == "y") return UpAxis::Y;
+    return UpAxis::Z;  // CLI11 allowed only x, y, z
+}
+
+// Output paths are checked before the scene is loaded, so that a mistake costs no render: the directory
+// must exist and take a new file (a probe file is created beside the target and removed again, which is
+// what writing the temporary file and renaming it needs). Returns "" or what is wrong.
+std::string whyNotWritable(const std::string& path) {
+    fs::path p(path);
+    std::error_code ec;
+    if (p.filename().empty() || fs::is_directory(p, ec)) return "is a directory, not a file name";
+    fs::path dir = p.parent_path();
+    if (dir.empty()) dir = ".";
+    if (!fs::exists(dir, ec)) return fmt::format("the directory '{}' does not exist", dir.string());
+    if (!fs::is_directory(dir, ec)) return fmt::format("'{}' is not a directory", dir.string());
+    std::string probe = (dir / fmt::format(".{}.probe{}", p.filename().string(), getpid())).string();
+    int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
+    if (fd < 0) return fmt::format("cannot create a file in '{}': {}", dir.string(), std::strerror(errno));
+    ::close(fd);
+    ::unlink(probe.c_str());
+    return "";
+}
+
+void checkWritableOrFail(const std::string& path, const char* what) {
+    std::string why = whyNotWritable(path);
+    if (!why.empty()) fail(fmt::format("{}: error: cannot write the {} there: {}", path, what, why));
+}
+
+// Writes `text` to a temporary file beside `path` and returns its name; the caller renames it into place.
+std::string writeTemporary(const std::string& path, const std::string& text) {
+    fs::path p(path);
+    std::string tmp = (p.parent_path() / fmt::format(".{}.tmp{}", p.filename().string(), getpid())).string();
+    std::ofstream f(tmp, std::ios::binary);
+    f << text;
+    f.close();
+    if (!f) {
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        throw std::runtime_error(path + ": cannot write");
+    }
+    return tmp;
+}
+
+Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatName = "auto",
+                 std::optional<UpAxis> up = std::nullopt) {
     std::optional<SceneFormat> format = parseSceneFormat(formatName);
     if (!format)
         fail(fmt::format("error: unknown --format '{}' (auto, rib, bpt, obj, micropolis)", formatName));
@@ -61,7 +120,7 @@ Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatN
             [quiet](const std::string& w) {
                 if (!quiet) fmt::print(stderr, "{}\n", w);
             },
-            *format);
+            *format, up);
     } catch (const InputError& e) {
         fail(e.what());
     } catch (const std::exception& e) {
@@ -79,58 +138,105 @@ std::string defaultOutput(const Scene& scene, const std::string& scenePath) {
     return fs::path(scenePath).filename().replace_extension(".png").string();
 }
 
-class ProgressBar {
+// The engines call progress(done, total) from worker threads with the work finished so far. On a terminal:
+// a bar with the fraction, the elapsed time and the time left (cli::TimeLeftEstimate); with --progress: one
+// line "progress N%" per whole percent reached, for render farm managers and logs.
+class Progress {
   public:
-    explicit ProgressBar(bool enabled) : enabled_(enabled), start_(std::chrono::steady_clock::now()) {}
-    void update(int done, int total) {
-        if (!enabled_) return;
+    enum class Mode { Off, Bar, Lines };
+    explicit Progress(Mode mode) : mode_(mode), start_(std::chrono::steady_clock::now()) {}
+    void begin() {
+        if (mode_ != Mode::Lines) return;
         std::lock_guard lock(mutex_);
+        fmt::print(stderr, "progress 0%\n");
+        std::fflush(stderr);
+        steps_.markReported(0);
+    }
+    void update(int64_t done, int64_t total) {
+        if (mode_ == Mode::Off) return;
+        std::lock_guard lock(mutex_);
+        if (mode_ == Mode::Lines) {
+            if (std::optional<int> p = steps_.step(done, total)) {
+                fmt::print(stderr, "progress {}%\n", *p);
+                std::fflush(stderr);
+            }
+            return;
+        }
         if (done < last_) return;
         last_ = done;
         double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+        estimate_.update(elapsed, done, total);
         // Redraw at most ten times a second (and always at the end).
         if (done != total && elapsed - lastDraw_ < 0.1) return;
         lastDraw_ = elapsed;
-        double eta = done > 0 ? elapsed * (total - done) / done : 0.0;
         const int width = 30;
-        int filled = total > 0 ? done * width / total : width;
-        fmt::print(stderr, "\r[{:<{}}] {}/{} buckets  {:.1f}s elapsed  ~{:.1f}s left ",
-                   std::string(filled, '#'), width, done, total, elapsed, eta);
+        const double f = total > 0 ? std::clamp(double(done) / double(total), 0.0, 1.0) : 1.0;
+        const int filled = int(f * width);
+        std::optional<double> left = estimate_.secondsLeft(elapsed);
+        std::string eta = left ? fmt::format("~{:.1f}s left", *left) : std::string("estimating");
+        fmt::print(stderr, "\r[{:<{}}] {:3.0f}%  {:.1f}s elapsed  {} ", std::string(filled, '#'), width,
+                   f * 100, elapsed, eta);
         if (done == total) fmt::print(stderr, "\n");
+    }
+    // After a successful render: make sure the last line says 100%.
+    void finish() {
+        if (mode_ != Mode::Lines) return;
+        std::lock_guard lock(mutex_);
+        if (steps_.last() < 100) {
+            fmt::print(stderr, "progress 100%\n");
+            steps_.markReported(100);
+        }
     }
 
   private:
-    bool enabled_;
+    Mode mode_;
     std::chrono::steady_clock::time_point start_;
     std::mutex mutex_;
-    int last_ = -1;
+    int64_t last_ = -1;
     double lastDraw_ = -1;
+    cli::TimeLeftEstimate estimate_;
+    cli::PercentSteps steps_;
 };
 
 int runRender(const RenderArgs& a) {
+    // Mistakes first, before anything is loaded: options, then the files the render will write.
     if (a.spp < 0 || a.spp > kMaxSpp) fail(fmt::format("error: --spp must be between 1 and {}", kMaxSpp));
     if (a.threads < 0) fail("error: --threads must be >= 0 (0 = all cores)");
     if (a.shadingRate < 0 || !std::isfinite(a.shadingRate)) fail("error: --shading-rate must be > 0");
     if (a.bucketSize < 4 || a.bucketSize > 1024) fail("error: --bucket-size must be between 4 and 1024");
     if (a.engine != "reyes" && a.engine != "rt") fail("error: --engine must be reyes or rt");
-    if (!a.output.empty() && !isSupportedImageExtension(a.output))
-        fail(fmt::format("{}: error: unsupported output format (use .png or .exr)", a.output));
+    int resW = 0, resH = 0;
+    if (!a.res.empty()) {
+        char x = 0, extra = 0;
+        if (std::sscanf(a.res.c_str(), "%d%c%d%c", &resW, &x, &resH, &extra) != 3 || (x != 'x' && x != 'X'))
+            fail(fmt::format("error: --res '{}' is not WIDTHxHEIGHT", a.res));
+        if (resW < 1 || resH < 1 || resW > kMaxResolution || resH > kMaxResolution)
+            fail(fmt::format("{}: error: resolution {}x{} outside 1..{} per axis", a.scene, resW, resH,
+                             kMaxResolution));
+    }
+    if (!a.output.empty()) {
+        if (!isSupportedImageExtension(a.output))
+            fail(fmt::format("{}: error: unsupported output format (use .png or .exr)", a.output));
+        checkWritableOrFail(a.output, "image");
+    }
+    if (!a.stats.empty()) {
+        checkWritableOrFail(a.stats, "statistics");
+        std::error_code ec;
+        if (!a.output.empty() && fs::weakly_canonical(a.stats, ec) == fs::weakly_canonical(a.output, ec))
+            fail(fmt::format("{}: error: --stats and -o name the same file", a.stats));
+    }
 
     // Ctrl-C from here on: stop cleanly (no output written) and exit 130.
     std::signal(SIGINT, onSigint);
-    Scene scene = loadOrFail(a.scene, a.quiet, a.format);
+    Scene scene = loadOrFail(a.scene, a.quiet, a.format, parseUp(a.up));
     if (gCancel.load()) {
         fmt::print(stderr, "interrupted while loading {}: no image written\n", a.scene);
         return 130;
     }
     // Command-line options override the scene's.
     if (!a.res.empty()) {
-        int w = 0, h = 0;
-        char x = 0, extra = 0;
-        if (std::sscanf(a.res.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
-            fail(fmt::format("error: --res '{}' is not WIDTHxHEIGHT", a.res));
-        scene.camera.width = w;
-        scene.camera.height = h;
+        scene.camera.width = resW;
+        scene.camera.height = resH;
     }
     if (scene.camera.width < 1 || scene.camera.height < 1 || scene.camera.width > kMaxResolution ||
         scene.camera.height > kMaxResolution)
@@ -141,7 +247,11 @@ int runRender(const RenderArgs& a) {
         for (auto& attr : scene.attributes) attr.shadingRate = float(a.shadingRate);
     if (scene.patches.empty()) fail(fmt::format("{}: error: the scene has no geometry", a.scene));
 
-    std::string output = a.output.empty() ? defaultOutput(scene, a.scene) : a.output;
+    std::string output = a.output;
+    if (output.empty()) {  // named by the scene: checked now, still before the render
+        output = defaultOutput(scene, a.scene);
+        checkWritableOrFail(output, "image");
+    }
 
     RenderSettings settings;
     settings.engine = a.engine;
@@ -153,16 +263,25 @@ int runRender(const RenderArgs& a) {
     settings.cullBackfaces = a.cullBackfaces;
     settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
-    ProgressBar bar(!a.quiet && isatty(STDERR_FILENO));
-    settings.progress = [&bar](int done, int total) { bar.update(done, total); };
+    Progress::Mode mode = a.progressLines                       ? Progress::Mode::Lines
+                          : (!a.quiet && isatty(STDERR_FILENO)) ? Progress::Mode::Bar
+                                                                : Progress::Mode::Off;
+    Progress progress(mode);
+    settings.progress = [&progress](auto done, auto total) {
+        progress.update(int64_t(done), int64_t(total));
+    };
     settings.cancel = &gCancel;
 
+    progress.begin();
     auto t0 = std::chrono::steady_clock::now();
     RenderResult result;
     try {
         result = render(scene, settings);
     } catch (const std::invalid_argument& e) {
         fail(std::string("error: ") + e.what());
+    } catch (const std::bad_alloc&) {
+        fmt::print(stderr, "error: out of memory while rendering {}: no image written\n", a.scene);
+        return 1;
     }
     double renderMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -172,24 +291,26 @@ int runRender(const RenderArgs& a) {
         fmt::print(stderr, "\ninterrupted after {:.0f} ms: no image written\n", renderMs);
         return 130;
     }
-
-    OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput};
-    try {
-        writeImage(output, result.image, enc);
-    } catch (const std::exception& e) {
-        fmt::print(stderr, "error: {}\n", e.what());
-        return 1;
-    }
+    progress.finish();
 
     nlohmann::json& s = result.stats;
     s["scene"] = a.scene;
     s["output"] = output;
     s["render_ms"] = renderMs;
     s["peak_rss_mb"] = peakRssMb();
-    if (!a.stats.empty()) {
-        std::ofstream f(a.stats);
-        if (!f) fail(fmt::format("{}: error: cannot write statistics", a.stats));
-        f << s.dump(2) << "\n";
+    // The statistics go to a temporary file first and are renamed only once the image is in place, so a
+    // failed write leaves neither file changed.
+    std::string statsTmp;
+    try {
+        if (!a.stats.empty()) statsTmp = writeTemporary(a.stats, s.dump(2) + "\n");
+        OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput};
+        writeImage(output, result.image, enc);
+        if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);
+    } catch (const std::exception& e) {
+        std::error_code ec;
+        if (!statsTmp.empty()) fs::remove(statsTmp, ec);
+        fmt::print(stderr, "error: {}\n", e.what());
+        return 1;
     }
     if (!a.quiet) {
         fmt::print(stderr, "{}: {}x{} {} spp, {} engine, {} threads: {:.1f} ms, peak {:.1f} MB\n", output,
@@ -204,10 +325,30 @@ int runRender(const RenderArgs& a) {
     return 0;
 }
 
-int runConvert(const std::string& in, const std::string& out, const std::string& format) {
+// --up frames inputs without a camera; a RIB has its own camera, so --up there is a mistake.
+void checkUpApplies(const std::string& path, const std::string& formatName, const std::string& up) {
+    if (up.empty()) return;
+    std::optional<SceneFormat> format = parseSceneFormat(formatName);
+    if (!format) return;  // reported by loadOrFail
+    try {
+        if (*format == SceneFormat::Auto) format = detectSceneFormat(path);
+    } catch (const InputError&) {
+        return;  // reported by loadOrFail
+    }
+    if (*format == SceneFormat::Rib)
+        fail(fmt::format(
+            "{}: error: --up frames inputs without a camera (.bpt, OBJ, Micropolis); this RIB has "
+            "its own camera",
+            path));
+}
+
+int runConvert(const std::string& in, const std::string& out, const std::string& format,
+               const std::string& up) {
     if (fs::path(out).extension() != ".rib")
         fail(fmt::format("{}: error: convert writes RIB: name it .rib", out));
-    Scene scene = loadOrFail(in, false, format);
+    checkUpApplies(in, format, up);
+    checkWritableOrFail(out, "RIB");
+    Scene scene = loadOrFail(in, false, format, parseUp(up));
     try {
         writeRib(scene, out);
     } catch (const std::exception& e) {
@@ -218,8 +359,9 @@ int runConvert(const std::string& in, const std::string& out, const std::string&
     return 0;
 }
 
-int runInfo(const std::string& path, const std::string& format) {
-    Scene scene = loadOrFail(path, false, format);
+int runInfo(const std::string& path, const std::string& formatName, const std::string& up) {
+    checkUpApplies(path, formatName, up);
+    Scene scene = loadOrFail(path, false, formatName, parseUp(up));
     Bounds3 b = scene.worldBounds();
     const Camera& c = scene.camera;
     fmt::print("scene:    {}\n", path);
@@ -235,61 +377,155 @@ int runInfo(const std::string& path, const std::string& format) {
         "camera:   {}x{}, {} fov {:.4g}, eye ({:.6g}, {:.6g}, {:.6g}), looking ({:.4g}, {:.4g}, {:.4g})\n",
         c.width, c.height, c.perspective ? "perspective" : "orthographic", c.fovDegrees, eye.x, eye.y, eye.z,
         dir.x, dir.y, dir.z);
+    std::optional<SceneFormat> format = parseSceneFormat(formatName);
+    if (format && *format == SceneFormat::Auto) format = detectSceneFormat(path);
+    if (format && *format != SceneFormat::Rib) {
+        if (std::optional<UpAxis> u = parseUp(up))
+            fmt::print("framing:  default camera, up {} (--up)\n", upAxisName(*u));
+        else
+            fmt::print("framing:  default camera, up {} ({})\n",
+                       upAxisName(defaultUpAxis(*format, scene.patches)),
+                       *format == SceneFormat::Obj ? "OBJ convention" : "chosen from the data");
+    }
     fmt::print("clipping: {:.6g} .. {:.6g}\n", c.nearClip, c.farClip);
     fmt::print("samples:  {}x{} per pixel\n", scene.image.pixelSamplesX, scene.image.pixelSamplesY);
     return 0;
 }
 
+// A number check whose message prints its bounds as people write them (CLI11's own range checks print the
+// limits of double in full, 309 digits).
+CLI::Validator inRange(double lo, double hi, bool loExclusive = false, bool integer = false) {
+    const char* kind = integer ? "an integer" : "a number";
+    std::string what = loExclusive ? fmt::format("{} > {:g} and <= {:g}", kind, lo, hi)
+                                   : fmt::format("{} from {:g} to {:g}", kind, lo, hi);
+    return CLI::Validator(
+        [=](std::string& text) -> std::string {
+            char* end = nullptr;
+            errno = 0;
+            double v = std::strtod(text.c_str(), &end);
+            if (text.empty() || *end != '\0' || errno == ERANGE || !std::isfinite(v) || v < lo || v > hi ||
+                (loExclusive && v == lo) || (integer && v != std::floor(v)))
+                return fmt::format("must be {}, got '{}'", what, text);
+            return "";
+        },
+        loExclusive ? fmt::format("(>{:g}..{:g})", lo, hi) : fmt::format("({:g}..{:g})", lo, hi));
+}
+
+CLI::Validator intRange(int lo, int hi) {
+    return inRange(lo, hi, false, true);
+}
+
+// Edit distance, for "did you mean" on a mistyped command.
+size_t editDistance(const std::string& a, const std::string& b) {
+    std::vector<size_t> row(b.size() + 1);
+    for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (size_t i = 1; i <= a.size(); ++i) {
+        size_t diag = row[0];
+        row[0] = i;
+        for (size_t j = 1; j <= b.size(); ++j) {
+            size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diag = up;
+        }
+    }
+    return row[b.size()];
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+    const std::vector<std::string> commands = {"render", "info", "convert"};
+    // A first word that is not an option must be a command; name it when it is not one of ours.
+    if (argc > 1 && argv[1][0] != '-' &&
+        std::find(commands.begin(), commands.end(), std::string(argv[1])) == commands.end()) {
+        std::string word = argv[1], hint;
+        for (const std::string& c : commands)
+            if (editDistance(word, c) <= 2) hint = fmt::format(" (did you mean '{}'?)", c);
+        fmt::print(stderr,
+                   "error: unknown command '{}'{}; the commands are render, info and convert (see "
+                   "tessera --help)\n",
+                   word, hint);
+        return 2;
+    }
+
     CLI::App app{"Tessera: a renderer for bicubic Bezier patches (Reyes and ray tracing)"};
     app.require_subcommand(1);
+    app.set_version_flag("--version",
+                         fmt::format("tessera {} ({} build)", TESSERA_VERSION, TESSERA_BUILD_TYPE));
+    app.option_defaults()->always_capture_default();  // --help shows every option's default
+    const std::string sceneHelp =
+        "Scene file: RIB (.rib, .rib.gz), .bpt patches, OBJ Catmull-Clark control mesh (.obj) or Micropolis "
+        "indexed-vertex text (detected by extension, else by content)";
+    const std::string formatHelp = "Input format: auto, rib, bpt, obj, micropolis";
+    const std::string upHelp =
+        "Up axis for inputs without a camera: x, y or z (default: y for OBJ, else chosen from the data; "
+        "docs/inputs.md)";
     RenderArgs ra;
-    CLI::App* render = app.add_subcommand("render", "Render a .rib or .bpt scene to .png or .exr");
-    render->add_option("scene", ra.scene, "Scene file (.rib, .rib.gz or .bpt)")->required();
-    render->add_option("-o,--output", ra.output, "Output image (.png or .exr)");
-    render->add_option("--format", ra.format, "Input format: auto, rib, bpt, obj, micropolis");
+    CLI::App* render = app.add_subcommand("render", "Render a scene to .png or .exr");
+    render->add_option("scene", ra.scene, sceneHelp)->required();
+    render->add_option(
+        "-o,--output", ra.output,
+        "Output image (.png or .exr); default: the RIB Display name, else SCENE's name with .png");
+    render->add_option("--format", ra.format, formatHelp)
+        ->check(CLI::IsMember({"auto", "rib", "bpt", "obj", "micropolis"}, CLI::ignore_case));
     render->add_option("--engine", ra.engine, "reyes or rt")->check(CLI::IsMember({"reyes", "rt"}));
-    render->add_option("--res", ra.res, "Resolution WIDTHxHEIGHT (overrides Format)");
-    render->add_option("--spp", ra.spp, "Samples per pixel (overrides PixelSamples)")
-        ->check(CLI::Range(1, kMaxSpp));
+    render->add_option("--res", ra.res,
+                       "Resolution WIDTHxHEIGHT; default: the scene's Format (800x600 without a RIB)");
+    render->add_option("--spp", ra.spp, "Samples per pixel; default (0): the scene's PixelSamples")
+        ->check(intRange(1, kMaxSpp));
     render
-        ->add_option("--shading-rate", ra.shadingRate, "Micropolygon area in pixels (overrides ShadingRate)")
-        ->check(CLI::PositiveNumber);
-    render->add_option("--threads", ra.threads, "Worker threads (0 = all cores)")
-        ->check(CLI::NonNegativeNumber);
+        ->add_option("--shading-rate", ra.shadingRate,
+                     "Micropolygon area in pixels; default (0): the scene's ShadingRate")
+        ->check(inRange(0, 1e6, true));
+    render->add_option("--threads", ra.threads, "Worker threads (0 = all cores)")->check(intRange(0, 4096));
     render->add_option("--stats", ra.stats, "Write statistics as JSON to this file");
     render->add_option("--seed", ra.seed, "Sample pattern seed");
-    render->add_option("--bucket-size", ra.bucketSize, "Bucket side in pixels")->check(CLI::Range(4, 1024));
+    render->add_option("--bucket-size", ra.bucketSize, "Bucket side in pixels")->check(intRange(4, 1024));
     render->add_option("--max-grid", ra.maxGridEdge, "Reyes: micropolygons per grid edge")
-        ->check(CLI::Range(1, 256));
+        ->check(intRange(1, 256));
     render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
-        ->check(CLI::Range(0, 12));
-    render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(CLI::Range(0, 64));
+        ->check(intRange(0, 12));
+    render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(intRange(0, 64));
+    render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
     render->add_flag("--cull-backfaces", ra.cullBackfaces,
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,
                      "rt: per-ray traversal for camera and shadow rays (no binning; same image)");
+    render->add_flag("--progress", ra.progressLines,
+                     "Print 'progress N%' on stderr, one line per whole percent (for logs and render farms)");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");
-    std::string infoPath, infoFormat = "auto";
+    std::string infoPath, infoFormat = "auto", infoUp;
     CLI::App* info = app.add_subcommand("info", "Print patch count, objects, bounds and camera of a scene");
-    info->add_option("scene", infoPath, "Scene file")->required();
-    info->add_option("--format", infoFormat, "Input format: auto, rib, bpt, obj, micropolis");
-    std::string convertIn, convertOut, convertFormat = "auto";
+    info->add_option("scene", infoPath, sceneHelp)->required();
+    info->add_option("--format", infoFormat, formatHelp)
+        ->check(CLI::IsMember({"auto", "rib", "bpt", "obj", "micropolis"}, CLI::ignore_case));
+    info->add_option("--up", infoUp, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
+    std::string convertIn, convertOut, convertFormat = "auto", convertUp;
     CLI::App* convert = app.add_subcommand("convert", "Write any supported input as a RIB of Bezier patches");
-    convert->add_option("input", convertIn, "Input scene")->required();
+    convert->add_option("input", convertIn, sceneHelp)->required();
     convert->add_option("-o,--output", convertOut, "Output .rib")->required();
-    convert->add_option("--format", convertFormat, "Input format: auto, rib, bpt, obj, micropolis");
+    convert->add_option("--format", convertFormat, formatHelp)
+        ->check(CLI::IsMember({"auto", "rib", "bpt", "obj", "micropolis"}, CLI::ignore_case));
+    convert->add_option("--up", convertUp, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
-        if (e.get_exit_code() == 0) return app.exit(e);
+        if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
         app.exit(e);
         return 2;
     }
-    if (*render) return runRender(ra);
-    if (*info) return runInfo(infoPath, infoFormat);
-    if (*convert) return runConvert(convertIn, convertOut, convertFormat);
+    try {
+        if (*render) {
+            checkUpApplies(ra.scene, ra.format, ra.up);
+            return runRender(ra);
+        }
+        if (*info) return runInfo(infoPath, infoFormat, infoUp);
+        if (*convert) return runConvert(convertIn, convertOut, convertFormat, convertUp);
+    } catch (const InputError& e) {
+        fail(e.what());
+    } catch (const std::exception& e) {  // not the input's fault: out of memory, a failing disk, ...
+        fmt::print(stderr, "error: {}\n", e.what());
+        return 1;
+    }
     return 2;
 }

@@ -45,17 +45,15 @@ bool looksLikeObj(const std::string& text) {
 }
 
 // Patches without a scene around them: one object, one plastic material, a synthesised camera.
-Scene patchScene(const std::string& path, std::vector<BezierPatch> patches, bool yUp) {
+Scene patchScene(const std::string& path, std::vector<BezierPatch> patches, SceneFormat format,
+                 std::optional<UpAxis> up) {
     Scene scene;
     scene.sourcePath = path;
     scene.patches = std::move(patches);
     scene.materials.push_back(defaultMaterial(MaterialType::Plastic));
     scene.attributes.assign(scene.patches.size(), PatchAttributes{});
     scene.objectCount = 1;
-    if (yUp)
-        frameSceneDefault(scene, 800, 600, UpAxis::Y);  // models from polygon modellers
-    else
-        frameSceneDefault(scene, 800, 600);
+    frameSceneDefault(scene, 800, 600, up ? *up : defaultUpAxis(format, scene.patches));
     return scene;
 }
 
@@ -115,34 +113,34 @@ Scene loadRib(const std::string& path, const WarningSink& warn) {
     return scene;
 }
 
-Scene loadBpt(const std::string& path, const WarningSink& /*warn*/) {
+UpAxis defaultUpAxis(SceneFormat format, const std::vector<BezierPatch>& patches) {
+    if (format == SceneFormat::Obj) return UpAxis::Y;  // polygon modellers and OBJ exporters are y-up
+    return chooseUpAxis(patches);
+}
+
+Scene loadBpt(const std::string& path, const WarningSink& /*warn*/, std::optional<UpAxis> up) {
     // A .bpt file is one object with one material; the camera and lights are synthesised.
-    return patchScene(path, parseBpt(readInputFile(path), path), false);
+    return patchScene(path, parseBpt(readInputFile(path), path), SceneFormat::Bpt, up);
 }
 
-Scene loadObj(const std::string& path, const WarningSink& warn) {
-    return patchScene(path, objToPatches(readInputFile(path), path, warn), true);
+Scene loadObj(const std::string& path, const WarningSink& warn, std::optional<UpAxis> up) {
+    return patchScene(path, objToPatches(readInputFile(path), path, warn), SceneFormat::Obj, up);
 }
 
-Scene loadMicropolis(const std::string& path, const WarningSink& /*warn*/) {
-    std::vector<BezierPatch> patches = parseMicropolis(readInputFile(path), path);
-    // The teapot is z-up (its longest axis is x); Big Guy is y-up and tallest along y.
-    Bounds3 b;
-    for (const BezierPatch& p : patches) b.extend(hullBounds(p));
-    Vec3 d = b.diagonal();
-    bool yUp = d.y >= d.x && d.y >= d.z;
-    return patchScene(path, std::move(patches), yUp);
+Scene loadMicropolis(const std::string& path, const WarningSink& /*warn*/, std::optional<UpAxis> up) {
+    return patchScene(path, parseMicropolis(readInputFile(path), path), SceneFormat::Micropolis, up);
 }
 
-Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format) {
+Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format,
+                std::optional<UpAxis> up) {
     if (format == SceneFormat::Auto) format = detectSceneFormat(path);
     switch (format) {
         case SceneFormat::Bpt:
-            return loadBpt(path, warn);
+            return loadBpt(path, warn, up);
         case SceneFormat::Obj:
-            return loadObj(path, warn);
+            return loadObj(path, warn, up);
         case SceneFormat::Micropolis:
-            return loadMicropolis(path, warn);
+            return loadMicropolis(path, warn, up);
         default:
             // The RIB reader itself inflates gzip input by its magic bytes.
             return loadRib(path, warn);

@@ -20,15 +20,20 @@ const char* sceneFormatName(SceneFormat format);
 // .obj), else by content (Micropolis indexed-vertex text, OBJ statements), else RIB.
 SceneFormat detectSceneFormat(const std::string& path);
 
+// The up axis a camera-less input of `format` gets when --up does not say: OBJ is y-up by convention;
+// .bpt and Micropolis files do not fix one, so chooseUpAxis() decides from the control points.
+UpAxis defaultUpAxis(SceneFormat format, const std::vector<BezierPatch>& patches);
+
 // Load a scene. Throws InputError (diagnostics.h) with "file:line: error: what" for malformed input;
-// warnings go to `warn`. Inputs without a camera (.bpt, OBJ, Micropolis) are framed automatically and get
-// default lights and a plastic material. `format` overrides the detection.
-Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format = SceneFormat::Auto);
+// warnings go to `warn`. Inputs without a camera (.bpt, OBJ, Micropolis) are framed automatically
+// (frameSceneDefault with `up`, else defaultUpAxis) and get default lights and a plastic material; `up` is
+// ignored for RIB, which has its own camera. `format` overrides the detection.
+Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format = SceneFormat::Auto,
+                std::optional<UpAxis> up = std::nullopt);
 Scene loadRib(const std::string& path, const WarningSink& warn);
-Scene loadBpt(
-    const std::string& path,
-    const WarningSink& warn);  // then frameSceneDefault(scene, 800, 600) and a default plastic material
-Scene loadObj(const std::string& path, const WarningSink& warn);
-Scene loadMicropolis(const std::string& path, const WarningSink& warn);
+Scene loadBpt(const std::string& path, const WarningSink& warn, std::optional<UpAxis> up = std::nullopt);
+Scene loadObj(const std::string& path, const WarningSink& warn, std::optional<UpAxis> up = std::nullopt);
+Scene loadMicropolis(const std::string& path, const WarningSink& warn,
+                     std::optional<UpAxis> up = std::nullopt);
 
 }  // namespace tessera

@@ -1,5 +1,6 @@
 #include "scene/scene.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace tessera {
@@ -10,27 +11,99 @@ Bounds3 Scene::worldBounds() const {
     return b;
 }
 
-void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
-    Bounds3 b = scene.worldBounds();
+namespace {
+
+Bounds3 controlPointBounds(const std::vector<BezierPatch>& patches) {
+    Bounds3 b;
+    for (const BezierPatch& p : patches)
+        for (const Vec3& q : p.cp) b.extend(q);
+    return b;
+}
+
+// World directions (right, up, towards the viewer) for each up axis; right x up = towards, so the frame is
+// right-handed like the world.
+void viewFrame(UpAxis up, Vec3& right, Vec3& upDir, Vec3& towards) {
+    switch (up) {
+        case UpAxis::X:
+            right = {0, 1, 0}, upDir = {1, 0, 0}, towards = {0, 0, -1};
+            break;
+        case UpAxis::Y:
+            right = {1, 0, 0}, upDir = {0, 1, 0}, towards = {0, 0, 1};
+            break;
+        case UpAxis::Z:
+            right = {1, 0, 0}, upDir = {0, 0, 1}, towards = {0, -1, 0};
+            break;
+    }
+}
+
+}  // namespace
+
+const char* upAxisName(UpAxis up) {
+    switch (up) {
+        case UpAxis::X:
+            return "x";
+        case UpAxis::Y:
+            return "y";
+        case UpAxis::Z:
+            return "z";
+    }
+    return "z";
+}
+
+UpAxis chooseUpAxis(const std::vector<BezierPatch>& patches) {
+    Bounds3 b = controlPointBounds(patches);
+    if (b.empty()) return UpAxis::Z;
+    const Vec3 d = b.diagonal();
+    const float size = maxComponent(d);
+    if (!(size > 0) || !std::isfinite(size)) return UpAxis::Z;
+    // Standing on the ground plane: starts at 0 (within 1% of the model's size) along this axis, and
+    // reaches both sides of 0 along the other two (the model sits over the origin).
+    const float tol = 0.01f * size;
+    auto straddles = [&](int a) { return b.lo[a] < -tol && b.hi[a] > tol; };
+    int standing = -1, count = 0;
+    for (int a = 0; a < 3; ++a)
+        if (std::fabs(b.lo[a]) <= tol && d[a] > tol && straddles((a + 1) % 3) && straddles((a + 2) % 3)) {
+            standing = a;
+            ++count;
+        }
+    if (count == 1) return standing == 0 ? UpAxis::X : (standing == 1 ? UpAxis::Y : UpAxis::Z);
+    return d.y >= d.x && d.y >= d.z ? UpAxis::Y : UpAxis::Z;
+}
+
+void defaultFramingSphere(const Scene& scene, Vec3& centre, float& radius) {
+    Bounds3 b = controlPointBounds(scene.patches);
     if (b.empty()) b = Bounds3{{-1, -1, -1}, {1, 1, 1}};
-    Vec3 c = b.center();
-    float radius = 0.5f * length(b.diagonal());
-    if (!(radius > 0)) radius = 1;
+    centre = b.center();
+    radius = 0;
+    for (const BezierPatch& p : scene.patches)
+        for (const Vec3& q : p.cp) radius = std::max(radius, length(q - centre));
+    if (!(radius > 0) || !std::isfinite(radius)) radius = 1;
+}
+
+void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
+    Vec3 c;
+    float radius = 1;
+    defaultFramingSphere(scene, c, radius);
     Camera& cam = scene.camera;
     cam.width = width;
     cam.height = height;
     cam.fovDegrees = 30.f;
-    // Viewing direction: towards the model's front from the right and above.
-    const bool zUp = upAxis == UpAxis::Z;
-    Vec3 dir = zUp ? normalize(Vec3{-0.55f, 0.75f, -0.38f}) : normalize(Vec3{-0.45f, -0.3f, -0.84f});
-    // The bounding sphere of the box is conservative (about 1.3x for typical models): pull in a little.
-    float dist = radius / std::sin(0.5f * cam.fovDegrees * 3.14159265f / 180.f) * 0.85f;
-    Vec3 eye = c - dir * dist;
-    Vec3 up = zUp ? Vec3{0, 0, 1} : Vec3{0, 1, 0};
-    Vec3 zc = dir;                          // camera +z: into the screen
+    cam.hasScreenWindow = false;
+    cam.frameAspect = 0;
+    cam.perspective = true;
+    // The eye: front-right of the model and 25 degrees above it.
+    Vec3 right, up, towards;
+    viewFrame(upAxis, right, up, towards);
+    const Vec3 offset = normalize(right * 0.53f + towards * 0.82f + up * 0.4f);
+    // The sphere is inside the view cone when sin(half angle) >= radius / distance. The cone of the half
+    // field of view of the shorter image axis lies inside the frame; 5% of that angle is left as margin.
+    const float halfFov = 0.5f * cam.fovDegrees * 3.14159265f / 180.f;
+    const float dist = radius / std::sin(0.95f * halfFov);
+    const Vec3 eye = c + offset * dist;
+    const Vec3 zc = -offset;  // camera +z: into the screen
     // Right-handed world to left-handed camera: right = forward x up, up = right x forward.
-    Vec3 xc = normalize(cross(zc, up));
-    Vec3 yc = cross(xc, zc);
+    const Vec3 xc = normalize(cross(zc, up));
+    const Vec3 yc = cross(xc, zc);
     Mat4 m;
     const Vec3 axes[3] = {xc, yc, zc};
     for (int r = 0; r < 3; ++r) {
@@ -40,12 +113,13 @@ void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
         m.m[r][3] = -dot(axes[r], eye);
     }
     cam.cameraFromWorld = m;
-    cam.nearClip = dist * 1e-3f;
-    cam.farClip = dist * 100.f;
+    cam.nearClip = std::max(dist - radius, dist * 1e-3f) * 0.5f;
+    cam.farClip = (dist + radius) * 2.f;
     scene.image.srgbOutput = true;
     scene.lights.clear();
     scene.lights.push_back({LightType::Ambient, {0.08f, 0.08f, 0.08f}, {}, {}});
-    scene.lights.push_back({LightType::Distant, {0.9f, 0.88f, 0.85f}, eye + xc * dist * -0.6f + yc * dist * 0.8f, c});
+    scene.lights.push_back(
+        {LightType::Distant, {0.9f, 0.88f, 0.85f}, eye + xc * dist * -0.6f + yc * dist * 0.8f, c});
     scene.lights.push_back({LightType::Distant, {0.25f, 0.27f, 0.3f}, eye + xc * dist, c});
 }
 

@@ -88,11 +88,25 @@ struct Scene {
     Bounds3 worldBounds() const;
 };
 
-enum class UpAxis { Y, Z };
+enum class UpAxis { X, Y, Z };
 
-// For inputs without a camera (.bpt, OBJ, Micropolis): frame the bounding box from the front-right and
-// above, with `up` vertical (the teapot data is z-up, models from polygon modellers y-up), and add an
-// ambient, a key and a fill light so that any patch file renders something sensible.
+// The up axis of a model whose format does not fix one (docs/inputs.md, "Default framing"): a model
+// stands on the ground plane through the origin, so an axis on which the control points start at 0 while
+// they extend on both sides of 0 along the two other axes is up; otherwise y when y is the tallest extent
+// (standing figures from polygon modellers), else z (Newell's teapot set, CAD and RenderMan worlds).
+UpAxis chooseUpAxis(const std::vector<BezierPatch>& patches);
+
+// For inputs without a camera (.bpt, OBJ, Micropolis): a camera looking at the model from the front-right
+// and 25 degrees above, with `up` vertical, far enough that the whole bounding sphere of the control points
+// (centred on their box) lies inside the frame for any image aspect (the 30-degree field of view spans
+// the shorter axis); plus an ambient, a key and a fill light so that any patch file renders something
+// sensible. "Front" is -y for z up, +z for y up and -z for x up.
 void frameSceneDefault(Scene& scene, int width, int height, UpAxis up = UpAxis::Z);
+
+// The sphere frameSceneDefault fits in view: centre of the control points' box, radius to the farthest
+// control point (the patches lie in their control hulls, so inside it).
+void defaultFramingSphere(const Scene& scene, Vec3& centre, float& radius);
+
+const char* upAxisName(UpAxis up);  // "x", "y", "z"
 
 }  // namespace tessera
