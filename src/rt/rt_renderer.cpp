@@ -254,6 +254,51 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
     std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
 }
 
+// Work per tile for the progress, in sample units: its samples (set-up, filtering), its camera rays
+// (samples inside the scene's rectangle) and, weighted by the rays each hit spawns (one per light plus the
+// shading), its samples that are likely to hit, estimated from the projected boxes of the patches that
+// overlap the tile (capped at the tile's area). Empty sky is cheap and the surfaces are not, so the
+// progress fraction follows the trace time rather than the tile count.
+std::vector<uint64_t> tileWork(const RtAccel& acc, const Projector& proj, const SceneRect& sr,
+                               const BucketLayout& layout, int spp, size_t lights) {
+    const int nb = layout.count();
+    std::vector<double> covered(nb, 0.0);
+    for (const BezierPatch& p : acc.patches) {
+        const Bounds3 b = hullBounds(p);
+        float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+        bool inFront = true;
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 q{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
+            if (proj.perspective && !(q.z > 0.f)) inFront = false;
+            const Vec3 r = proj.toRaster(q);
+            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+        }
+        if (!inFront) x0 = y0 = -INFINITY, x1 = y1 = INFINITY;  // reaches behind the eye: the whole view
+        x0 = std::max(x0, float(layout.region.x0)), x1 = std::min(x1, float(layout.region.x1));
+        y0 = std::max(y0, float(layout.region.y0)), y1 = std::min(y1, float(layout.region.y1));
+        if (!(x0 < x1 && y0 < y1)) continue;
+        int bx0, by0, bx1, by1;
+        layout.overlapped(x0, y0, x1, y1, bx0, by0, bx1, by1);
+        for (int by = by0; by <= by1; ++by)
+            for (int bx = bx0; bx <= bx1; ++bx) {
+                const Rect t = layout.target(by * layout.countX + bx);
+                const float ix = std::min(float(t.x1), x1) - std::max(float(t.x0), x0);
+                const float iy = std::min(float(t.y1), y1) - std::max(float(t.y0), y0);
+                if (ix > 0 && iy > 0) covered[by * layout.countX + bx] += double(ix) * iy;
+            }
+    }
+    std::vector<uint64_t> work(nb);
+    for (int b = 0; b < nb; ++b) {
+        const Rect t = layout.target(b);
+        const double area = double(t.width()) * t.height();
+        const double ix = std::max(0.f, std::min(float(t.x1), sr.x1) - std::max(float(t.x0), sr.x0));
+        const double iy = std::max(0.f, std::min(float(t.y1), sr.y1) - std::max(float(t.y0), sr.y0));
+        const double hits = std::min(covered[b], area);
+        work[b] = uint64_t((area / 16 + ix * iy + hits * double(2 + lights)) * spp) + 1;
+    }
+    return work;
+}
+
 }  // namespace
 
 RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
@@ -289,16 +334,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     const SceneRect sr = sceneRect(acc, proj);
     const int rx = frame.filter.radiusX(), ry = frame.filter.radiusY();
     const BucketLayout layout(frame.region, bs);
-    const int nb = layout.count();
-    // Work per tile for the progress: its camera rays (samples inside the scene's rectangle), which is
-    // what the trace time follows, plus its samples (set-up and filtering).
-    std::vector<uint64_t> work(nb);
-    for (int b = 0; b < nb; ++b) {
-        const Rect t = layout.target(b);
-        const float ix = std::max(0.f, std::min(float(t.x1), sr.x1) - std::max(float(t.x0), sr.x0));
-        const float iy = std::max(0.f, std::min(float(t.y1), sr.y1) - std::max(float(t.y0), sr.y0));
-        work[b] = uint64_t(ix * iy * float(spp)) + uint64_t(t.width()) * t.height() * spp / 16 + 1;
-    }
+    const std::vector<uint64_t> work = tileWork(acc, proj, sr, layout, spp, frame.lights.size());
 
     tbb::enumerable_thread_specific<Workspace> workspaces(acc, traceOpt);
     auto renderTile = [&](int b, Workspace& ws) {
