@@ -109,3 +109,26 @@ TEST(Engines, ReyesSaysOnceThatReflectionsNeedTheRayTracer) {
     for (float v : reyes.image.rgba) sum += v;
     EXPECT_GT(sum, 0.0);
 }
+
+TEST(Engines, AViewCameraReplacesTheScenesCamera) {
+    // The entry takes a view: a pass with another camera (a shadow map's light, a second eye) renders what
+    // a scene with that camera renders, bit for bit, in both engines.
+    const Scene scene = sphereScene();
+    Camera other = scene.camera;
+    other.width = 160;
+    other.height = 120;
+    other.cameraFromWorld = Mat4::translate(0.4, -0.2, 1.0);
+    Scene moved = scene;
+    moved.camera = other;
+    for (const char* engine : {"reyes", "rt"}) {
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        const RenderResult want = render(moved, rs);
+        rs.view.camera = &other;
+        const RenderResult got = render(scene, rs);
+        ASSERT_EQ(got.image.width, 160);
+        EXPECT_EQ(got.image.rgba, want.image.rgba) << engine;
+        EXPECT_NE(got.image.rgba, render(scene, RenderSettings{}).image.rgba);
+    }
+}

@@ -61,7 +61,7 @@ TEST(Film, IdAndDepthAreExactAtTheSampleNearestThePixelCentre) {
         RenderSettings rs;
         rs.engine = engine;
         rs.threads = 2;
-        rs.channels = kAllFilmChannels;
+        rs.output.channels = kAllFilmChannels;
         const RenderResult r = render(scene, rs);
         const ImagePlane* id = r.image.plane("id");
         const ImagePlane* z = r.image.plane("z");
@@ -143,9 +143,9 @@ TEST(Film, ARegionRendersTheSamePixelsAsTheWholeImage) {
         RenderSettings rs;
         rs.engine = engine;
         rs.threads = 2;
-        rs.channels = kChannelObjectId | kChannelDepth;
+        rs.output.channels = kChannelObjectId | kChannelDepth;
         const RenderResult whole = render(scene, rs);
-        rs.region = Rect{13, 7, 45, 29};
+        rs.view.region = Rect{13, 7, 45, 29};
         const RenderResult part = render(scene, rs);
         ASSERT_EQ(part.image.width, 32);
         ASSERT_EQ(part.image.height, 22);

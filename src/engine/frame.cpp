@@ -6,25 +6,25 @@ namespace tessera {
 
 FrameSetup::FrameSetup(const Scene& scene, const RenderSettings& settings)
     : start(EngineClock::now()),
-      camera(scene.camera),
+      camera(viewCamera(scene, settings)),
       filter(makeFilter(scene.image)),
       nx(std::max(1, scene.image.pixelSamplesX)),
       ny(std::max(1, scene.image.pixelSamplesY)),
-      region(renderRegion(scene.camera, settings)),
-      projector(scene.camera) {
-    for (const Light& l : scene.lights) lights.push_back(prepareLight(l, scene.camera.cameraFromWorld));
+      region(renderRegion(camera, settings)),
+      projector(camera) {
+    for (const Light& l : scene.lights) lights.push_back(prepareLight(l, camera.cameraFromWorld));
 }
 
 RenderResult FrameSetup::startResult(const RenderSettings& settings) const {
     RenderResult result;
     result.image = Image(region);
-    result.image.addPlanes(settings.channels, settings.aovs);
+    result.image.addPlanes(settings.output.channels, settings.output.aovs);
     return result;
 }
 
 void FrameSetup::resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const {
-    tile.reset(pixels, nx, ny, settings.seed, std::numeric_limits<float>::infinity(), settings.channels,
-               settings.aovs);
+    tile.reset(pixels, nx, ny, settings.seed, std::numeric_limits<float>::infinity(), settings.output.channels,
+               settings.output.aovs);
 }
 
 }  // namespace tessera

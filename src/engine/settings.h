@@ -13,6 +13,20 @@
 
 namespace tessera {
 
+// What a render looks at: a camera (nullptr: the scene's; a shadow-map pass gives the light's) and the film
+// region to render (crop window, farm tile): a half-open raster rectangle, empty = the whole image.
+struct RenderView {
+    const Camera* camera = nullptr;
+    Rect region;
+};
+
+// What a render writes: the film's attribute channels (FilmChannel bits) and further AOVs; each becomes an
+// image plane of the result.
+struct OutputSpec {
+    uint32_t channels = 0;
+    std::vector<std::string> aovs;
+};
+
 struct RenderSettings {
     std::string engine = "reyes";  // "reyes" or "rt"
     int threads = 0;               // 0: all hardware threads
@@ -27,12 +41,8 @@ struct RenderSettings {
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves
     // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
-    // Output spec: the film's attribute channels (FilmChannel bits) and further AOVs wanted; each becomes
-    // an image plane of the result.
-    uint32_t channels = 0;
-    std::vector<std::string> aovs;
-    // Film region to render (crop window, farm tile): half-open raster rectangle; empty = the whole image.
-    Rect region;
+    RenderView view;
+    OutputSpec output;
     // Progress: called from worker threads with (work done, total work) after each bucket; the units are
     // the engine's estimate of its work (samples traced, micropolygons sampled), so the fraction grows
     // steadily over the render. Must be thread-safe.
@@ -48,12 +58,18 @@ struct RenderResult {
     std::vector<std::string> warnings;  // said once per render (e.g. effects an engine does not render)
 };
 
-// The raster rectangle a render covers: settings.region clipped to the image, or the whole image.
+// The camera a render uses: the view's, else the scene's.
+inline const Camera& viewCamera(const Scene& scene, const RenderSettings& s) {
+    return s.view.camera ? *s.view.camera : scene.camera;
+}
+
+// The raster rectangle a render covers: the view's region clipped to the image, or the whole image.
 inline Rect renderRegion(const Camera& cam, const RenderSettings& s) {
     const Rect whole{0, 0, cam.width, cam.height};
-    if (s.region.width() <= 0 || s.region.height() <= 0) return whole;
-    return Rect{std::clamp(s.region.x0, 0, cam.width), std::clamp(s.region.y0, 0, cam.height),
-                std::clamp(s.region.x1, 0, cam.width), std::clamp(s.region.y1, 0, cam.height)};
+    const Rect& r = s.view.region;
+    if (r.width() <= 0 || r.height() <= 0) return whole;
+    return Rect{std::clamp(r.x0, 0, cam.width), std::clamp(r.y0, 0, cam.height), std::clamp(r.x1, 0, cam.width),
+                std::clamp(r.y1, 0, cam.height)};
 }
 
 }  // namespace tessera

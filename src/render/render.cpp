@@ -24,8 +24,9 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
         }
     });
     result.stats["threads"] = threads;
-    result.stats["width"] = scene.camera.width;
-    result.stats["height"] = scene.camera.height;
+    const Camera& cam = viewCamera(scene, settings);
+    result.stats["width"] = cam.width;
+    result.stats["height"] = cam.height;
     result.stats["spp"] = scene.image.pixelSamplesX * scene.image.pixelSamplesY;
     return result;
 }

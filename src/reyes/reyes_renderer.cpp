@@ -152,7 +152,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                 const Piece& piece = pieces[pi];
                 const PatchAttributes& attr = scene.attributes[piece.patch];
                 ShadeInputs in{attr.kind, &scene.materials[attr.material], attr.twoSided, attr.flipNormal, frame.lights,
-                               attr.object, (settings.channels & kChannelNormal) != 0};
+                               attr.object, (settings.output.channels & kChannelNormal) != 0};
                 slot.grid = std::make_unique<Grid>();
                 diceAndShade(view, piece, in, *slot.grid);
                 ++tc.grids;
