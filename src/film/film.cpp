@@ -5,7 +5,7 @@
 
 namespace tessera {
 
-void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
+void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, SamplerKind sampler) {
     region = reg;
     nx = nx_;
     ny = ny_;
@@ -14,6 +14,7 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
     size_t n = pixels * spp;
     sx.resize(n);
     sy.resize(n);
+    sampleIndex.resize(n);
     z.assign(n, farZ);
     r.assign(n, 0.f);
     g.assign(n, 0.f);
@@ -21,9 +22,18 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ) {
     a.assign(n, 0.f);
     pixelHit.assign(pixels, 0);
     size_t i = 0;
+    if (sampler == SamplerKind::Sobol) {
+        for (int py = reg.y0; py < reg.y1; ++py)
+            for (int px = reg.x0; px < reg.x1; ++px, i += spp)
+                filmSamplesFixed(px, py, nx, ny, seed, &sx[i], &sy[i], &sampleIndex[i]);
+        return;
+    }
     for (int py = reg.y0; py < reg.y1; ++py)
         for (int px = reg.x0; px < reg.x1; ++px)
-            for (int s = 0; s < spp; ++s, ++i) samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
+            for (int s = 0; s < spp; ++s, ++i) {
+                samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
+                sampleIndex[i] = uint32_t(s);
+            }
 }
 
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {

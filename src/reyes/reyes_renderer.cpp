@@ -136,7 +136,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
             return;
         }
         auto t0 = Clock::now();
-        tc.tile.reset(region, nx, ny, seed, std::numeric_limits<float>::infinity());
+        tc.tile.reset(region, nx, ny, seed, std::numeric_limits<float>::infinity(), settings.sampler);
         for (uint32_t k = begin; k < end; ++k) {
             const uint32_t pi = bucketPieces[k];
             GridSlot& slot = slots[pi];

@@ -1986,7 +1986,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         Rect target{bx * bs, by * bs, std::min(W, (bx + 1) * bs), std::min(H, (by + 1) * bs)};
         Rect region{std::max(0, target.x0 - rx), std::max(0, target.y0 - ry), std::min(W, target.x1 + rx),
                     std::min(H, target.y1 + ry)};
-        ws.tile.reset(region, nx, ny, settings.seed, std::numeric_limits<float>::infinity());
+        ws.tile.reset(region, nx, ny, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler);
         auto ts = Clock::now();
         // Camera rays, one per sample inside the scene's rectangle (written in place: this runs for every
         // sample of the frame), and the per-sample arrays of the camera-ray binning.
