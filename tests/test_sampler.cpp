@@ -157,6 +157,12 @@ void expectSlotContract(int px, int py, int nx, int ny, const int32_t* x, const 
 }  // namespace
 
 TEST(Sampler, FilmSlotsKeepTheStratumContract) {
+    for (int n = -1; n <= 1100; ++n) {
+        int expected = -1;
+        for (int k = 0; k <= 8; ++k)
+            if (n == 1 << k) expected = k;
+        EXPECT_EQ(log2PowerOfTwo(n), expected) << n;
+    }
     std::vector<SlotCase> cases;
     for (int spp : {1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 3, 5, 6, 9, 12, 7, 24}) {
         SlotCase c;

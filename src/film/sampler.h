@@ -6,13 +6,13 @@
 //  - Sobol' generator matrices: dimension 0 is van der Corput (bit reversal), dimensions 1.. come from
 //    the primitive polynomials and initial direction numbers of S. Joe and F. Y. Kuo, "Constructing
 //    Sobol sequences with better two-dimensional projections" (2008), file new-joe-kuo-6.21201.
-//  - Nested uniform (Owen) scrambling of each dimension with the Laine-Karras style hash (Burley sec. 3):
+//  - Nested uniform (Owen) scrambling of each dimension with the Laine-Karras style hash (Burley 2020):
 //    on bit-reversed values, `x += seed; x ^= x * even` never lets a bit depend on a less significant
 //    digit of the sample, so it is a valid Owen scramble and keeps every (t,m,s)-net property.
 //  - Index shuffling (Burley sec. 4): the sample index itself is Owen-scrambled per pixel and group of
 //    dimensions. The first 2^m shuffled indices are one aligned block of 2^m Sobol' indices, which is
 //    again a net: every prefix of a pixel's samples stays stratified while the groups are decorrelated.
-//  - Padding (Burley sec. 4, as pbrt-v4's padded/ZSobol samplers): only film x, y and time share one
+//  - Padding (as in Burley 2020 and pbrt-v4's padded/ZSobol samplers): only film x, y and time share one
 //    Sobol' point (matrices 0, 1, 2). Every later pair of dimensions (lens, light, BSDF, ...) uses matrices
 //    0 and 1 again with its own index shuffle, because 0 and 1 are the only Joe-Kuo pair that is a
 //    (0,2)-sequence (e.g. matrices 3 and 4 have t = 2 at 16 points); so every named pair is a (0,m,2)-net
@@ -61,9 +61,9 @@ TESSERA_HD uint32_t reverseBits32(uint32_t x) {
 #endif
 }
 
-// Burley 2020, listing 2: a hash in which each output bit depends only on the same and lower input bits
-// (addition and multiplication by even constants carry upwards only). Applied to bit-reversed values,
-// "lower" means "more significant digit of the sample": a nested uniform scramble.
+// Burley 2020 (after Laine and Karras 2011): a hash in which each output bit depends only on the same and
+// lower input bits (addition and multiplication by even constants carry upwards only). Applied to
+// bit-reversed values, "lower" means "more significant digit of the sample": a nested uniform scramble.
 TESSERA_HD uint32_t laineKarrasPermutation(uint32_t x, uint32_t seed) {
     x += seed;
     x ^= x * 0x6c50b47cu;
@@ -72,7 +72,7 @@ TESSERA_HD uint32_t laineKarrasPermutation(uint32_t x, uint32_t seed) {
     x ^= x * 0x8d22f6e6u;
     return x;
 }
-// Owen scramble of a 32-bit fixed-point value in [0,1) (Burley 2020, listing 3).
+// Owen scramble of a 32-bit fixed-point value in [0,1) (Burley 2020).
 TESSERA_HD uint32_t nestedUniformScramble(uint32_t x, uint32_t seed) {
     return reverseBits32(laineKarrasPermutation(reverseBits32(x), seed));
 }
@@ -211,11 +211,10 @@ TESSERA_HD Sample2D sample2D(uint32_t pixelSeed, uint32_t index, uint32_t dim) {
     return {sampleDimension(pixelSeed, index, dim), sampleDimension(pixelSeed, index, dim + 1)};
 }
 
-// 0..8 when n = 2^k <= 256, else -1.
+// 0..8 when n = 2^k <= 256, else -1 (branch-free bit tests: this runs per pixel).
 TESSERA_HD int log2PowerOfTwo(int n) {
-    for (int k = 0; k <= 8; ++k)
-        if (n == (1 << k)) return k;
-    return -1;
+    if (n <= 0 || n > 256 || (n & (n - 1))) return -1;
+    return int((n & 0xaa) != 0) | int((n & 0xcc) != 0) << 1 | int((n & 0xf0) != 0) << 2 | int(n == 256) << 3;
 }
 
 // Reverses the bits within each byte of x.
