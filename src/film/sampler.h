@@ -1,6 +1,7 @@
 // The camera sample shared by both engines: a stateless Owen-scrambled Sobol' sampler. For (pixel seed,
 // sample index, dimension) it returns the same well-distributed value on any thread, bucket or backend
-// (header-only, plain integer code, no tables on the hot path: usable from a CUDA kernel).
+// (header-only, plain integer code, no tables on the hot path: meant for CUDA kernels too; not yet
+// compiled with nvcc).
 //
 // Construction (B. Burley, "Practical Hash-based Owen Scrambling", JCGT 9(4), 2020):
 //  - Sobol' generator matrices: dimension 0 is van der Corput (bit reversal), dimensions 1.. come from
@@ -10,13 +11,14 @@
 //    on bit-reversed values, `x += seed; x ^= x * even` never lets a bit depend on a less significant
 //    digit of the sample, so it is a valid Owen scramble and keeps every (t,m,s)-net property.
 //  - Index shuffling (Burley sec. 4): the sample index itself is Owen-scrambled per pixel and group of
-//    dimensions. The first 2^m shuffled indices are one aligned block of 2^m Sobol' indices, which is
-//    again a net: every prefix of a pixel's samples stays stratified while the groups are decorrelated.
+//    dimensions (all groups but the first, see sampleGroup). The first 2^m shuffled indices are one aligned
+//    block of 2^m Sobol' indices, which is again a net: every prefix of a pixel's samples stays stratified
+//    while the groups are decorrelated.
 //  - Padding (as in Burley 2020 and pbrt-v4's padded/ZSobol samplers): only film x, y and time share one
 //    Sobol' point (matrices 0, 1, 2). Every later pair of dimensions (lens, light, BSDF, ...) uses matrices
-//    0 and 1 again with its own index shuffle, because 0 and 1 are the only Joe-Kuo pair that is a
-//    (0,2)-sequence (e.g. matrices 3 and 4 have t = 2 at 16 points); so every named pair is a (0,m,2)-net
-//    and every single dimension a (0,m,1)-net for each power-of-two prefix.
+//    0 and 1 again with its own index shuffle, because 0 and 1 are the only pair of the first 13 matrices
+//    that is a (0,2)-sequence (e.g. matrices 3 and 4 have t = 2 at 16 points); so every named pair is a
+//    (0,m,2)-net and every single dimension a (0,m,1)-net for each power-of-two prefix.
 #pragma once
 #include <cstdint>
 
