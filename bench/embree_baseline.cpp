@@ -4,7 +4,7 @@
 // shadows) as Tessera's engines. Prints and saves JSON: triangles, memory, build and trace time, rays/s.
 //
 //   embree_baseline SCENE [--res WxH] [--spp N] [--max-error-px E] [--threads N] [--no-shadows]
-//                   [-o IMAGE] [--json OUT.json] [--runs N]
+//                   [-o IMAGE] [--json OUT.json] [--runs N] [--sampler sobol|jittered]
 #include <embree3/rtcore.h>
 #include <fmt/core.h>
 #include <tbb/global_control.h>
@@ -57,13 +57,14 @@ struct Mesh {
 int main(int argc, char** argv) {
     if (argc < 2) {
         fmt::print(stderr, "usage: embree_baseline SCENE [--res WxH] [--spp N] [--max-error-px E] [--threads N] "
-                           "[--no-shadows] [-o IMAGE] [--json OUT] [--runs N]\n");
+                           "[--no-shadows] [-o IMAGE] [--json OUT] [--runs N] [--sampler sobol|jittered]\n");
         return 2;
     }
     std::string scenePath = argv[1], output, jsonOut, res;
     int spp = 1, threads = 0, runs = 3;
     float maxErrorPx = 0.1f;
     bool shadows = true;
+    SamplerKind sampler = SamplerKind::Sobol;  // the renderer's default, so the images compare
     for (int i = 2; i < argc; ++i) {
         std::string a = argv[i];
         auto next = [&] { return i + 1 < argc ? std::string(argv[++i]) : std::string(); };
@@ -75,6 +76,7 @@ int main(int argc, char** argv) {
         else if (a == "-o") output = next();
         else if (a == "--json") jsonOut = next();
         else if (a == "--runs") runs = std::max(1, std::stoi(next()));
+        else if (a == "--sampler") sampler = next() == "jittered" ? SamplerKind::Jittered : SamplerKind::Sobol;
         else {
             fmt::print(stderr, "embree_baseline: unknown option {}\n", a);
             return 2;
@@ -175,7 +177,7 @@ int main(int argc, char** argv) {
             Rect region{std::max(0, target.x0 - rx), std::max(0, target.y0 - ry), std::min(W, target.x1 + rx),
                         std::min(H, target.y1 + ry)};
             SampleTile tile;
-            tile.reset(region, nx, ny, 0, std::numeric_limits<float>::infinity());
+            tile.reset(region, nx, ny, 0, std::numeric_limits<float>::infinity(), sampler);
             RTCIntersectContext ctx;
             uint64_t nPrimary = 0, nShadow = 0, nHits = 0;
             for (size_t i = 0; i < tile.sampleCount(); ++i) {

@@ -70,7 +70,7 @@ TEST(Film, IdAndDepthAreExactAtTheSampleNearestThePixelCentre) {
         // The film's own sample positions (the same for both engines and every tile).
         SampleTile tile;
         tile.reset(Rect{0, 0, scene.camera.width, scene.camera.height}, 2, 2, rs.seed,
-                   std::numeric_limits<float>::infinity());
+                   std::numeric_limits<float>::infinity(), rs.sampler);
         int checked = 0, ones = 0, zeros = 0, background = 0;
         for (int py = 0; py < scene.camera.height; ++py)
             for (int px = 0; px < scene.camera.width; ++px) {
@@ -104,7 +104,8 @@ TEST(Film, ReconstructionFiltersShadowCountsAndTakesIdsFromTheNearestSample) {
     // A hand-filled 3x3 tile, 4 samples per pixel, box filter of one pixel: the centre pixel sees only
     // its own samples.
     SampleTile tile;
-    tile.reset(Rect{0, 0, 3, 3}, 2, 2, 7, std::numeric_limits<float>::infinity(), kAllFilmChannels);
+    tile.reset(Rect{0, 0, 3, 3}, 2, 2, 7, std::numeric_limits<float>::infinity(), SamplerKind::Sobol,
+               kAllFilmChannels);
     for (size_t i = 0; i < tile.sampleCount(); ++i) {
         tile.a[i] = 1.f;
         tile.z[i] = 2.f + float(i);
@@ -128,7 +129,7 @@ TEST(Film, ReconstructionFiltersShadowCountsAndTakesIdsFromTheNearestSample) {
     EXPECT_NEAR(img.plane("shadows")->values[4], 1.5f, 1e-6f);
     // No channels asked: no planes, no per-sample attribute storage.
     SampleTile plain;
-    plain.reset(Rect{0, 0, 3, 3}, 2, 2, 7, 1.f);
+    plain.reset(Rect{0, 0, 3, 3}, 2, 2, 7, 1.f, SamplerKind::Sobol);
     EXPECT_TRUE(plain.objectId.empty());
     EXPECT_TRUE(plain.normalX.empty());
 }

@@ -206,7 +206,7 @@ TEST(Shading, BothEnginesGiveTheShadingModuleRadianceForTheSameHit) {
     std::vector<ShadingLight> lights;
     for (const Light& l : s.lights) lights.push_back(prepareLight(l, Mat4{}));
     SampleTile tile;
-    tile.reset(Rect{0, 0, 40, 40}, 1, 1, 0, 1.f);
+    tile.reset(Rect{0, 0, 40, 40}, 1, 1, 0, 1.f, SamplerKind::Sobol);
     for (const char* engine : {"rt", "reyes"}) {
         RenderSettings rs;
         rs.engine = engine;

@@ -57,6 +57,7 @@ double peakRssMb() {
 
 struct RenderArgs {
     std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
+    std::string sampler = "sobol";
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
@@ -257,6 +258,7 @@ int runRender(const RenderArgs& a) {
     settings.engine = a.engine;
     settings.threads = a.threads;
     settings.seed = a.seed;
+    settings.sampler = a.sampler == "jittered" ? SamplerKind::Jittered : SamplerKind::Sobol;
     settings.bucketSize = a.bucketSize;
     settings.subpatchDepth = a.subpatchDepth;
     settings.maxDepth = a.maxDepth;
@@ -480,6 +482,8 @@ int main(int argc, char** argv) {
     render->add_option("--threads", ra.threads, "Worker threads (0 = all cores)")->check(intRange(0, 4096));
     render->add_option("--stats", ra.stats, "Write statistics as JSON to this file");
     render->add_option("--seed", ra.seed, "Sample pattern seed");
+    render->add_option("--sampler", ra.sampler, "Film samples: sobol (Owen-scrambled Sobol') or jittered")
+        ->check(CLI::IsMember({"sobol", "jittered"}));
     render->add_option("--bucket-size", ra.bucketSize, "Bucket side in pixels")->check(intRange(4, 1024));
     render->add_option("--max-grid", ra.maxGridEdge, "Reyes: micropolygons per grid edge")
         ->check(intRange(1, 256));

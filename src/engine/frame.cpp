@@ -23,8 +23,8 @@ RenderResult FrameSetup::startResult(const RenderSettings& settings) const {
 }
 
 void FrameSetup::resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const {
-    tile.reset(pixels, nx, ny, settings.seed, std::numeric_limits<float>::infinity(), settings.output.channels,
-               settings.output.aovs);
+    tile.reset(pixels, nx, ny, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler,
+               settings.output.channels, settings.output.aovs);
 }
 
 }  // namespace tessera

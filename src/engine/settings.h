@@ -33,6 +33,7 @@ struct RenderSettings {
     uint32_t seed = 0;             // sample pattern seed
     int bucketSize = 32;           // pixels per bucket side
     int maxGridEdge = 16;          // Reyes: micropolygons per grid edge before splitting
+    SamplerKind sampler = SamplerKind::Sobol;  // camera sample pattern (film/sampler.h)
     // Ray tracer
     int subpatchDepth = 6;
     int maxDepth = 4;

@@ -7,8 +7,8 @@
 
 namespace tessera {
 
-void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, uint32_t channels_,
-                       const std::vector<std::string>& aovNames_) {
+void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, SamplerKind sampler,
+                       uint32_t channels_, const std::vector<std::string>& aovNames_) {
     region = reg;
     nx = nx_;
     ny = ny_;
@@ -17,6 +17,7 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, ui
     size_t n = pixels * spp;
     sx.resize(n);
     sy.resize(n);
+    sampleIndex.resize(n);
     z.assign(n, farZ);
     r.assign(n, 0.f);
     g.assign(n, 0.f);
@@ -40,9 +41,18 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, ui
     aovValues.resize(aovNames.size());
     for (auto& v : aovValues) v.assign(n, 0.f);
     size_t i = 0;
+    if (sampler == SamplerKind::Sobol) {
+        for (int py = reg.y0; py < reg.y1; ++py)
+            for (int px = reg.x0; px < reg.x1; ++px, i += spp)
+                filmSamplesFixed(px, py, nx, ny, seed, &sx[i], &sy[i], &sampleIndex[i]);
+        return;
+    }
     for (int py = reg.y0; py < reg.y1; ++py)
         for (int px = reg.x0; px < reg.x1; ++px)
-            for (int s = 0; s < spp; ++s, ++i) samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
+            for (int s = 0; s < spp; ++s, ++i) {
+                samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
+                sampleIndex[i] = uint32_t(s);
+            }
 }
 
 void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovNames) {

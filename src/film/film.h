@@ -1,4 +1,4 @@
-// The film shared by both engines: stratified jittered sample positions, a per-bucket sample tile
+// The film shared by both engines: sample positions (film/sampler.h), a per-bucket sample tile
 // (position, depth, premultiplied colour and coverage per subpixel sample) and reconstruction of
 // pixels from samples with the pixel filter.
 #pragma once
@@ -10,6 +10,7 @@
 #include "core/random.h"
 #include "core/vec.h"
 #include "film/filter.h"
+#include "film/sampler.h"
 
 namespace tessera {
 
@@ -67,10 +68,12 @@ struct Image {
 // exact integers and shared micropolygon edges never leave gaps (the GPU rasterization convention).
 constexpr int kSubpixelBits = 8;
 constexpr float kSubpixelScale = float(1 << kSubpixelBits);
+static_assert(kSubpixelBits == 8, "filmSamplesFixed (sampler.h) writes 1/256-pixel offsets");
 
-// Stratified jittered sample s (0 .. nx*ny-1) of pixel (px,py): stratum (s % nx, s / nx) of the pixel,
-// jittered by a hash of (pixel, sample, seed). Positions lie on the 1/256-pixel fixed-point lattice that
-// the rasterizer uses, so both engines see exactly the same sample positions.
+// SamplerKind::Jittered (the original pattern): stratified jittered sample s (0 .. nx*ny-1) of pixel
+// (px,py): stratum (s % nx, s / nx) of the pixel, jittered by a hash of (pixel, sample, seed). Positions
+// lie on the 1/256-pixel fixed-point lattice that the rasterizer uses, so both engines see exactly the
+// same sample positions.
 inline void samplePositionFixed(int px, int py, int s, int nx, int ny, uint32_t seed, int32_t& x, int32_t& y) {
     // One hash per (pixel, sample): cheap enough to recompute per bucket, no tables to share.
     const uint32_t h = hash32((uint32_t(px) * 73856093u) ^ (uint32_t(py) * 19349663u) ^ (uint32_t(s) * 83492791u) ^
@@ -99,7 +102,8 @@ inline void splitSamplesPerPixel(int n, int& nx, int& ny) {
 struct SampleTile {
     Rect region;
     int nx = 1, ny = 1, spp = 1;
-    std::vector<int32_t> sx, sy;  // fixed-point raster positions
+    std::vector<int32_t> sx, sy;        // fixed-point raster positions
+    std::vector<uint32_t> sampleIndex;  // per slot: its sample index for the other dimensions (sampler.h)
     std::vector<float> z, r, g, b, a;
     std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
     // Per-sample attributes, present only for the FilmChannel bits in `channels` (empty otherwise).
@@ -110,8 +114,11 @@ struct SampleTile {
     std::vector<std::string> aovNames;         // further channels a display asked for,
     std::vector<std::vector<float>> aovValues;  // one float per sample each
 
-    // (Re)initialise for a region without reallocating when the size fits.
-    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ, uint32_t channels = 0,
+    // (Re)initialise for a region without reallocating when the size fits. Slot s of every pixel lies in
+    // stratum (s % nx, s / nx) with either sampler; a pixel's positions depend only on (pixel, seed).
+    // Dimension d of slot i: sampleDimension(pixelSeed(px, py, seed), sampleIndex[i], d). `channels`
+    // (FilmChannel bits) and `aovNames`: the attribute channels to carry.
+    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ, SamplerKind sampler, uint32_t channels = 0,
                const std::vector<std::string>& aovNames = {});
     size_t sampleCount() const { return sx.size(); }
     bool has(uint32_t channel) const { return (channels & channel) != 0; }
