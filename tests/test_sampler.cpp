@@ -315,3 +315,14 @@ TEST(Sampler, ConvergesFasterThanJitteredOnSmoothIntegrands) {
     std::printf("disk, N = 64: RMSE Sobol %.3g, jittered %.3g\n", sobolDisk, jitteredDisk);
     EXPECT_LT(sobolDisk, 1.1 * jitteredDisk);
 }
+
+TEST(Sampler, SixteenBitFilmOperationsMatchTheThirtyTwoBitOnes) {
+    // The film loop's 16-bit lanes must give exactly the low bits the 32-bit definitions give.
+    for (uint32_t seed : {0u, 1u, 0x9e3779b9u, 0xdeadbeefu, 0x12345678u})
+        for (uint32_t x = 0; x < 65536; x += 7) {
+            ASSERT_EQ(laineKarrasLow16(uint16_t(x), uint16_t(seed)),
+                      laineKarrasPermutation(x, seed) & 0xffffu);
+            ASSERT_EQ(sobolBits1Reversed16(uint16_t(x)), sobolBits1Reversed(x) & 0xffffu);
+            ASSERT_EQ(reverseBitsInBytes16(uint16_t(x)), reverseBitsInBytes(x) & 0xffffu);
+        }
+}

@@ -42,9 +42,10 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     for (auto& v : aovValues) v.assign(n, 0.f);
     size_t i = 0;
     if (sampler == SamplerKind::Sobol) {
+        const FilmPattern pattern = filmPattern(nx, ny, seed);
         for (int py = reg.y0; py < reg.y1; ++py)
             for (int px = reg.x0; px < reg.x1; ++px, i += spp)
-                filmSamplesFixed(px, py, nx, ny, seed, &sx[i], &sy[i], &sampleIndex[i]);
+                filmSamplesFixed(pattern, px, py, &sx[i], &sy[i], &sampleIndex[i]);
         return;
     }
     for (int py = reg.y0; py < reg.y1; ++py)
@@ -91,7 +92,8 @@ ImagePlane* Image::plane(const std::string& name) {
 }
 
 size_t nearestSampleToCentre(const SampleTile& tile, int px, int py) {
-    const size_t first = (size_t(py - tile.region.y0) * tile.region.width() + (px - tile.region.x0)) * tile.spp;
+    const size_t first =
+        (size_t(py - tile.region.y0) * tile.region.width() + (px - tile.region.x0)) * tile.spp;
     const int64_t cx = (int64_t(px) << kSubpixelBits) + (1 << (kSubpixelBits - 1));
     const int64_t cy = (int64_t(py) << kSubpixelBits) + (1 << (kSubpixelBits - 1));
     size_t best = first;
@@ -157,7 +159,8 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
             if (!(sw != 0.f)) continue;
             if (normal) {
                 const Vec3 N = normalize(Vec3{acc[0], acc[1], acc[2]});
-                normal->values[pix * 3] = N.x, normal->values[pix * 3 + 1] = N.y, normal->values[pix * 3 + 2] = N.z;
+                normal->values[pix * 3] = N.x, normal->values[pix * 3 + 1] = N.y,
+                                     normal->values[pix * 3 + 2] = N.z;
             }
             if (shadows) shadows->values[pix] = acc[3] / sw;
             for (size_t k = 0; k < aovs.size(); ++k) aovs[k].first->values[pix] = acc[4 + k] / sw;

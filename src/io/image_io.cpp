@@ -56,7 +56,12 @@ float encode(float c, const OutputEncoding& enc) {
 }
 
 uint8_t quantize(float v) {
-    return uint8_t(std::clamp(std::lround(v * 255.f), 0L, 255L));
+    // lround(v * 255) clamped to [0, 255], without the library call (it runs per channel of every pixel):
+    // clamped first (NaN -> 0), then rounded half up, which is exact in double.
+    const float x = v * 255.f;
+    if (!(x > 0.f)) return 0;
+    if (x >= 255.f) return 255;
+    return uint8_t(double(x) + 0.5);
 }
 
 }  // namespace

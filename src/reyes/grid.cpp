@@ -10,12 +10,17 @@ int32_t toFixed(float v) {
     // Clamp far-off vertices so that edge functions cannot overflow 64 bits.
     constexpr float kLimit = float(1 << 20) * kSubpixelScale;
     float f = std::clamp(v * kSubpixelScale, -kLimit, kLimit);
-    return int32_t(std::lround(f));
+    // Round half away from zero, as lround, without the library call (it runs per grid vertex): f +- 0.5
+    // is exact in double, and the conversion truncates.
+    const double d = f;
+    return int32_t(d + (d >= 0 ? 0.5 : -0.5));
 }
 
 // Index of the edge vertex that grid vertex i (of n) snaps to, for an edge of `segments` segments:
 // round(i * segments / n), in integers so both neighbours compute the same thing.
-int snapIndex(int i, int n, int segments) { return (2 * i * segments + n) / (2 * n); }
+int snapIndex(int i, int n, int segments) {
+    return (2 * i * segments + n) / (2 * n);
+}
 
 // Dice and shade a piece of a bicubic Bezier patch.
 void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
@@ -37,7 +42,6 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     // Dice first (positions, normals, view directions of the whole grid), then shade the grid as one batch.
     thread_local std::vector<Vec3> Ps, Ns, Is;
     thread_local std::vector<Color> Ci;
-    thread_local LightSamples lightSamples;
     Ps.resize(count);
     Ns.resize(count);
     Is.resize(count);
@@ -94,9 +98,9 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     points.N = Ns.data();
     points.I = Is.data();
     const std::span<const Material> material(shade.material, 1);
-    sampleLights(shade.lights, material, points, lightSamples);
-    // Visibility: Reyes has no shadows yet (shadow maps come later), so every query answers "visible".
-    shadeSurfaces(material, points, lightSamples, Ci.data());
+    // Visibility: Reyes has no shadows yet (shadow maps come later), so every query answers "visible":
+    // the fused form of sampleLights + shadeSurfaces.
+    shadeSurfacesUnoccluded(shade.lights, material, points, Ci.data());
     grid.objectId = shade.objectId;
     if (shade.wantNormals) {
         grid.NX.resize(count);
@@ -118,7 +122,9 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
 
 void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     switch (shade.kind) {
-        case SurfaceKind::BicubicBezier: diceAndShadeBezier(view, piece, shade, grid); return;
+        case SurfaceKind::BicubicBezier:
+            diceAndShadeBezier(view, piece, shade, grid);
+            return;
     }
 }
 

@@ -10,7 +10,7 @@ void sampleLights(std::span<const ShadingLight> lights, std::span<const Material
     out.needsVisibility.assign(n * nL, 0);
     out.visibility.assign(n * nL, 1.f);
     for (size_t i = 0; i < n; ++i) {
-        LightSample* s = &out.sample[i * nL];
+        LightSample* s = out.sample.data() + i * nL;  // no lights: an empty vector, never dereferenced
         if (!surfaceUsesLights(materials[points.materialOf(i)].type)) {
             for (size_t l = 0; l < nL; ++l) s[l] = LightSample{};
             continue;
@@ -32,8 +32,18 @@ void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& poi
                    size_t begin, size_t end, Color* Ci) {
     const size_t nL = ls.lights;
     for (size_t i = begin; i < end; ++i)
-        Ci[i] = shadeSurfacePoint(materials[points.materialOf(i)], points.N[i], points.I[i], &ls.sample[i * nL],
-                                  &ls.visibility[i * nL], nL);
+        Ci[i] = shadeSurfacePoint(materials[points.materialOf(i)], points.N[i], points.I[i],
+                                  ls.sample.data() + i * nL, ls.visibility.data() + i * nL, nL);
+}
+
+void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<const Material> materials,
+                             const SurfacePoints& points, Color* Ci) {
+    for (size_t i = 0; i < points.count; ++i) {
+        const Vec3 P = points.P[i];
+        Ci[i] = shadeSurfaceLights(
+            materials[points.materialOf(i)], points.N[i], points.I[i], lights.size(),
+            [&](size_t l) { return sampleLight(lights[l], P); }, [](size_t) { return 1.f; });
+    }
 }
 
 }  // namespace tessera

@@ -38,9 +38,13 @@ struct LightSamples {
 };
 
 // Whether a surface is lit at all (constant is not: no light samples, no shadow rays).
-TESSERA_HD bool surfaceUsesLights(MaterialType t) { return t != MaterialType::Constant; }
+TESSERA_HD bool surfaceUsesLights(MaterialType t) {
+    return t != MaterialType::Constant;
+}
 // Whether part of a surface's response is traced (mirror and glass): Reyes shades only the local part.
-TESSERA_HD bool surfaceHasTracedLobes(MaterialType t) { return t == MaterialType::Mirror || t == MaterialType::Glass; }
+TESSERA_HD bool surfaceHasTracedLobes(MaterialType t) {
+    return t == MaterialType::Mirror || t == MaterialType::Glass;
+}
 
 // Step 1: light samples for every point of the batch. Lights facing the point's back side (Nf.L <= 0) and
 // ambient lights need no visibility query.
@@ -55,17 +59,18 @@ void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& poi
 void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
                    size_t begin, size_t end, Color* Ci);
 
-// The local response of one point: shared by the batch loop and by tests that check both engines get the
-// same radiance for the same hit.
-TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const LightSample* samples,
-                                   const float* visibility, size_t lightCount) {
+// The local response of one point, over light samples given by sampleAt(l) and their visibility by
+// visibilityAt(l): the one accumulation of the RI ambient, diffuse and specular terms that every path uses.
+template <class SampleAt, class VisibilityAt>
+TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t lightCount, SampleAt&& sampleAt,
+                                    VisibilityAt&& visibilityAt) {
     if (m.type == MaterialType::Constant) return m.Os * m.Cs;
     const Vec3 Nf = faceForward(N, I);
     const Vec3 V = -I;
     const float exponent = specularExponent(m.roughness);
     Color ambient, diffuse, specular;
     for (size_t l = 0; l < lightCount; ++l) {
-        const LightSample& s = samples[l];
+        const LightSample s = sampleAt(l);
         if (!s.valid) continue;
         if (s.ambient) {
             ambient += s.Cl;
@@ -73,17 +78,19 @@ TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const Ligh
         }
         const float nl = dot(Nf, s.L);
         if (nl <= 0.f) continue;
-        const float vis = visibility[l];
+        const float vis = visibilityAt(l);
         if (vis <= 0.f) continue;
         const Color Cl = s.Cl * vis;
         diffuse += Cl * nl;
         specular += Cl * specularLobe(Nf, V, s.L, exponent);
     }
     switch (m.type) {
-        case MaterialType::Matte: return m.Os * m.Cs * (ambient * m.Ka + diffuse * m.Kd);
+        case MaterialType::Matte:
+            return m.Os * m.Cs * (ambient * m.Ka + diffuse * m.Kd);
         // shinymetal adds Kr * an environment map; with no textures yet its local part is metal's.
         case MaterialType::Metal:
-        case MaterialType::ShinyMetal: return m.Os * m.Cs * (ambient * m.Ka + specular * m.Ks);
+        case MaterialType::ShinyMetal:
+            return m.Os * m.Cs * (ambient * m.Ka + specular * m.Ks);
         // paintedplastic multiplies Cs by a texture; with no textures yet it is plastic.
         // Mirror and glass: the RI plastic terms with their own Ka, Kd, Ks (defaults 0, 0, 0.5: a highlight)
         // as the local part; reflection and refraction are traced lobes.
@@ -91,9 +98,24 @@ TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const Ligh
         case MaterialType::PaintedPlastic:
         case MaterialType::Mirror:
         case MaterialType::Glass:
-        default: return m.Os * (m.Cs * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
+        default:
+            return m.Os * (m.Cs * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
     }
 }
+
+// The local response of one point from stored light samples and visibilities (the batch loop, and tests
+// that check both engines get the same radiance for the same hit).
+TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const LightSample* samples,
+                                   const float* visibility, size_t lightCount) {
+    return shadeSurfaceLights(
+        m, N, I, lightCount, [&](size_t l) -> const LightSample& { return samples[l]; },
+        [&](size_t l) { return visibility[l]; });
+}
+
+// Steps 1-3 fused for an engine whose every visibility query answers "visible" (Reyes until shadow maps):
+// the same light samples and accumulation, without storing the samples.
+void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<const Material> materials,
+                             const SurfacePoints& points, Color* Ci);
 
 // A direction the integrator traces further, with the weight its radiance is multiplied by.
 struct TracedLobe {
