@@ -43,6 +43,13 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     size_t i = 0;
     if (sampler == SamplerKind::Sobol) {
         const FilmPattern pattern = filmPattern(nx, ny, seed);
+        if (spp == 1) {
+            for (int py = reg.y0; py < reg.y1; ++py)
+                for (int px = reg.x0; px < reg.x1; ++px, ++i)
+                    filmSampleSingleFixed(pattern, px, py, sx[i], sy[i]);
+            std::fill(sampleIndex.begin(), sampleIndex.end(), 0u);
+            return;
+        }
         for (int py = reg.y0; py < reg.y1; ++py)
             for (int px = reg.x0; px < reg.x1; ++px, i += spp)
                 filmSamplesFixed(pattern, px, py, &sx[i], &sy[i], &sampleIndex[i]);

@@ -278,8 +278,25 @@ TESSERA_HD FilmPattern filmPattern(int nx, int ny, uint32_t seed) {
     return {nx, ny, log2PowerOfTwo(nx), log2PowerOfTwo(ny), hash32(seed ^ 0x5eed5eedu)};
 }
 
+// One sample per pixel (the ray tracer's benchmark frames): sample index 0, whose Sobol' bits are 0 in
+// every dimension, so its film offsets are the reversed low bytes of the two Laine-Karras permutations of 0
+// (the general loop below with i = 0, written out so that it inlines into the tile's loop).
+TESSERA_HD void filmSampleSingleFixed(const FilmPattern& fp, int px, int py, int32_t& x, int32_t& y) {
+    const uint32_t ps = hash32(((uint32_t(py) & 0xffffu) << 16 | (uint32_t(px) & 0xffffu)) ^ fp.seedHash);
+    const uint32_t lowX = laineKarrasPermutation(0u, scrambleSeed(ps, kDimFilmX)) & 0xffu;
+    const uint32_t lowY = laineKarrasPermutation(0u, scrambleSeed(ps, kDimFilmY)) & 0xffu;
+    const uint32_t both = reverseBitsInBytes(lowX | lowY << 8);
+    x = (px << 8) + int32_t(both & 0xffu);
+    y = (py << 8) + int32_t(both >> 8);
+}
+
 TESSERA_HD void filmSamplesFixed(const FilmPattern& fp, int px, int py, int32_t* x, int32_t* y,
                                  uint32_t* index) {
+    if (fp.nx == 1 && fp.ny == 1) {
+        filmSampleSingleFixed(fp, px, py, *x, *y);
+        *index = 0;
+        return;
+    }
     const int nx = fp.nx, ny = fp.ny, lx = fp.lx, ly = fp.ly;
     const uint32_t ps = hash32(((uint32_t(py) & 0xffffu) << 16 | (uint32_t(px) & 0xffffu)) ^ fp.seedHash);
     const uint32_t sx = scrambleSeed(ps, kDimFilmX), sy = scrambleSeed(ps, kDimFilmY);

@@ -32,9 +32,9 @@ struct Workspace {
     std::vector<uint32_t> hitRay, hitMaterial;
     std::vector<Vec3> hitP, hitN, hitI;
     LightSamples lightSamples;
-    std::vector<uint32_t> shadowIdx;    // [hit * lights + light]: its shadow ray (kNone: none)
+    std::vector<uint32_t> shadowIdx;      // [hit * lights + light]: its shadow ray (kNone: none)
     std::vector<uint8_t> shadowedLights;  // per hit: lights in shadow (the film's shadow-count channel)
-    std::vector<Color> radiance;        // per hit: the local response
+    std::vector<Color> radiance;          // per hit: the local response
     CameraSamples camera;
     std::vector<ShadowRun> shadowRuns;
     double shadeMs = 0, filterMs = 0;
@@ -89,10 +89,10 @@ void makeShadowRays(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
             const Vec3 o = pts.P[k] + Nf * acc.offset;
             Vec3 L = sample.L;
             float tmax = sample.dist;
-            if (sample.positional) {
+            if (isPositional(fr.lights[l].type)) {
                 // Aimed from the offset origin, so that the ray's line passes through the light (the
                 // shadow binning projects from the light).
-                const Vec3 toLight = sample.lightPosition - o;
+                const Vec3 toLight = fr.lights[l].position - o;
                 const float len = length(toLight);
                 if (len > 0.f && std::isfinite(len)) L = toLight / len, tmax = len;
                 if (!(dot(Nf, L) > 0.f)) continue;
@@ -103,8 +103,8 @@ void makeShadowRays(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
                            Nf);
         }
         if (ws.shadow.size() > runBegin)
-            ws.shadowRuns.push_back({runBegin, ws.shadow.size(), fr.lights[l].type != LightType::Distant,
-                                     fr.lights[l].position});
+            ws.shadowRuns.push_back(
+                {runBegin, ws.shadow.size(), fr.lights[l].type != LightType::Distant, fr.lights[l].position});
     }
 }
 
@@ -150,7 +150,8 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
         tile.b[s] += c.z;
         if (rays.depth[r] >= fr.maxDepth) continue;
         TracedLobe lobes[2];
-        const int nLobes = tracedLobes(fr.scene.materials[pts.materialOf(k)], pts.I[k], pts.N[k], w, 1e-4f, lobes);
+        const int nLobes =
+            tracedLobes(fr.scene.materials[pts.materialOf(k)], pts.I[k], pts.N[k], w, 1e-4f, lobes);
         for (int j = 0; j < nLobes; ++j) {
             const bool t = lobes[j].transmitted;
             ws.next.push(pts.P[k] + Nf * (t ? -fr.acc.offset : fr.acc.offset), lobes[j].direction, 0.f,
@@ -173,9 +174,11 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
     ts = EngineClock::now();
     applyVisibility(pts, ws);
     ws.radiance.resize(pts.count);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.count, 256), [&](const tbb::blocked_range<size_t>& range) {
-        shadeSurfaces(fr.scene.materials, pts, ws.lightSamples, range.begin(), range.end(), ws.radiance.data());
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.count, 256),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                          shadeSurfaces(fr.scene.materials, pts, ws.lightSamples, range.begin(), range.end(),
+                                        ws.radiance.data());
+                      });
     accumulate(fr, pts, ws);
     ws.shadeMs += msSince(ts);
 }

@@ -11,6 +11,11 @@
 
 namespace tessera {
 
+// Whether a light is at a position (point, spot): its shadow rays end there.
+TESSERA_HD bool isPositional(LightType t) {
+    return t == LightType::Point || t == LightType::Spot;
+}
+
 // A light in one space (camera space for Reyes, the accel's space for the ray tracer).
 struct ShadingLight {
     LightType type = LightType::Distant;
@@ -36,15 +41,15 @@ inline ShadingLight prepareLight(const Light& l, const Mat4& toSpace) {
 }
 
 // What the light gives a shading point. `valid` is false when no light arrives (behind a spotlight's
-// cone, at the light's position); ambient lights have L = 0 and are never occluded.
+// cone, at the light's position); ambient lights have L = 0 and are never occluded. A visibility query of a
+// point or spot light ends at the light's position (ShadingLight::position); kept out of the sample, which
+// the ray tracer stores per hit and light.
 struct LightSample {
-    Vec3 L;                // unit direction from P to the light
-    Color Cl;              // radiance arriving at P, before visibility
-    float dist = 0.f;      // to the light (infinity for distant lights)
+    Vec3 L;            // unit direction from P to the light
+    Color Cl;          // radiance arriving at P, before visibility
+    float dist = 0.f;  // to the light (infinity for distant lights)
     bool valid = false;
     bool ambient = false;
-    bool positional = false;  // point/spot: a shadow ray ends at `lightPosition`
-    Vec3 lightPosition;
 };
 
 // RI smoothstep(e0, e1, x).
@@ -77,8 +82,6 @@ TESSERA_HD LightSample sampleLight(const ShadingLight& l, Vec3 P) {
             s.dist = std::sqrt(d2);
             s.L = d / s.dist;
             s.Cl = l.color / d2;  // RI pointlight / spotlight: intensity * lightcolor / (L.L)
-            s.positional = true;
-            s.lightPosition = l.position;
             if (l.type == LightType::Spot) {
                 // RI spotlight: cosangle = L.A (from the light), atten = cosangle^beamdistribution *
                 // smoothstep(cos(coneangle), cos(coneangle - conedeltaangle), cosangle).
