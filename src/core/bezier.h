@@ -2,6 +2,7 @@
 // Plain functions over plain data (no allocation, no globals) so any backend can share them.
 // Control points are row-major: cp[v * 4 + u], u varies fastest (the RIB convention).
 #pragma once
+#include "core/hostdevice.h"
 #include "core/vec.h"
 
 namespace tessera {
@@ -17,14 +18,14 @@ struct SurfacePoint {
 };
 
 // Cubic Bernstein basis B_i(t) and its derivative.
-inline void bernstein3(float t, float b[4]) {
+TESSERA_HD void bernstein3(float t, float b[4]) {
     float s = 1.f - t;
     b[0] = s * s * s;
     b[1] = 3.f * t * s * s;
     b[2] = 3.f * t * t * s;
     b[3] = t * t * t;
 }
-inline void bernstein3Deriv(float t, float d[4]) {
+TESSERA_HD void bernstein3Deriv(float t, float d[4]) {
     float s = 1.f - t;
     d[0] = -3.f * s * s;
     d[1] = 3.f * s * s - 6.f * t * s;
@@ -32,7 +33,7 @@ inline void bernstein3Deriv(float t, float d[4]) {
     d[3] = 3.f * t * t;
 }
 
-inline Vec3 evalCurve(const Vec3 c[4], float t) {
+TESSERA_HD Vec3 evalCurve(const Vec3 c[4], float t) {
     float b[4];
     bernstein3(t, b);
     return c[0] * b[0] + c[1] * b[1] + c[2] * b[2] + c[3] * b[3];

@@ -11,6 +11,7 @@
 #include <immintrin.h>
 #endif
 
+#include "core/hostdevice.h"
 #include "core/bezier.h"
 #include "rt/subpatch_tree.h"
 
@@ -41,14 +42,14 @@ __attribute__((always_inline)) inline RayPlanes makeRayPlanes(Vec3 o, Vec3 d) {
 }
 
 // Reciprocal direction for slab tests; zero components become huge finite values (no 0 * inf NaNs).
-inline Vec3 safeInverse(Vec3 d) {
+TESSERA_HD Vec3 safeInverse(Vec3 d) {
     auto inv = [](float x) { return std::fabs(x) > 1e-30f ? 1.f / x : (x >= 0.f ? 1e30f : -1e30f); };
     return {inv(d.x), inv(d.y), inv(d.z)};
 }
 
 // Slab test; on a hit returns the entry and exit distances (clamped to [tmin, tmax]). Plain compares
 // (minss/maxss), no initializer lists: this is the traversal's inner kernel.
-inline bool rayBoxInterval(const Bounds3& b, const Vec3& o, const Vec3& inv, float tmin, float tmax,
+TESSERA_HD bool rayBoxInterval(const Bounds3& b, const Vec3& o, const Vec3& inv, float tmin, float tmax,
                            float& tEnter, float& tExit) {
     const float tx0 = (b.lo.x - o.x) * inv.x, tx1 = (b.hi.x - o.x) * inv.x;
     const float ty0 = (b.lo.y - o.y) * inv.y, ty1 = (b.hi.y - o.y) * inv.y;
@@ -61,7 +62,7 @@ inline bool rayBoxInterval(const Bounds3& b, const Vec3& o, const Vec3& inv, flo
     return t0 <= t1;
 }
 
-inline bool rayBox(const Bounds3& b, Vec3 o, Vec3 inv, float tmin, float tmax, float& tEnter) {
+TESSERA_HD bool rayBox(const Bounds3& b, Vec3 o, Vec3 inv, float tmin, float tmax, float& tEnter) {
     float tExit;
     return rayBoxInterval(b, o, inv, tmin, tmax, tEnter, tExit);
 }
@@ -134,7 +135,7 @@ struct PatchHit {
 
 // Residual tolerance for a patch whose box is `box`, seen from ray origin o: a few float ulps of the
 // magnitudes involved (the residual n.Q + d cancels terms of size |Q| and |o|).
-inline float newtonTolerance(const Bounds3& box, Vec3 o) {
+TESSERA_HD float newtonTolerance(const Bounds3& box, Vec3 o) {
     float mag = 0;
     for (int k = 0; k < 3; ++k)
         mag = std::max({mag, std::fabs(box.lo[k]), std::fabs(box.hi[k]), std::fabs(o[k])});
@@ -149,7 +150,7 @@ struct alignas(16) ProjectedPatch {
 };
 
 template <class T>
-inline void projectPatch(const BezierPatch& patch, const T n1[3], const T n2[3], T d1, T d2,
+TESSERA_HD void projectPatch(const BezierPatch& patch, const T n1[3], const T n2[3], T d1, T d2,
                          ProjectedPatch<T>& pp) {
     for (int k = 0; k < 16; ++k) {
         const Vec3& c = patch.cp[k];
@@ -158,14 +159,14 @@ inline void projectPatch(const BezierPatch& patch, const T n1[3], const T n2[3],
     }
 }
 
-inline void projectPatch(const BezierPatch& patch, const RayPlanes& pl, ProjectedPatch<float>& pp) {
+TESSERA_HD void projectPatch(const BezierPatch& patch, const RayPlanes& pl, ProjectedPatch<float>& pp) {
     const float n1[3] = {pl.n1.x, pl.n1.y, pl.n1.z}, n2[3] = {pl.n2.x, pl.n2.y, pl.n2.z};
     projectPatch<float>(patch, n1, n2, pl.d1, pl.d2, pp);
 }
 
 // R = (r1, r2) and its Jacobian [j11 j12; j21 j22] (columns d/du, d/dv) at (u, v): scalar reference.
 template <class T>
-inline void evalProjected(const ProjectedPatch<T>& pp, T u, T v, T& r1, T& r2, T& j11, T& j12, T& j21,
+TESSERA_HD void evalProjected(const ProjectedPatch<T>& pp, T u, T v, T& r1, T& r2, T& j11, T& j12, T& j21,
                           T& j22) {
     T bu[4], bv[4], du[4], dv[4];
     T s = 1 - u, t = u;
@@ -292,7 +293,7 @@ inline bool leafMayHit(const ProjectedPatch<float>& pp, const LeafBasis& lb, flo
 // Largest Bernstein coefficient over one leaf of a scalar function given by its 16 coefficients over the
 // patch (row-major like ProjectedPatch), mapped by the leaf's change of basis: an upper bound of the
 // function on the leaf (convex hull property).
-inline float leafMaxCoefficient(const float a[16], const LeafBasis& lb) {
+TESSERA_HD float leafMaxCoefficient(const float a[16], const LeafBasis& lb) {
 #if defined(__SSE2__)
     const __m128 a0 = _mm_loadu_ps(a), a1 = _mm_loadu_ps(a + 4), a2 = _mm_loadu_ps(a + 8),
                  a3 = _mm_loadu_ps(a + 12);
@@ -331,7 +332,7 @@ inline float leafMaxCoefficient(const float a[16], const LeafBasis& lb) {
 // Jacobian (collapsed edge) nudges the iterate towards the domain centre. Returns convergence;
 // `iterations` receives the number of evaluations (+1 for the free step).
 template <class T>
-inline bool newtonIterate(const ProjectedPatch<T>& pp, T eps, T& u, T& v, int& iterations) {
+TESSERA_HD bool newtonIterate(const ProjectedPatch<T>& pp, T eps, T& u, T& v, int& iterations) {
     const T outer = T(0.25);  // iterates may wander this far outside the domain before giving up
     T prevNorm = std::numeric_limits<T>::infinity();
     int it = 0, clamps = 0;
@@ -518,7 +519,7 @@ bool solveLeaf(const BezierPatch& patch, const RayPlanes& pl, const Ray& ray, fl
     return ok;
 }
 
-inline void leafHalfSize(int depth, float& hu, float& hv) {
+TESSERA_HD void leafHalfSize(int depth, float& hu, float& hv) {
     hu = 0.5f / float(1 << ((depth + 1) / 2));
     hv = 0.5f / float(1 << (depth / 2));
 }

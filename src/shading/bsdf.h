@@ -22,7 +22,7 @@ TESSERA_HD float specularExponent(float roughness) { return 8.f / std::max(rough
 TESSERA_HD float specularLobe(Vec3 Nf, Vec3 V, Vec3 L, float exponent) {
     const Vec3 H = normalize(L + V);
     const float nh = dot(Nf, H);
-    return nh > 0.f ? std::pow(nh, exponent) : 0.f;
+    return nh > 0.f ? powf(nh, exponent) : 0.f;
 }
 
 // Mirror direction of I about N (unit vectors; N on either side).

@@ -87,7 +87,7 @@ TESSERA_HD LightSample sampleLight(const ShadingLight& l, Vec3 P) {
                 // smoothstep(cos(coneangle), cos(coneangle - conedeltaangle), cosangle).
                 const float cosAngle = -dot(s.L, l.direction);
                 if (cosAngle < l.cosOuter) return s;
-                s.Cl *= std::pow(std::max(cosAngle, 0.f), l.beamDistribution) *
+                s.Cl *= powf(std::max(cosAngle, 0.f), l.beamDistribution) *
                         smoothStep(l.cosOuter, l.cosInner, cosAngle);
             }
             s.valid = true;
