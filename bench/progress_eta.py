@@ -2,6 +2,9 @@
 """How steady the progress estimate is: runs a tessera command with --progress and prints, at 10/25/50/75/90%,
 the total time a linear extrapolation of the elapsed time projects, against the actual total.
 Usage: bench/progress_eta.py build/tessera render SCENE --progress [options]"""
+import subprocess
+import sys
+import time
 cmd = sys.argv[1:]
 t0 = time.time()
 p = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
