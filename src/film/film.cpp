@@ -65,7 +65,7 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
 
 void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovNames) {
     const size_t n = size_t(width) * height;
-    auto add = [&](const char* name, int components, bool integer, float background) {
+    auto add = [&](const std::string& name, int components, bool integer, float background) {
         ImagePlane p;
         p.name = name;
         p.components = components;
@@ -81,10 +81,7 @@ void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovName
     if (channels & kChannelNormal) add("N", 3, false, 0.f);
     if (channels & kChannelShadowCount) add("shadows", 1, false, 0.f);
     if (channels & kChannelHasTexture) add("textured", 1, false, 0.f);
-    for (const std::string& a : aovNames) {
-        add("", 1, false, 0.f);
-        planes.back().name = a;
-    }
+    for (const std::string& a : aovNames) add(a, 1, false, 0.f);
 }
 
 const ImagePlane* Image::plane(const std::string& name) const {
@@ -114,12 +111,31 @@ size_t nearestSampleToCentre(const SampleTile& tile, int px, int py) {
 
 namespace {
 
+// Calls visit(i, w) for every sample i of the tile within the pixel filter's reach (radii rx, ry, which the
+// callers take from the filter once per tile) of pixel (px, py), w its tabulated filter weight: the window
+// that colour and the filtered planes share.
+template <class Visit>
+inline void forEachSampleInReach(const SampleTile& tile, const PixelFilter& filter, int rx, int ry, int px,
+                                 int py, Visit&& visit) {
+    const int tw = tile.region.width(), spp = tile.spp;
+    const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
+    const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
+    const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    for (int qy = qy0; qy <= qy1; ++qy) {
+        // The samples of one row of the window are contiguous: one loop over all of them.
+        const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
+        const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+        for (size_t i = begin; i < end; ++i)
+            visit(i, filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy));
+    }
+}
+
 // The planes beside RGBA for the pixels of `target`: nearest-sample planes (id, depth, has-texture) from the
 // pixel's sample nearest its centre; filtered planes (normal, shadow count, AOVs) with the pixel filter over
 // covered samples (weights times coverage, so background does not dilute them).
 void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
     const int rx = filter.radiusX(), ry = filter.radiusY();
-    const int tw = tile.region.width(), spp = tile.spp;
     ImagePlane* id = tile.has(kChannelObjectId) ? out.plane("id") : nullptr;
     ImagePlane* depth = out.plane("z");
     ImagePlane* textured = tile.has(kChannelHasTexture) ? out.plane("textured") : nullptr;
@@ -140,29 +156,20 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
             if (depth) depth->values[pix] = covered ? tile.z[near] : std::numeric_limits<float>::infinity();
             if (textured) textured->values[pix] = covered ? float(tile.hasTexture[near]) : 0.f;
             if (!filtered) continue;
-            const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
-            const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
-            const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-            const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
             std::fill(acc.begin(), acc.end(), 0.f);
             float sw = 0.f;
-            for (int qy = qy0; qy <= qy1; ++qy) {
-                const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
-                const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
-                for (size_t i = begin; i < end; ++i) {
-                    if (!(tile.a[i] > 0.f)) continue;
-                    const float w =
-                        filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy) * tile.a[i];
-                    sw += w;
-                    if (normal) {
-                        acc[0] += w * tile.normalX[i];
-                        acc[1] += w * tile.normalY[i];
-                        acc[2] += w * tile.normalZ[i];
-                    }
-                    if (shadows) acc[3] += w * float(tile.shadowCount[i]);
-                    for (size_t k = 0; k < aovs.size(); ++k) acc[4 + k] += w * (*aovs[k].second)[i];
+            forEachSampleInReach(tile, filter, rx, ry, px, py, [&](size_t i, float filterWeight) {
+                if (!(tile.a[i] > 0.f)) return;
+                const float w = filterWeight * tile.a[i];
+                sw += w;
+                if (normal) {
+                    acc[0] += w * tile.normalX[i];
+                    acc[1] += w * tile.normalY[i];
+                    acc[2] += w * tile.normalZ[i];
                 }
-            }
+                if (shadows) acc[3] += w * float(tile.shadowCount[i]);
+                for (size_t k = 0; k < aovs.size(); ++k) acc[4 + k] += w * (*aovs[k].second)[i];
+            });
             if (!(sw != 0.f)) continue;
             if (normal) {
                 const Vec3 N = normalize(Vec3{acc[0], acc[1], acc[2]});
@@ -181,7 +188,6 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
     if (!out.planes.empty()) reconstructPlanes(tile, filter, target, out);
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int tw = tile.region.width(), th = tile.region.height();
-    const int spp = tile.spp;
     static_assert(kSubpixelBits == 8, "filter tables assume 1/256 pixel offsets");
     // Background pixels (no covered sample in reach) stay transparent black and skip the filter. Which
     // pixels have a covered sample in reach: pixelHit dilated by the filter radius, first along rows,
@@ -212,24 +218,14 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
                 o[0] = o[1] = o[2] = o[3] = 0.f;
                 continue;
             }
-            const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
-            const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
-            const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-            const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
             float sr = 0, sg = 0, sb = 0, sa = 0, sw = 0;
-            for (int qy = qy0; qy <= qy1; ++qy) {
-                // The samples of one row of the window are contiguous: one loop over all of them.
-                const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
-                const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
-                for (size_t i = begin; i < end; ++i) {
-                    const float w = filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy);
-                    sr += w * tile.r[i];
-                    sg += w * tile.g[i];
-                    sb += w * tile.b[i];
-                    sa += w * tile.a[i];
-                    sw += w;
-                }
-            }
+            forEachSampleInReach(tile, filter, rx, ry, px, py, [&](size_t i, float w) {
+                sr += w * tile.r[i];
+                sg += w * tile.g[i];
+                sb += w * tile.b[i];
+                sa += w * tile.a[i];
+                sw += w;
+            });
             const float k = sw != 0.f ? 1.f / sw : 0.f;
             o[0] = sr * k;
             o[1] = sg * k;

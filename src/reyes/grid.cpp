@@ -26,8 +26,7 @@ int snapIndex(int i, int n, int segments) {
 void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     const BezierPatch& patch = view.patches[piece.patch];
     const PieceEdge* e = piece.edge;
-    const int nu = std::max({e[0].segments(), e[2].segments(), 1});
-    const int nv = std::max({e[1].segments(), e[3].segments(), 1});
+    const int nu = pieceGridU(piece), nv = pieceGridV(piece);
     grid.nu = nu;
     grid.nv = nv;
     grid.twoSided = shade.twoSided;

@@ -68,7 +68,8 @@ inline bool shadeSampleIfInside(const TriangleSetup& t, const Grid& g, int64_t s
     if constexpr (kAttributes) {
         Vec3 N;
         if (!g.NX.empty())
-            N = normalize(Vec3{l0 * g.NX[a] + l1 * g.NX[b] + l2 * g.NX[c], l0 * g.NY[a] + l1 * g.NY[b] + l2 * g.NY[c],
+            N = normalize(Vec3{l0 * g.NX[a] + l1 * g.NX[b] + l2 * g.NX[c],
+                               l0 * g.NY[a] + l1 * g.NY[b] + l2 * g.NY[c],
                                l0 * g.NZ[a] + l1 * g.NZ[b] + l2 * g.NZ[c]});
         // Reyes has no shadows or textures yet: no lights in shadow, untextured.
         tile.setAttributes(i, g.objectId, N, 0, false);
@@ -116,8 +117,9 @@ uint64_t rasterizeGridImpl(const Grid& g, SampleTile& tile, float nearZ) {
                     const int64_t sx = tile.sx[si], sy = tile.sy[si];
                     ++tests;
                     if (sx < minX || sx > maxX || sy < minY || sy > maxY) continue;
-                    bool hit = (t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ)) ||
-                               (t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ));
+                    bool hit =
+                        (t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ)) ||
+                        (t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ));
                     if (hit) tile.pixelHit[pix] = 1;
                 }
             }

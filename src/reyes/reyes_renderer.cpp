@@ -35,13 +35,6 @@ struct ThreadCounters {
     SampleTile tile;
 };
 
-// Micropolygons a piece will dice into (its grid's nu x nv, from the edge lattices), for the progress.
-uint64_t estimatedMicropolygons(const Piece& p) {
-    const int nu = std::max({p.edge[0].segments(), p.edge[2].segments(), 1});
-    const int nv = std::max({p.edge[1].segments(), p.edge[3].segments(), 1});
-    return uint64_t(nu) * uint64_t(nv);
-}
-
 }  // namespace
 
 RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
@@ -51,8 +44,9 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     for (const Material& m : scene.materials)
         if (surfaceHasTracedLobes(m.type)) {
             // Mirror and glass get their local terms here; the traced part needs the ray tracer.
-            result.warnings.push_back("the scene has mirror or glass surfaces: Reyes renders their highlights only; "
-                                      "reflections and refractions need --engine rt");
+            result.warnings.push_back(
+                "the scene has mirror or glass surfaces: Reyes renders their highlights only; "
+                "reflections and refractions need --engine rt");
             break;
         }
 
@@ -121,7 +115,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
             int bx0, by0, bx1, by1;
             bucketRange(pieces[pi], bx0, by0, bx1, by1);
             const int spanned = (bx1 - bx0 + 1) * (by1 - by0 + 1);
-            const uint64_t share = estimatedMicropolygons(pieces[pi]) / uint64_t(spanned) + 1;
+            const uint64_t share =
+                uint64_t(pieceGridU(pieces[pi])) * uint64_t(pieceGridV(pieces[pi])) / uint64_t(spanned) + 1;
             for (int by = by0; by <= by1; ++by)
                 for (int bx = bx0; bx <= bx1; ++bx) {
                     const int b = by * layout.countX + bx;
@@ -151,8 +146,13 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                 auto td = EngineClock::now();
                 const Piece& piece = pieces[pi];
                 const PatchAttributes& attr = scene.attributes[piece.patch];
-                ShadeInputs in{attr.kind, &scene.materials[attr.material], attr.twoSided, attr.flipNormal, frame.lights,
-                               attr.object, (settings.output.channels & kChannelNormal) != 0};
+                ShadeInputs in{attr.kind,
+                               &scene.materials[attr.material],
+                               attr.twoSided,
+                               attr.flipNormal,
+                               frame.lights,
+                               attr.object,
+                               (settings.output.channels & kChannelNormal) != 0};
                 slot.grid = std::make_unique<Grid>();
                 diceAndShade(view, piece, in, *slot.grid);
                 ++tc.grids;

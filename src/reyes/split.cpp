@@ -97,7 +97,8 @@ Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) 
     float v0 = std::min(std::min(piece.uv[0].y, piece.uv[1].y), std::min(piece.uv[2].y, piece.uv[3].y));
     float v1 = std::max(std::max(piece.uv[0].y, piece.uv[1].y), std::max(piece.uv[2].y, piece.uv[3].y));
     // The quad lies inside its (u,v) bounding rectangle, whose control hull bounds the surface.
-    BezierPatch hull = (u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f) ? patch : subPatch(patch, u0, u1, v0, v1);
+    BezierPatch hull =
+        (u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f) ? patch : subPatch(patch, u0, u1, v0, v1);
     Bounds3 b = hullBounds(hull);
     const Projector& pr = view.projector;
     if (!(b.hi.z >= pr.nearClip) || !(b.lo.z <= pr.farClip)) return Verdict::Cull;
@@ -109,7 +110,8 @@ Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) 
             x0 = std::min(x0, r.x), x1 = std::max(x1, r.x);
             y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
         }
-        if (x1 < view.cullX0 || x0 > view.cullX1 || y1 < view.cullY0 || y0 > view.cullY1) return Verdict::Cull;
+        if (x1 < view.cullX0 || x0 > view.cullX1 || y1 < view.cullY0 || y0 > view.cullY1)
+            return Verdict::Cull;
         piece.x0 = x0, piece.y0 = y0, piece.x1 = x1, piece.y1 = y1;
     }
     int maxSeg = 0;
@@ -221,7 +223,9 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
                   std::vector<Piece>& out, SplitCounters& counters) {
     switch (attr.kind) {
-        case SurfaceKind::BicubicBezier: splitPatch(view, index, micropolygonSide, out, counters); return;
+        case SurfaceKind::BicubicBezier:
+            splitPatch(view, index, micropolygonSide, out, counters);
+            return;
     }
 }
 

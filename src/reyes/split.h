@@ -10,6 +10,7 @@
 // Splits that cut the two opposite edges at different fractions give non-isoparametric (diagonal) pieces,
 // so a piece is a quadrilateral in (u,v), evaluated through the original patch.
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -41,11 +42,19 @@ struct Piece {
     float x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // raster bound of the control hull
 };
 
+// The grid a piece dices into: nu = max(top, bottom edge segments), nv likewise (at least 1 each).
+inline int pieceGridU(const Piece& p) {
+    return std::max({p.edge[0].segments(), p.edge[2].segments(), 1});
+}
+inline int pieceGridV(const Piece& p) {
+    return std::max({p.edge[1].segments(), p.edge[3].segments(), 1});
+}
+
 // Everything split and dice need, read-only during a render. Patches are in camera space.
 struct ReyesView {
     const BezierPatch* patches = nullptr;
     Projector projector;
-    float micropolygonSide = 1.f;  // sqrt(shading rate), pixels
+    float micropolygonSide = 1.f;          // sqrt(shading rate), pixels
     float cullX0, cullY0, cullX1, cullY1;  // raster window that can still reach a pixel (image + filter)
     int maxGridEdge = 16;
     explicit ReyesView(const Camera& cam) : projector(cam) {}

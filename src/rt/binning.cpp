@@ -105,13 +105,7 @@ void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, S
 // Raster rectangle containing the projection of box b, grown for rounding (the rays' own raster
 // positions are rounded too); false when the box reaches behind the eye (no finite rectangle).
 inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
-    x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
-    for (int c = 0; c < 8; ++c) {
-        const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
-        if (proj.perspective && !(p.z > 0.f)) return false;
-        const Vec3 r = proj.toRaster(p);
-        x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
-    }
+    if (!proj.rasterBounds(b, x0, x1, y0, y1)) return false;
     const float m = 1e-2f + 1e-5f * std::max({std::fabs(x0), std::fabs(x1), std::fabs(y0), std::fabs(y1)});
     x0 -= m, x1 += m, y0 -= m, y1 += m;
     return std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1);

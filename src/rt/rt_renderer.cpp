@@ -104,7 +104,7 @@ void makeShadowRays(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
         }
         if (ws.shadow.size() > runBegin)
             ws.shadowRuns.push_back(
-                {runBegin, ws.shadow.size(), fr.lights[l].type != LightType::Distant, fr.lights[l].position});
+                {runBegin, ws.shadow.size(), isPositional(fr.lights[l].type), fr.lights[l].position});
     }
 }
 
@@ -194,20 +194,12 @@ struct SceneRect {
 
 SceneRect sceneRect(const RtAccel& acc, const Projector& proj) {
     SceneRect sr;
+    float x0, x1, y0, y1;
     if (acc.bounds.empty()) {
         sr.x0 = sr.y0 = INFINITY, sr.x1 = sr.y1 = -INFINITY;  // nothing to hit
-    } else {
-        bool inFront = true;
-        float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
-        for (int c = 0; c < 8; ++c) {
-            const Vec3 p{c & 1 ? acc.bounds.hi.x : acc.bounds.lo.x, c & 2 ? acc.bounds.hi.y : acc.bounds.lo.y,
-                         c & 4 ? acc.bounds.hi.z : acc.bounds.lo.z};
-            if (proj.perspective && !(p.z > 0.f)) inFront = false;
-            const Vec3 r = proj.toRaster(p);
-            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
-        }
-        if (inFront && std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1))
-            sr.x0 = x0 - 1.f, sr.x1 = x1 + 1.f, sr.y0 = y0 - 1.f, sr.y1 = y1 + 1.f;
+    } else if (proj.rasterBounds(acc.bounds, x0, x1, y0, y1) && std::isfinite(x0) && std::isfinite(x1) &&
+               std::isfinite(y0) && std::isfinite(y1)) {
+        sr.x0 = x0 - 1.f, sr.x1 = x1 + 1.f, sr.y0 = y0 - 1.f, sr.y1 = y1 + 1.f;
     }
     return sr;
 }
@@ -266,17 +258,10 @@ std::vector<uint64_t> tileWork(const RtAccel& acc, const Projector& proj, const 
                                const BucketLayout& layout, int spp, size_t lights) {
     const int nb = layout.count();
     std::vector<double> covered(nb, 0.0);
-    for (const BezierPatch& p : acc.patches) {
-        const Bounds3 b = hullBounds(p);
-        float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
-        bool inFront = true;
-        for (int c = 0; c < 8; ++c) {
-            const Vec3 q{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
-            if (proj.perspective && !(q.z > 0.f)) inFront = false;
-            const Vec3 r = proj.toRaster(q);
-            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
-        }
-        if (!inFront) x0 = y0 = -INFINITY, x1 = y1 = INFINITY;  // reaches behind the eye: the whole view
+    for (uint32_t patch = 0; patch < acc.patches.size(); ++patch) {
+        float x0, x1, y0, y1;  // the patch's root box, as the BVH has it
+        if (!proj.rasterBounds(acc.forest.tree(patch)[0], x0, x1, y0, y1))
+            x0 = y0 = -INFINITY, x1 = y1 = INFINITY;  // reaches behind the eye: the whole view
         x0 = std::max(x0, float(layout.region.x0)), x1 = std::min(x1, float(layout.region.x1));
         y0 = std::max(y0, float(layout.region.y0)), y1 = std::min(y1, float(layout.region.y1));
         if (!(x0 < x1 && y0 < y1)) continue;

@@ -2,6 +2,7 @@
 // camera space is left-handed, +x right, +y up, +z into the screen; a perspective projection maps
 // the screen window onto the raster.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -50,9 +51,24 @@ struct Projector {
         float iz = perspective ? 1.f / p.z : 1.f;
         return {p.x * iz * sx + ox, p.y * iz * sy + oy, p.z};
     }
+    // Bounding rectangle, in raster space, of the projected corners of a camera-space box: it contains the
+    // box's projection when the box lies in front of the eye. False (rectangle unusable) when a corner is at
+    // or behind the eye of a perspective camera.
+    bool rasterBounds(const Bounds3& b, float& x0, float& x1, float& y0, float& y1) const {
+        x0 = y0 = INFINITY, x1 = y1 = -INFINITY;
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
+            if (perspective && !(p.z > 0.f)) return false;
+            const Vec3 r = toRaster(p);
+            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x), y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+        }
+        return true;
+    }
     // Camera-space point on the z = 1 plane (perspective) or the z = 0 plane (orthographic) that projects
     // to raster position (x, y).
-    Vec3 fromRaster(float x, float y) const { return {(x - ox) / sx, (y - oy) / sy, perspective ? 1.f : 0.f}; }
+    Vec3 fromRaster(float x, float y) const {
+        return {(x - ox) / sx, (y - oy) / sy, perspective ? 1.f : 0.f};
+    }
 
     bool hasLens() const { return lensRadius > 0.f; }
     // Radius in raster pixels of the circle of confusion of a camera-space depth z (Reyes' blur bound):
