@@ -135,8 +135,6 @@ struct Segment {
 // becomes 4 patches (exact quarter circles in the two other axes). Returns .bpt text.
 std::string revolvedBpt(const std::vector<Segment>& profile, int up,
                         std::vector<int>* segmentOfPatch = nullptr) {
-    const float k = 0.5522847f;
-    const float cx[4] = {1, 1, k, 0}, cy[4] = {0, k, 1, 1};
     std::ostringstream o;
     o << profile.size() * 4 << "\n";
     for (size_t s = 0; s < profile.size(); ++s)
@@ -144,12 +142,8 @@ std::string revolvedBpt(const std::vector<Segment>& profile, int up,
             o << "3 3\n";
             for (int v = 0; v < 4; ++v)
                 for (int u = 0; u < 4; ++u) {
-                    float x = cx[u], y = cy[u];
-                    for (int r = 0; r < q; ++r) {
-                        float t = x;
-                        x = -y;
-                        y = t;
-                    }
+                    float x, y;
+                    test::quarterCirclePoint(u, q, x, y);
                     const Segment& g = profile[s];
                     float radius = g.r0 + (g.r1 - g.r0) * v / 3.f, height = g.h0 + (g.h1 - g.h0) * v / 3.f;
                     float p[3];

@@ -43,11 +43,24 @@ inline BezierPatch flatSquare(float side, float depth, float cx = 0, float cy = 
     return p;
 }
 
+// Control point u (0..3) of the cubic Bezier quarter circle of quadrant q (0..3, counter-clockwise) of the
+// unit circle, rotated with exact swaps and negations so that neighbouring quadrants share bit-identical
+// points.
+inline void quarterCirclePoint(int u, int q, float& x, float& y) {
+    const float k = 0.5522847f;  // cubic Bezier quarter-circle constant
+    const float cx[4] = {1, 1, k, 0}, cy[4] = {0, k, 1, 1};
+    x = cx[u], y = cy[u];
+    for (int r = 0; r < q; ++r) {
+        const float t = x;
+        x = -y;
+        y = t;
+    }
+}
+
 // A closed sphere-like surface of 8 bicubic patches (one per octant, collapsed edges at the poles).
 // Shared edges are bit-identical, as in real models whose patches share control points.
 inline std::vector<BezierPatch> octantSphere(float radius, Vec3 centre) {
-    const float k = 0.5522847f;  // cubic Bezier quarter-circle constant
-    const float cx[4] = {1, 1, k, 0}, cy[4] = {0, k, 1, 1};  // quarter circle in (x,y)
+    const float k = 0.5522847f;                              // cubic Bezier quarter-circle constant
     const float pr[4] = {1, 1, k, 0}, pz[4] = {0, k, 1, 1};  // profile: radius and height
     std::vector<BezierPatch> out;
     for (int hemi = 0; hemi < 2; ++hemi)
@@ -55,13 +68,8 @@ inline std::vector<BezierPatch> octantSphere(float radius, Vec3 centre) {
             BezierPatch p;
             for (int v = 0; v < 4; ++v)
                 for (int u = 0; u < 4; ++u) {
-                    // Rotate the quadrant by q * 90 degrees with exact swaps and negations.
-                    float x = cx[u], y = cy[u];
-                    for (int r = 0; r < q; ++r) {
-                        float t = x;
-                        x = -y;
-                        y = t;
-                    }
+                    float x, y;
+                    quarterCirclePoint(u, q, x, y);
                     float z = hemi == 0 ? pz[v] : -pz[v];
                     // Keep the normal orientation consistent: mirror u for the lower hemisphere.
                     int uu = hemi == 0 ? u : 3 - u;
@@ -73,7 +81,9 @@ inline std::vector<BezierPatch> octantSphere(float radius, Vec3 centre) {
     return out;
 }
 
-inline float alphaAt(const Image& img, int x, int y) { return img.pixel(x, y)[3]; }
+inline float alphaAt(const Image& img, int x, int y) {
+    return img.pixel(x, y)[3];
+}
 
 // Pinholes: pixels not fully covered (alpha below `covered`) whose eight neighbours all are.
 inline int countPinholes(const Image& img, float covered = 0.999f) {
