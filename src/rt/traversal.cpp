@@ -103,23 +103,43 @@ size_t leafLevel(const LevelIn& in, uint32_t leafQuadFirst, Candidate* cand, siz
 }
 
 #if TESSERA_RT_AVX2
+// Items j and j + 1 of a level (their patch pairs and quads), for the AVX2 loops' one 8-wide test of both.
+struct ItemPair {
+    uint32_t ia, qa, ib, qb;
+    const PatchPair* pa;
+    const PatchPair* pb;
+};
+inline ItemPair itemPair(const LevelIn& in, uint32_t j) {
+    const uint32_t ia = in.items[j], ib = in.items[j + 1];
+    return {ia,
+            ia & kItemQuadMask,
+            ib,
+            ib & kItemQuadMask,
+            &in.pairs[ia >> kItemQuadBits],
+            &in.pairs[ib >> kItemQuadBits]};
+}
+// The 8-wide test of both items' quads against their rays, back-facing children masked: lanes 0-3 are item
+// j's, 4-7 item j + 1's; te8 gets the entry distances.
+TESSERA_AVX2 inline int itemPairHits(const LevelIn& in, const ItemPair& p, __m256& te8) {
+    const PatchPair &pa = *p.pa, &pb = *p.pb;
+    int mask = quadHits2(pa.quads[p.qa], in.ray4[pa.ray], pa.selfT4, pb.quads[p.qb], in.ray4[pb.ray],
+                         pb.selfT4, te8);
+    if (pa.qback) mask &= ~int(pa.qback[p.qa]);
+    if (pb.qback) mask &= ~(int(pb.qback[p.qb]) << 4);
+    return mask;
+}
+
 TESSERA_AVX2 uint32_t innerLevelAvx2(const LevelIn& in, uint32_t* next) {
     uint32_t j = 0, nNext = 0;
     for (; j + 1 < in.n; j += 2) {
-        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
-        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
-        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
-        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        const ItemPair ip = itemPair(in, j);
         __m256 te8;
-        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
-                             pb.selfT4, te8);
-        if (pa.qback) mask &= ~int(pa.qback[qa]);
-        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const int mask = itemPairHits(in, ip, te8);
         const HitOrder *ha, *hb;
         hitOrder2(mask, te8, ha, hb);
-        storeItems4(next + nNext, *ha, (ia & ~kItemQuadMask) + 4 * qa + 1);
+        storeItems4(next + nNext, *ha, (ip.ia & ~kItemQuadMask) + 4 * ip.qa + 1);
         nNext += kPop4[mask & 15];
-        storeItems4(next + nNext, *hb, (ib & ~kItemQuadMask) + 4 * qb + 1);
+        storeItems4(next + nNext, *hb, (ip.ib & ~kItemQuadMask) + 4 * ip.qb + 1);
         nNext += kPop4[mask >> 4];
     }
     return innerLevelTail(in, j, next, nNext);
@@ -129,15 +149,11 @@ TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Can
                                   uint32_t* count) {
     uint32_t j = 0;
     for (; j + 1 < in.n; j += 2) {
-        const uint32_t ia = in.items[j], qa = ia & kItemQuadMask;
-        const uint32_t ib = in.items[j + 1], qb = ib & kItemQuadMask;
-        const PatchPair& pa = in.pairs[ia >> kItemQuadBits];
-        const PatchPair& pb = in.pairs[ib >> kItemQuadBits];
+        const ItemPair ip = itemPair(in, j);
+        const PatchPair &pa = *ip.pa, &pb = *ip.pb;
+        const uint32_t qa = ip.qa, qb = ip.qb;
         __m256 te8;
-        int mask = quadHits2(pa.quads[qa], in.ray4[pa.ray], pa.selfT4, pb.quads[qb], in.ray4[pb.ray],
-                             pb.selfT4, te8);
-        if (pa.qback) mask &= ~int(pa.qback[qa]);
-        if (pb.qback) mask &= ~(int(pb.qback[qb]) << 4);
+        const int mask = itemPairHits(in, ip, te8);
         const int ma = mask & 15, mb = mask >> 4;
         storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], &pa.rayId, 4 * (qa - leafQuadFirst),
                          _mm256_castps256_ps128(te8));
