@@ -13,6 +13,11 @@ FrameSetup::FrameSetup(const Scene& scene, const RenderSettings& settings)
       region(renderRegion(camera, settings)),
       projector(camera) {
     for (const Light& l : scene.lights) lights.push_back(prepareLight(l, camera.cameraFromWorld));
+    if (!settings.blur.enabled) projector.lensRadius = 0.f;  // --no-blur: pinhole
+    motion = prepareFrameMotion(scene, camera, settings.blur.enabled);
+    blur = makeBlurPattern(settings.blur.sampling, motion.blurred(), projector.hasLens() && projector.perspective,
+                           nx * ny, camera.width, settings.blur.tileSize, settings.blur.permutations,
+                           settings.seed);
 }
 
 RenderResult FrameSetup::startResult(const RenderSettings& settings) const {
@@ -25,6 +30,7 @@ RenderResult FrameSetup::startResult(const RenderSettings& settings) const {
 void FrameSetup::resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const {
     tile.reset(pixels, nx, ny, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler,
                settings.output.channels, settings.output.aovs);
+    tile.setBlur(blurred() ? &blur : nullptr);
 }
 
 }  // namespace tessera

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "engine/clock.h"
+#include "engine/motion.h"
 #include "engine/settings.h"
 #include "film/filter.h"
 #include "shading/light.h"
@@ -18,12 +19,16 @@ struct FrameSetup {
     Rect region;         // raster pixels this render writes
     Projector projector;
     std::vector<ShadingLight> lights;  // camera space
+    FrameMotion motion;                // the patches' camera-space motion over the shutter
+    BlurPattern blur;                  // each sample's time and lens position (inactive: sharp frame)
 
     FrameSetup(const Scene& scene, const RenderSettings& settings);
     int samplesPerPixel() const { return nx * ny; }
     // An empty result whose image is the region, with the planes the output spec asks for.
     RenderResult startResult(const RenderSettings& settings) const;
-    // Reset a tile for the samples of `pixels` with the output spec's channels.
+    bool blurred() const { return blur.active(); }
+    // Reset a tile for the samples of `pixels` with the output spec's channels (and their times and lens
+    // positions when the frame blurs).
     void resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const;
 };
 

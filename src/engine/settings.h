@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "film/blur_pattern.h"
 #include "film/film.h"
 #include "scene/scene.h"
 
@@ -27,6 +28,19 @@ struct OutputSpec {
     std::vector<std::string> aovs;
 };
 
+// Motion blur and depth of field (docs/motion.md): whether to render them, and how camera samples are
+// spread over time and the lens (film/blur_pattern.h).
+struct BlurSettings {
+    bool enabled = true;  // false (--no-blur): pinhole camera, everything at shutter open
+    BlurSampling sampling = BlurSampling::BoundingBox;
+    int tileSize = 4;       // interleaved: K
+    int permutations = 64;  // interleaved: P
+    // Reyes, bounding-box scheme: cut a micropolygon's blurred bound by time and lens strata so that each
+    // piece is tested only against the samples whose (t, lens) lie in its stratum (same hits, fewer
+    // tests). Off: the paper's single extended bound (for the benchmarks).
+    bool strataBounds = true;
+};
+
 struct RenderSettings {
     std::string engine = "reyes";  // "reyes" or "rt"
     int threads = 0;               // 0: all hardware threads
@@ -44,6 +58,7 @@ struct RenderSettings {
     bool rayBinning = true;
     RenderView view;
     OutputSpec output;
+    BlurSettings blur;
     // Progress: called from worker threads with (work done, total work) after each bucket; the units are
     // the engine's estimate of its work (samples traced, micropolygons sampled), so the fraction grows
     // steadily over the render. Must be thread-safe.

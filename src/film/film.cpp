@@ -63,6 +63,22 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
             }
 }
 
+void SampleTile::setBlur(const BlurPattern* pattern) {
+    blur = pattern && pattern->active() ? pattern : nullptr;
+    if (!blur) {
+        time.clear();
+        lens.clear();
+        return;
+    }
+    const size_t n = sampleCount();
+    time.resize(n);
+    lens.resize(n);
+    size_t i = 0;
+    for (int py = region.y0; py < region.y1; ++py)
+        for (int px = region.x0; px < region.x1; ++px)
+            for (int s = 0; s < spp; ++s, ++i) blur->sampleAt(px, py, s, sampleIndex[i], time[i], lens[i]);
+}
+
 void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovNames) {
     const size_t n = size_t(width) * height;
     auto add = [&](const std::string& name, int components, bool integer, float background) {

@@ -9,6 +9,7 @@
 
 #include "core/random.h"
 #include "core/vec.h"
+#include "film/blur_pattern.h"
 #include "film/filter.h"
 #include "film/sampler.h"
 
@@ -104,6 +105,11 @@ struct SampleTile {
     int nx = 1, ny = 1, spp = 1;
     std::vector<int32_t> sx, sy;        // fixed-point raster positions
     std::vector<uint32_t> sampleIndex;  // per slot: its sample index for the other dimensions (sampler.h)
+    // Blurred frames only (setBlur): each sample's normalised shutter time and lens point on the unit disk,
+    // as the frame's BlurPattern assigns them; empty for a sharp frame.
+    const BlurPattern* blur = nullptr;
+    std::vector<float> time;
+    std::vector<Vec2> lens;
     std::vector<float> z, r, g, b, a;
     std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
     // Per-sample attributes, present only for the FilmChannel bits in `channels` (empty otherwise).
@@ -120,6 +126,8 @@ struct SampleTile {
     // (FilmChannel bits) and `aovNames`: the attribute channels to carry.
     void reset(Rect region, int nx, int ny, uint32_t seed, float farZ, SamplerKind sampler, uint32_t channels = 0,
                const std::vector<std::string>& aovNames = {});
+    // After reset: give the samples their times and lens points (nullptr or an inactive pattern: none).
+    void setBlur(const BlurPattern* pattern);
     size_t sampleCount() const { return sx.size(); }
     bool has(uint32_t channel) const { return (channels & channel) != 0; }
     // Writes the attributes of a covered sample (colour, alpha and depth are written by the engine).

@@ -7,6 +7,9 @@
 #include <limits>
 
 #include "core/hostdevice.h"
+#include <vector>
+
+#include "core/motion_transform.h"
 #include "core/transform.h"
 
 namespace tessera {
@@ -20,7 +23,10 @@ struct Camera {
     float screenWindow[4] = {-1, 1, -1, 1};  // left right bottom top
     float frameAspect = 0.f;                 // FrameAspectRatio, 0 = from the resolution
     float nearClip = 1e-4f, farClip = 1e30f;
-    Mat4 cameraFromWorld;  // the CTM at WorldBegin
+    Mat4 cameraFromWorld;  // the CTM at WorldBegin, at shutter open
+    // A moving camera (MotionBegin around the camera transform): keys refined to at most 2 degrees of turn
+    // per segment (refineTransformKeys); empty or one key: static. cameraFromWorldAt interpolates them.
+    std::vector<TransformKey> motion;
     // RI Shutter open close: the interval the camera sample's time spans (RI default 0 0: no motion).
     float shutterOpen = 0.f, shutterClose = 0.f;
     // RI DepthOfField fstop focallength focaldistance (camera-space units); fstop = infinity: pinhole.
@@ -32,6 +38,10 @@ struct Camera {
     }
     // Time of a camera sample u in [0,1) within the shutter interval.
     float timeAt(float u) const { return shutterOpen + (shutterClose - shutterOpen) * u; }
+    bool hasShutter() const { return shutterClose > shutterOpen; }
+    bool moving() const { return motion.size() > 1 && hasShutter(); }
+    // The camera transform at scene time `time` (decomposed interpolation between the keys).
+    Mat4 cameraFromWorldAt(double time) const { return motion.size() > 1 ? transformAt(motion, time) : cameraFromWorld; }
 
     float aspect() const { return frameAspect > 0 ? frameAspect : width * pixelAspect / height; }
     // Screen window, the default derived from the frame aspect ratio as the spec prescribes.

@@ -124,3 +124,30 @@ void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
 }
 
 }  // namespace tessera
+
+namespace tessera {
+
+bool Scene::hasMotion() const {
+    if (!camera.hasShutter()) return false;
+    if (camera.moving()) return true;
+    for (const PatchAttributes& a : attributes)
+        if (a.motion.moving()) return true;
+    return false;
+}
+
+BezierPatch patchAtTime(const Scene& scene, size_t i, float time) {
+    const MotionKeys& m = scene.attributes[i].motion;
+    if (!m.moving()) return scene.patches[i];
+    const float* t = &scene.motionTimes[m.first];
+    const BezierPatch* k = &scene.motionPatches[m.first];
+    if (time <= t[0]) return k[0];
+    if (time >= t[m.count - 1]) return k[m.count - 1];
+    uint32_t s = 1;
+    while (t[s] < time) ++s;
+    const float w = (time - t[s - 1]) / (t[s] - t[s - 1]);
+    BezierPatch r;
+    for (int c = 0; c < 16; ++c) r.cp[c] = lerp(k[s - 1].cp[c], k[s].cp[c], w);
+    return r;
+}
+
+}  // namespace tessera

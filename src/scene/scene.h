@@ -19,6 +19,10 @@ struct ImageOptions {
     float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
     bool srgbOutput = false;                         // used for scenes without a RIB (.bpt)
     std::string displayName;                         // RIB Display name ("" if none)
+    // RIB Hider "hidden" "string blursampling" (simple, interleaved, bbox; "" = the renderer's default)
+    // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
+    std::string blurSampling;
+    int blurTileSize = 0, blurPermutations = 0;
 };
 
 enum class LightType { Ambient, Distant, Point, Spot };
@@ -49,9 +53,12 @@ struct Material {
 // kernels). Bicubic Bezier today; bilinear patches, polygons and the RI quadrics are the next entries.
 enum class SurfaceKind : uint8_t { BicubicBezier };
 
-// Where a surface's motion keys live: `count` control-point sets Scene::motionPatches[first ...] at times
-// Scene::motionTimes[first ...] (deformation blur), and/or `count` object-to-world transforms
-// Scene::motionTransforms[first ...] (transformation blur). count 0: static (Scene::patches only).
+// Where a surface's motion keys live: `count` world-space control-point sets Scene::motionPatches[first ...]
+// at scene times Scene::motionTimes[first ...] (increasing). count 0 or 1: static (Scene::patches only).
+// One model of motion for both engines (docs/motion.md): between two keys the control points move
+// linearly, and outside the keys they stay at the nearest key. Transformation blur is turned into such
+// keys at load time: the readers evaluate the decomposed, interpolated transform (core/motion_transform.h)
+// at enough times that no segment turns more than 2 degrees, so a rotation stays a rotation.
 struct MotionKeys {
     uint32_t first = 0, count = 0;
     bool moving() const { return count > 1; }
@@ -67,6 +74,9 @@ struct PatchAttributes {
     uint32_t material = 0;
     uint32_t object = 0;        // object id (one per RIB primitive call / .bpt file)
     float shadingRate = 1.f;    // pixels of area per micropolygon
+    // RI GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis): Reyes coarsens the shading
+    // of blurred geometry by these factors (0: no coarsening, the default, so images stay comparable).
+    float motionFactor = 0.f, focusFactor = 0.f;
     bool twoSided = true;       // Sides 2
     bool flipNormal = false;    // orientation disagrees with dPdu x dPdv
 };
@@ -78,15 +88,20 @@ struct Scene {
     std::vector<Material> materials;
     std::vector<BezierPatch> patches;           // world space
     std::vector<PatchAttributes> attributes;    // one per patch
-    // Motion keys (filled by the motion-blur work; empty for static scenes), see MotionKeys.
+    // Motion keys of moving patches (empty for static scenes), see MotionKeys. Scene::patches holds every
+    // patch at shutter open.
     std::vector<BezierPatch> motionPatches;
     std::vector<float> motionTimes;
-    std::vector<Mat4> motionTransforms;
     uint32_t objectCount = 0;
     std::string sourcePath;
 
     Bounds3 worldBounds() const;
+    // Whether anything moves within the shutter (a patch with keys or the camera).
+    bool hasMotion() const;
 };
+
+// World-space control points of patch `i` at scene time `time` (linear between its keys).
+BezierPatch patchAtTime(const Scene& scene, size_t i, float time);
 
 enum class UpAxis { X, Y, Z };
 
