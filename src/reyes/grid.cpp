@@ -6,16 +6,6 @@
 namespace tessera {
 namespace {
 
-int32_t toFixed(float v) {
-    // Clamp far-off vertices so that edge functions cannot overflow 64 bits.
-    constexpr float kLimit = float(1 << 20) * kSubpixelScale;
-    float f = std::clamp(v * kSubpixelScale, -kLimit, kLimit);
-    // Round half away from zero, as lround, without the library call (it runs per grid vertex): f +- 0.5
-    // is exact in double, and the conversion truncates.
-    const double d = f;
-    return int32_t(d + (d >= 0 ? 0.5 : -0.5));
-}
-
 // Index of the edge vertex that grid vertex i (of n) snaps to, for an edge of `segments` segments:
 // round(i * segments / n), in integers so both neighbours compute the same thing.
 int snapIndex(int i, int n, int segments) {
@@ -45,6 +35,15 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     Ns.resize(count);
     Is.resize(count);
     Ci.resize(count);
+    // Where each vertex came from, to evaluate it again at the other knots of a moving patch.
+    const bool moves = view.patchMoves(piece.patch) && view.knotCount() > 1;
+    thread_local std::vector<Vec2> UVs;
+    thread_local std::vector<int> owners, lattice;
+    if (moves) {
+        UVs.resize(count);
+        owners.resize(count);
+        lattice.resize(count);
+    }
 
     for (int j = 0; j <= nv; ++j) {
         for (int i = 0; i <= nu; ++i) {
@@ -81,14 +80,36 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
             if (shade.flipNormal) N = -N;
 
             const int v = j * (nu + 1) + i;
+            if (moves) {
+                UVs[v] = uv;
+                owners[v] = owner ? int(owner - e) : -1;
+                lattice[v] = k;
+            }
             Ps[v] = P;
             Ns[v] = N;
             Is[v] = normalize(P);  // the eye is at the camera-space origin
             Vec3 r = view.projector.toRaster(P);
-            grid.X[v] = toFixed(r.x);
-            grid.Y[v] = toFixed(r.y);
+            grid.X[v] = rasterToFixed(r.x);
+            grid.Y[v] = rasterToFixed(r.y);
             grid.Z[v] = P.z;
             grid.front[v] = dot(N, P) < 0.f;
+        }
+    }
+    grid.blurred = moves || view.lens;
+    grid.knots = 1;
+    grid.knotP.clear();
+    if (grid.blurred) {
+        grid.knots = moves ? view.knotCount() : 1;
+        grid.knotP.resize(size_t(grid.knots) * count);
+        std::copy(Ps.begin(), Ps.begin() + count, grid.knotP.begin());
+        for (int kn = 1; kn < grid.knots; ++kn) {
+            // The same lattice points and (u,v) on the patch at knot kn: shared edges stay identical, so
+            // the blurred grid stays crack-free at every time.
+            const BezierPatch& at = view.knotPatches[kn][piece.patch];
+            Vec3* out = &grid.knotP[size_t(kn) * count];
+            for (int v = 0; v < count; ++v)
+                out[v] = owners[v] >= 0 ? latticePosition(at, e[owners[v]], lattice[v])
+                                        : evalPatch(at, UVs[v].x, UVs[v].y);
         }
     }
     SurfacePoints points;

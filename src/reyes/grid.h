@@ -1,5 +1,6 @@
 // Reyes dice + shade: a piece becomes a grid of (nu+1) x (nv+1) shaded vertices in raster space.
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -9,6 +10,16 @@
 #include "shading/surface.h"
 
 namespace tessera {
+
+// Raster coordinate to the rasterizer's fixed point, clamped so that edge functions cannot overflow 64 bits;
+// rounds half away from zero (as lround, without the library call: it runs per vertex and per blurred
+// sample; f +- 0.5 is exact in double, and the conversion truncates).
+inline int32_t rasterToFixed(float v) {
+    constexpr float kLimit = float(1 << 20) * kSubpixelScale;
+    const float f = std::clamp(v * kSubpixelScale, -kLimit, kLimit);
+    const double d = f;
+    return int32_t(d + (d >= 0 ? 0.5 : -0.5));
+}
 
 // Shaded grid, structure of arrays. Raster positions are fixed point (see film.h).
 struct Grid {
@@ -21,6 +32,13 @@ struct Grid {
     // normal per vertex, facing the viewer.
     uint32_t objectId = 0;
     std::vector<float> NX, NY, NZ;
+    // Blurred frames: the vertices' camera-space positions at each knot of the shutter timeline
+    // (knot-major, knots * vertexCount(); knot 0 is where X, Y, Z came from), moving linearly between
+    // knots. Shading is done once, at shutter open. `blurred`: the rasterizer must move micropolygons to
+    // each sample's time and lens point (motion, a lens, or both).
+    int knots = 1;
+    std::vector<Vec3> knotP;
+    bool blurred = false;
     int vertexCount() const { return (nu + 1) * (nv + 1); }
 };
 

@@ -15,6 +15,7 @@
 #include "engine/tile_loop.h"
 #include "reyes/grid.h"
 #include "reyes/rasterize.h"
+#include "reyes/rasterize_blur.h"
 #include "reyes/split.h"
 #include "scene/weld.h"
 
@@ -33,6 +34,7 @@ struct ThreadCounters {
     uint64_t grids = 0, micropolygons = 0, sampleTests = 0;
     double diceMs = 0, sampleMs = 0, filterMs = 0;
     SampleTile tile;
+    BlurStrata strata;
 };
 
 }  // namespace
@@ -57,11 +59,44 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     });
     // Shared edges must be bit-identical for crack-free dicing: weld what matches only up to rounding.
     const auto tWeld = EngineClock::now();
-    const WeldResult weld = weldSharedEdges(patches, defaultWeldTolerance(patches));
+    const FrameMotion& motion = frame.motion;
+    if (motion.blurred())
+        for (size_t i = 0; i < patches.size(); ++i)
+            if (motion.moving(i)) patches[i] = motion.patchKeys(i)[0];
+    const float weldTolerance = defaultWeldTolerance(patches);
+    const WeldResult weld = weldSharedEdges(patches, weldTolerance);
+    // Blurred frames: the patches at every other knot of the shutter timeline, welded the same way.
+    std::vector<std::vector<BezierPatch>> knotArrays;
+    uint64_t movingPatches = 0;
+    if (motion.blurred()) {
+        knotArrays.resize(motion.knotCount() - 1);
+        for (int k = 1; k < motion.knotCount(); ++k) {
+            std::vector<BezierPatch>& arr = knotArrays[k - 1];
+            arr = patches;
+            for (size_t i = 0; i < patches.size(); ++i)
+                if (motion.moving(i)) arr[i] = motion.patchKeys(i)[k];
+            weldSharedEdges(arr, weldTolerance);
+        }
+        for (size_t i = 0; i < patches.size(); ++i) movingPatches += motion.moving(i);
+    }
     const double weldMs = msSince(tWeld);
 
     ReyesView view(cam);
     view.patches = patches.data();
+    view.projector = frame.projector;
+    view.lens = frame.blur.lens;
+    if (motion.blurred()) {
+        view.knotPatches.push_back(patches.data());
+        for (auto& arr : knotArrays) view.knotPatches.push_back(arr.data());
+        view.moving = &motion.firstKey;
+    }
+    const bool blurred = frame.blurred();
+    BlurRasterContext blurContext;
+    blurContext.projector = &view.projector;
+    blurContext.pattern = &frame.blur;
+    blurContext.knots = &motion.knots;
+    blurContext.strataBounds = settings.blur.strataBounds;
+    const bool useStrata = blurred && frame.blur.scheme == BlurSampling::BoundingBox && settings.blur.strataBounds;
     view.maxGridEdge = std::max(1, settings.maxGridEdge);
     const int rx = frame.filter.radiusX(), ry = frame.filter.radiusY();
     const Rect& region = frame.region;
@@ -139,6 +174,10 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
         if (begin == end) return;  // nothing here: the image is already transparent black
         const Rect target = layout.target(b);
         frame.resetTile(tc.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
+        if (useStrata) {
+            tc.strata.configure(frame.blur);
+            tc.strata.build(tc.tile);
+        }
         for (uint32_t k = begin; k < end; ++k) {
             const uint32_t pi = bucketPieces[k];
             GridSlot& slot = slots[pi];
@@ -160,7 +199,9 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                 tc.diceMs += msSince(td);
             });
             auto ts = EngineClock::now();
-            tc.sampleTests += rasterizeGrid(*slot.grid, tc.tile, view.projector.nearClip);
+            tc.sampleTests += slot.grid->blurred ? rasterizeBlurredGrid(*slot.grid, tc.tile, view.projector.nearClip,
+                                                                      blurContext, tc.strata)
+                                                 : rasterizeGrid(*slot.grid, tc.tile, view.projector.nearClip);
             tc.sampleMs += msSince(ts);
             if (slot.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) slot.grid.reset();
         }
@@ -188,6 +229,13 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     s["splits"] = splits.load();
     s["welded_corners"] = weld.cornersMoved;
     s["welded_edges"] = weld.edgesWelded;
+    if (blurred)
+        s["blur"] = {{"sampling", blurSamplingName(frame.blur.scheme)},
+                     {"motion", frame.blur.motion},
+                     {"lens", frame.blur.lens},
+                     {"knots", motion.knotCount()},
+                     {"moving_patches", movingPatches},
+                     {"strata_bounds", useStrata}};
     s["pieces"] = pieces.size();
     s["grids"] = total.grids;
     s["micropolygons"] = total.micropolygons;

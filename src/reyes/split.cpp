@@ -91,28 +91,64 @@ void cutEdge(const PieceEdge& e, int& cutK, PieceEdge& first, PieceEdge& second)
 
 enum class Verdict { Cull, Split, SplitNear, Dice };
 
+// Raster rectangle of a control hull lying in front of the eye; with a lens, grown by the circle of
+// confusion of its depth range: a lens point a on the unit disk shifts the image of depth z by
+// a * lensRadius * (1/focaldistance - 1/z) * (sx, sy) (Projector::lensShift), largest at a depth extreme.
+void hullRaster(const Projector& pr, bool lens, const BezierPatch& hull, const Bounds3& b, float& x0, float& y0,
+                float& x1, float& y1) {
+    x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
+    for (const Vec3& c : hull.cp) {
+        Vec3 r = pr.toRaster(c);
+        x0 = std::min(x0, r.x), x1 = std::max(x1, r.x);
+        y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+    }
+    if (lens && pr.hasLens() && pr.perspective) {
+        const float k = pr.lensRadius * std::max(std::abs(1.f / pr.focalDistance - 1.f / b.lo.z),
+                                                 std::abs(1.f / pr.focalDistance - 1.f / b.hi.z));
+        const float gx = k * std::abs(pr.sx), gy = k * std::abs(pr.sy);
+        x0 -= gx, x1 += gx, y0 -= gy, y1 += gy;
+    }
+}
+
 Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) {
     float u0 = std::min(std::min(piece.uv[0].x, piece.uv[1].x), std::min(piece.uv[2].x, piece.uv[3].x));
     float u1 = std::max(std::max(piece.uv[0].x, piece.uv[1].x), std::max(piece.uv[2].x, piece.uv[3].x));
     float v0 = std::min(std::min(piece.uv[0].y, piece.uv[1].y), std::min(piece.uv[2].y, piece.uv[3].y));
     float v1 = std::max(std::max(piece.uv[0].y, piece.uv[1].y), std::max(piece.uv[2].y, piece.uv[3].y));
-    // The quad lies inside its (u,v) bounding rectangle, whose control hull bounds the surface.
-    BezierPatch hull =
-        (u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f) ? patch : subPatch(patch, u0, u1, v0, v1);
-    Bounds3 b = hullBounds(hull);
+    const bool whole = u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f;
     const Projector& pr = view.projector;
-    if (!(b.hi.z >= pr.nearClip) || !(b.lo.z <= pr.farClip)) return Verdict::Cull;
-    bool straddles = b.lo.z < pr.nearClip;
-    if (!straddles) {
-        float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
-        for (const Vec3& c : hull.cp) {
-            Vec3 r = pr.toRaster(c);
-            x0 = std::min(x0, r.x), x1 = std::max(x1, r.x);
-            y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
+    // The quad lies inside its (u,v) bounding rectangle, whose control hull bounds the surface. A moving
+    // patch is bounded at every knot of the shutter: between knots its control points move linearly, so
+    // the hulls at the knots bound it at all times (and a straight camera-space path projects to a
+    // straight raster path).
+    const int knots = view.patchMoves(piece.patch) ? view.knotCount() : 1;
+    bool anyInRange = false, straddles = false;
+    float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
+    float sharpW = 0, sharpH = 0;
+    for (int k = 0; k < knots; ++k) {
+        const BezierPatch& source = k == 0 ? patch : view.knotPatches[k][piece.patch];
+        const BezierPatch hull = whole ? source : subPatch(source, u0, u1, v0, v1);
+        const Bounds3 b = hullBounds(hull);
+        if (!(b.hi.z >= pr.nearClip) || !(b.lo.z <= pr.farClip)) continue;
+        anyInRange = true;
+        if (b.lo.z < pr.nearClip) {
+            straddles = true;
+            continue;
         }
+        float kx0, ky0, kx1, ky1;
+        if (k == 0) {
+            hullRaster(pr, false, hull, b, kx0, ky0, kx1, ky1);
+            sharpW = kx1 - kx0, sharpH = ky1 - ky0;
+        }
+        hullRaster(pr, view.lens, hull, b, kx0, ky0, kx1, ky1);
+        x0 = std::min(x0, kx0), y0 = std::min(y0, ky0), x1 = std::max(x1, kx1), y1 = std::max(y1, ky1);
+    }
+    if (!anyInRange) return Verdict::Cull;
+    if (!straddles) {
         if (x1 < view.cullX0 || x0 > view.cullX1 || y1 < view.cullY0 || y0 > view.cullY1)
             return Verdict::Cull;
         piece.x0 = x0, piece.y0 = y0, piece.x1 = x1, piece.y1 = y1;
+        piece.blurPixels = std::max(0.f, std::max((x1 - x0) - sharpW, (y1 - y0) - sharpH));
     }
     int maxSeg = 0;
     for (const PieceEdge& e : piece.edge) maxSeg = std::max(maxSeg, e.segments());
@@ -222,6 +258,16 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
 
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
                   std::vector<Piece>& out, SplitCounters& counters) {
+    // GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis): blurred geometry is shaded
+    // more coarsely, the shading rate growing with the blur: rate * max(1, factor * blur / 16 pixels).
+    const float factor = std::max(view.patchMoves(index) ? attr.motionFactor : 0.f, view.lens ? attr.focusFactor : 0.f);
+    if (factor > 0.f) {
+        Piece root;
+        root.patch = index;
+        root.uv[0] = {0, 0}, root.uv[1] = {1, 0}, root.uv[2] = {1, 1}, root.uv[3] = {0, 1};
+        if (classify(view, view.patches[index], root) != Verdict::Cull)
+            micropolygonSide *= std::sqrt(std::max(1.f, factor * root.blurPixels / 16.f));
+    }
     switch (attr.kind) {
         case SurfaceKind::BicubicBezier:
             splitPatch(view, index, micropolygonSide, out, counters);

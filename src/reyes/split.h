@@ -39,7 +39,8 @@ struct Piece {
     uint32_t patch = 0;
     Vec2 uv[4];
     PieceEdge edge[4];
-    float x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // raster bound of the control hull
+    float x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // raster bound of the control hull (over the shutter and lens)
+    float blurPixels = 0;                  // how far the blur spreads it (motion path + CoC diameter)
 };
 
 // The grid a piece dices into: nu = max(top, bottom edge segments), nv likewise (at least 1 each).
@@ -53,6 +54,14 @@ inline int pieceGridV(const Piece& p) {
 // Everything split and dice need, read-only during a render. Patches are in camera space.
 struct ReyesView {
     const BezierPatch* patches = nullptr;
+    // Blurred frames: the patches at each knot of the shutter timeline (engine/motion.h; knot 0 is
+    // `patches`), which of them move, and whether the lens blurs. Bounds then cover every knot, grown by
+    // the circle of confusion, and grids carry their vertices at every knot.
+    std::vector<const BezierPatch*> knotPatches;
+    const std::vector<uint32_t>* moving = nullptr;  // FrameMotion::firstKey (kStatic: does not move)
+    bool lens = false;
+    int knotCount() const { return knotPatches.empty() ? 1 : int(knotPatches.size()); }
+    bool patchMoves(uint32_t patch) const { return moving && !moving->empty() && (*moving)[patch] != 0xffffffffu; }
     Projector projector;
     float micropolygonSide = 1.f;          // sqrt(shading rate), pixels
     float cullX0, cullY0, cullX1, cullY1;  // raster window that can still reach a pixel (image + filter)
