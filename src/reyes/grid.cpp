@@ -97,19 +97,29 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     }
     grid.blurred = moves || view.lens;
     grid.knots = 1;
-    grid.knotP.clear();
     if (grid.blurred) {
         grid.knots = moves ? view.knotCount() : 1;
-        grid.knotP.resize(size_t(grid.knots) * count);
-        std::copy(Ps.begin(), Ps.begin() + count, grid.knotP.begin());
+        const size_t n = size_t(grid.knots) * count;
+        grid.knotX.resize(n), grid.knotY.resize(n), grid.knotZ.resize(n), grid.knotC.resize(n);
+        grid.knotValid.resize(n);
+        const Projector& pr = view.projector;
+        auto store = [&](size_t at, const Vec3& P) {
+            const bool valid = !pr.perspective || P.z >= pr.nearClip;
+            const Vec3 r = valid ? pr.toRaster(P) : Vec3{};
+            grid.knotX[at] = r.x, grid.knotY[at] = r.y, grid.knotZ[at] = P.z;
+            grid.knotC[at] = (valid && pr.hasLens() && pr.perspective)
+                                 ? pr.lensRadius * (1.f / pr.focalDistance - 1.f / P.z)
+                                 : 0.f;
+            grid.knotValid[at] = valid;
+        };
+        for (int v = 0; v < count; ++v) store(size_t(v), Ps[v]);
         for (int kn = 1; kn < grid.knots; ++kn) {
             // The same lattice points and (u,v) on the patch at knot kn: shared edges stay identical, so
             // the blurred grid stays crack-free at every time.
             const BezierPatch& at = view.knotPatches[kn][piece.patch];
-            Vec3* out = &grid.knotP[size_t(kn) * count];
             for (int v = 0; v < count; ++v)
-                out[v] = owners[v] >= 0 ? latticePosition(at, e[owners[v]], lattice[v])
-                                        : evalPatch(at, UVs[v].x, UVs[v].y);
+                store(size_t(kn) * count + v, owners[v] >= 0 ? latticePosition(at, e[owners[v]], lattice[v])
+                                                             : evalPatch(at, UVs[v].x, UVs[v].y));
         }
     }
     SurfacePoints points;

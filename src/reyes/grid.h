@@ -32,12 +32,15 @@ struct Grid {
     // normal per vertex, facing the viewer.
     uint32_t objectId = 0;
     std::vector<float> NX, NY, NZ;
-    // Blurred frames: the vertices' camera-space positions at each knot of the shutter timeline
-    // (knot-major, knots * vertexCount(); knot 0 is where X, Y, Z came from), moving linearly between
-    // knots. Shading is done once, at shutter open. `blurred`: the rasterizer must move micropolygons to
-    // each sample's time and lens point (motion, a lens, or both).
+    // Blurred frames (`blurred`: the rasterizer must move micropolygons to each sample's time and lens
+    // point): per knot of the shutter timeline and vertex (knot-major, knots * vertexCount()), the raster
+    // position, the depth, and the lens coefficient c = lensRadius * (1/focaldistance - 1/z), so that a lens
+    // point a shifts the vertex by a * c * (sx, sy) pixels (Projector::lensShift). Between knots a vertex
+    // moves linearly in raster space (the paper's screen-space motion vectors). `knotValid`: in front of
+    // the near plane. Shading is done once, at shutter open.
     int knots = 1;
-    std::vector<Vec3> knotP;
+    std::vector<float> knotX, knotY, knotZ, knotC;
+    std::vector<uint8_t> knotValid;
     bool blurred = false;
     int vertexCount() const { return (nu + 1) * (nv + 1); }
 };

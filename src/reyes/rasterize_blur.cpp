@@ -26,12 +26,30 @@ inline void knotSegment(const std::vector<float>& knots, int gridKnots, float u,
     w = (u - knots[k]) / (knots[k + 1] - knots[k]);
 }
 
-// A vertex at time segment (k, w): camera-space position.
-inline Vec3 vertexAt(const Grid& g, int v, int k, float w) {
-    const size_t n = size_t(g.vertexCount());
-    if (g.knots == 1) return g.knotP[v];
-    const Vec3 a = g.knotP[size_t(k) * n + v], b = g.knotP[size_t(k + 1) * n + v];
-    return lerp(a, b, w);
+// A vertex moved to time segment (k, w) and lens point `lens`: fixed-point raster position and depth.
+struct MovedVertex {
+    int64_t X, Y;
+    float Z;
+    bool valid;
+};
+inline MovedVertex moveVertex(const Grid& g, size_t v, int k, float w, Vec2 lens, float sx, float sy) {
+    MovedVertex m;
+    float x, y, z, c;
+    if (g.knots == 1) {
+        m.valid = g.knotValid[v];
+        x = g.knotX[v], y = g.knotY[v], z = g.knotZ[v], c = g.knotC[v];
+    } else {
+        const size_t n = size_t(g.vertexCount()), a = size_t(k) * n + v, b = a + n;
+        m.valid = g.knotValid[a] & g.knotValid[b];
+        x = g.knotX[a] + w * (g.knotX[b] - g.knotX[a]);
+        y = g.knotY[a] + w * (g.knotY[b] - g.knotY[a]);
+        z = g.knotZ[a] + w * (g.knotZ[b] - g.knotZ[a]);
+        c = g.knotC[a] + w * (g.knotC[b] - g.knotC[a]);
+    }
+    m.X = rasterToFixed(x + lens.x * c * sx);
+    m.Y = rasterToFixed(y + lens.y * c * sy);
+    m.Z = z;
+    return m;
 }
 
 // A micropolygon's corners moved to one (time, lens point), in fixed point, with their depths.
@@ -42,26 +60,20 @@ struct MovedQuad {
     bool valid;
 };
 
-inline MovedQuad moveQuad(const Grid& g, const int vid[4], int k, float w, Vec2 lens, const Projector& pr,
-                          float nearZ) {
+inline void finishQuad(MovedQuad& q) {
+    q.minX = std::min({q.X[0], q.X[1], q.X[2], q.X[3]}), q.maxX = std::max({q.X[0], q.X[1], q.X[2], q.X[3]});
+    q.minY = std::min({q.Y[0], q.Y[1], q.Y[2], q.Y[3]}), q.maxY = std::max({q.Y[0], q.Y[1], q.Y[2], q.Y[3]});
+}
+
+inline MovedQuad moveQuad(const Grid& g, const int vid[4], int k, float w, Vec2 lens, const Projector& pr) {
     MovedQuad q;
     q.valid = true;
-    q.minX = q.minY = INT64_MAX;
-    q.maxX = q.maxY = INT64_MIN;
     for (int c = 0; c < 4; ++c) {
-        const Vec3 P = vertexAt(g, vid[c], k, w);
-        if (pr.perspective && !(P.z >= nearZ)) {
-            q.valid = false;
-            return q;
-        }
-        const Vec3 r = pr.toRaster(P);
-        const Vec2 s = pr.lensShift(P.z, lens);
-        q.X[c] = rasterToFixed(r.x + s.x);
-        q.Y[c] = rasterToFixed(r.y + s.y);
-        q.Z[c] = P.z;
-        q.minX = std::min(q.minX, q.X[c]), q.maxX = std::max(q.maxX, q.X[c]);
-        q.minY = std::min(q.minY, q.Y[c]), q.maxY = std::max(q.maxY, q.Y[c]);
+        const MovedVertex m = moveVertex(g, size_t(vid[c]), k, w, lens, pr.sx, pr.sy);
+        q.valid &= m.valid;
+        q.X[c] = m.X, q.Y[c] = m.Y, q.Z[c] = m.Z;
     }
+    finishQuad(q);
     return q;
 }
 
@@ -168,35 +180,42 @@ inline Span pixelSpan(const Rect& reg, int64_t minX, int64_t maxX, int64_t minY,
 // Raster bound (float) of a vertex over the time interval [ua, ub] and the lens cell [lx0,lx1]x[ly0,ly1]
 // (unit-disk coordinates): the positions at both ends and at every knot inside (the path is straight
 // between knots), each grown by the shift range of the lens cell at its depth.
-inline void extendVertexBound(const Grid& g, int v, const std::vector<float>& knots, float ua, float ub,
-                              float lx0, float lx1, float ly0, float ly1, const Projector& pr, bool& valid,
-                              float& x0, float& x1, float& y0, float& y1) {
-    auto add = [&](const Vec3& P) {
-        if (pr.perspective && !(P.z > pr.nearClip)) {
-            valid = false;
+struct Bound2 {
+    float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+    bool valid = true;
+};
+inline void extendVertexBound(const Grid& g, int v, const std::vector<float>& knots, float ua, float ub, float lx0,
+                              float lx1, float ly0, float ly1, float sx, float sy, Bound2& bd) {
+    const size_t n = size_t(g.vertexCount());
+    auto add = [&](float x, float y, float c, bool valid) {
+        if (!valid) {
+            bd.valid = false;
             return;
         }
-        const Vec3 r = pr.toRaster(P);
-        float sx0 = 0, sx1 = 0, sy0 = 0, sy1 = 0;
-        if (pr.hasLens() && pr.perspective) {
-            const float kz = pr.lensRadius * (1.f / pr.focalDistance - 1.f / P.z);
-            const float ax = kz * pr.sx, ay = kz * pr.sy;
-            sx0 = std::min(lx0 * ax, lx1 * ax), sx1 = std::max(lx0 * ax, lx1 * ax);
-            sy0 = std::min(ly0 * ay, ly1 * ay), sy1 = std::max(ly0 * ay, ly1 * ay);
-        }
-        x0 = std::min(x0, r.x + sx0), x1 = std::max(x1, r.x + sx1);
-        y0 = std::min(y0, r.y + sy0), y1 = std::max(y1, r.y + sy1);
+        const float ax = c * sx, ay = c * sy;
+        bd.x0 = std::min(bd.x0, x + std::min(lx0 * ax, lx1 * ax)), bd.x1 = std::max(bd.x1, x + std::max(lx0 * ax, lx1 * ax));
+        bd.y0 = std::min(bd.y0, y + std::min(ly0 * ay, ly1 * ay)), bd.y1 = std::max(bd.y1, y + std::max(ly0 * ay, ly1 * ay));
     };
-    int k;
-    float w;
-    knotSegment(knots, g.knots, ua, k, w);
-    add(vertexAt(g, v, k, w));
+    auto addAt = [&](float u) {
+        int k;
+        float w;
+        knotSegment(knots, g.knots, u, k, w);
+        if (g.knots == 1) {
+            add(g.knotX[v], g.knotY[v], g.knotC[v], g.knotValid[v]);
+            return;
+        }
+        const size_t a = size_t(k) * n + v, b = a + n;
+        add(g.knotX[a] + w * (g.knotX[b] - g.knotX[a]), g.knotY[a] + w * (g.knotY[b] - g.knotY[a]),
+            g.knotC[a] + w * (g.knotC[b] - g.knotC[a]), g.knotValid[a] & g.knotValid[b]);
+    };
+    addAt(ua);
     if (g.knots > 1) {
-        const size_t n = size_t(g.vertexCount());
         for (int kn = 1; kn + 1 < g.knots; ++kn)
-            if (knots[kn] > ua && knots[kn] < ub) add(g.knotP[size_t(kn) * n + v]);
-        knotSegment(knots, g.knots, ub, k, w);
-        add(vertexAt(g, v, k, w));
+            if (knots[kn] > ua && knots[kn] < ub) {
+                const size_t a = size_t(kn) * n + v;
+                add(g.knotX[a], g.knotY[a], g.knotC[a], g.knotValid[a]);
+            }
+        addAt(ub);
     }
 }
 
@@ -208,120 +227,134 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
     const std::vector<float>& knots = *ctx.knots;
     const Rect& reg = tile.region;
     const int stride = g.nu + 1, spp = tile.spp, tw = reg.width();
+    const int vertices = g.vertexCount();
     uint64_t tests = 0;
     auto sampleIndex = [&](int px, int py, int slot) {
         return (size_t(py - reg.y0) * tw + size_t(px - reg.x0)) * spp + size_t(slot);
     };
+    // Facing at shutter open of each micropolygon (one-sided culling, see facesCamera).
+    auto openFacing = [&](const int vid[4], bool& front0, int64_t& sign0) {
+        front0 = g.front[vid[0]] | g.front[vid[1]] | g.front[vid[2]] | g.front[vid[3]];
+        sign0 = 1;
+        if (!g.twoSided) {
+            const int64_t X0 = g.X[vid[0]], Y0 = g.Y[vid[0]];
+            sign0 = (g.X[vid[1]] - X0) * (g.Y[vid[2]] - Y0) - (g.X[vid[2]] - X0) * (g.Y[vid[1]] - Y0);
+            if (sign0 == 0) sign0 = 1;
+        }
+    };
+
+    if (pat.scheme != BlurSampling::BoundingBox) {
+        // Simple and interleaved: every micropolygon of the grid takes the same (t, lens) per pass, so the
+        // whole grid is moved once per pass (each vertex shared by four micropolygons) and then sampled.
+        thread_local std::vector<MovedVertex> moved;
+        moved.resize(vertices);
+        const bool interleaved = pat.scheme == BlurSampling::Interleaved;
+        const int K = pat.tileSize, KK = K * K, passes = interleaved ? pat.tileSamples() : spp;
+        for (int n = 0; n < passes; ++n) {
+            int k;
+            float w;
+            knotSegment(knots, g.knots, pat.time[n], k, w);
+            const Vec2 lens = pat.lensPoint[n];
+            int64_t gx0 = INT64_MAX, gx1 = INT64_MIN, gy0 = INT64_MAX, gy1 = INT64_MIN;
+            for (int v = 0; v < vertices; ++v) {
+                moved[v] = moveVertex(g, size_t(v), k, w, lens, pr.sx, pr.sy);
+                gx0 = std::min(gx0, moved[v].X), gx1 = std::max(gx1, moved[v].X);
+                gy0 = std::min(gy0, moved[v].Y), gy1 = std::max(gy1, moved[v].Y);
+            }
+            if (pixelSpan(reg, gx0, gx1, gy0, gy1).empty()) continue;  // the grid misses this tile now
+            for (int j = 0; j < g.nv; ++j)
+                for (int i = 0; i < g.nu; ++i) {
+                    const int a = j * stride + i;
+                    const int vid[4] = {a, a + 1, a + stride + 1, a + stride};
+                    MovedQuad q;
+                    q.valid = true;
+                    for (int c = 0; c < 4; ++c) {
+                        const MovedVertex& m = moved[vid[c]];
+                        q.valid &= m.valid;
+                        q.X[c] = m.X, q.Y[c] = m.Y, q.Z[c] = m.Z;
+                    }
+                    if (!q.valid) continue;
+                    finishQuad(q);
+                    const Span sp = pixelSpan(reg, q.minX, q.maxX, q.minY, q.maxY);
+                    if (sp.empty()) continue;
+                    bool front0;
+                    int64_t sign0;
+                    openFacing(vid, front0, sign0);
+                    if (!facesCamera(g.twoSided, front0, sign0, q)) continue;
+                    if (!interleaved) {
+                        for (int py = sp.py0; py <= sp.py1; ++py)
+                            for (int px = sp.px0; px <= sp.px1; ++px) {
+                                ++tests;
+                                if (testSample<kAttributes>(g, vid, q, sampleIndex(px, py, n), tile, nearZ))
+                                    tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
+                            }
+                        continue;
+                    }
+                    const int N = passes;
+                    for (int ty = sp.py0 / K; ty <= sp.py1 / K; ++ty)
+                        for (int tx = sp.px0 / K; tx <= sp.px1 / K; ++tx) {
+                            const int qn = pat.perm[size_t(pat.tilePermutation(tx, ty)) * N + n];
+                            const int inTile = qn % KK, slot = qn / KK;
+                            const int px = tx * K + inTile % K, py = ty * K + inTile / K;
+                            if (px < sp.px0 || px > sp.px1 || py < sp.py0 || py > sp.py1) continue;
+                            ++tests;
+                            if (testSample<kAttributes>(g, vid, q, sampleIndex(px, py, slot), tile, nearZ))
+                                tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
+                        }
+                }
+        }
+        return tests;
+    }
+
+    // Bounding box: per micropolygon, one bound per (time stratum, lens cell) (one for the whole shutter
+    // and lens without strata bounds), then each sample in it at its own (t, lens).
+    const bool cut = ctx.strataBounds && !strata.start.empty();
+    const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
+    const int cells = T * L * L;
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
             const int a = j * stride + i;
             const int vid[4] = {a, a + 1, a + stride + 1, a + stride};
-            const bool front0 = g.front[vid[0]] | g.front[vid[1]] | g.front[vid[2]] | g.front[vid[3]];
-            int64_t sign0 = 1;
-            if (!g.twoSided) {
-                // Orientation at shutter open from the sharp fixed-point corners.
-                const int64_t X0 = g.X[vid[0]], Y0 = g.Y[vid[0]];
-                sign0 = (g.X[vid[1]] - X0) * (g.Y[vid[2]] - Y0) - (g.X[vid[2]] - X0) * (g.Y[vid[1]] - Y0);
-                if (sign0 == 0) sign0 = 1;
-            }
-            auto moved = [&](float u, Vec2 lens) {
-                int k;
-                float w;
-                knotSegment(knots, g.knots, u, k, w);
-                return moveQuad(g, vid, k, w, lens, pr, nearZ);
-            };
-            switch (pat.scheme) {
-                case BlurSampling::Simple: {
-                    for (int s = 0; s < spp; ++s) {
-                        const MovedQuad q = moved(pat.time[s], pat.lensPoint[s]);
-                        if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) continue;
-                        const Span sp = pixelSpan(reg, q.minX, q.maxX, q.minY, q.maxY);
-                        if (sp.empty()) continue;
-                        for (int py = sp.py0; py <= sp.py1; ++py)
-                            for (int px = sp.px0; px <= sp.px1; ++px) {
-                                const size_t si = sampleIndex(px, py, s);
-                                ++tests;
-                                if (testSample<kAttributes>(g, vid, q, si, tile, nearZ))
-                                    tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
-                            }
-                    }
-                    break;
-                }
-                case BlurSampling::Interleaved: {
-                    const int K = pat.tileSize, KK = K * K, N = pat.tileSamples();
-                    for (int n = 0; n < N; ++n) {
-                        const MovedQuad q = moved(pat.time[n], pat.lensPoint[n]);
-                        if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) continue;
-                        const Span sp = pixelSpan(reg, q.minX, q.maxX, q.minY, q.maxY);
-                        if (sp.empty()) continue;
-                        for (int ty = sp.py0 / K; ty <= sp.py1 / K; ++ty)
-                            for (int tx = sp.px0 / K; tx <= sp.px1 / K; ++tx) {
-                                const int qn = pat.perm[size_t(pat.tilePermutation(tx, ty)) * N + n];
-                                const int inTile = qn % KK, slot = qn / KK;
-                                const int px = tx * K + inTile % K, py = ty * K + inTile / K;
-                                if (px < sp.px0 || px > sp.px1 || py < sp.py0 || py > sp.py1) continue;
-                                const size_t si = sampleIndex(px, py, slot);
-                                ++tests;
-                                if (testSample<kAttributes>(g, vid, q, si, tile, nearZ))
-                                    tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
-                            }
-                    }
-                    break;
-                }
-                case BlurSampling::BoundingBox: {
-                    const bool cut = ctx.strataBounds && !strata.start.empty();
-                    const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
-                    const int cells = T * L * L;
-                    for (int cell = 0; cell < cells; ++cell) {
-                        const int tb = cell / (L * L), lc = cell % (L * L);
-                        const float ua = float(tb) / T, ub = float(tb + 1) / T;
-                        const float lx0 = -1.f + 2.f * float(lc % L) / L, lx1 = -1.f + 2.f * float(lc % L + 1) / L;
-                        const float ly0 = -1.f + 2.f * float(lc / L) / L, ly1 = -1.f + 2.f * float(lc / L + 1) / L;
-                        bool valid = true;
-                        float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
-                        for (int c = 0; c < 4 && valid; ++c)
-                            extendVertexBound(g, vid[c], knots, ua, ub, lx0, lx1, ly0, ly1, pr, valid, x0, x1, y0,
-                                              y1);
-                        // A corner behind the near plane at some time: bound by the samples' own moves
-                        // (each moved quad is checked below); use the whole tile.
-                        Span sp;
-                        if (!valid) {
-                            sp = {reg.x0, reg.x1 - 1, reg.y0, reg.y1 - 1};
+            bool front0;
+            int64_t sign0;
+            openFacing(vid, front0, sign0);
+            for (int cell = 0; cell < cells; ++cell) {
+                const int tb = cell / (L * L), lc = cell % (L * L);
+                const float ua = float(tb) / T, ub = float(tb + 1) / T;
+                const float lx0 = -1.f + 2.f * float(lc % L) / L, lx1 = -1.f + 2.f * float(lc % L + 1) / L;
+                const float ly0 = -1.f + 2.f * float(lc / L) / L, ly1 = -1.f + 2.f * float(lc / L + 1) / L;
+                Bound2 bd;
+                for (int c = 0; c < 4; ++c)
+                    extendVertexBound(g, vid[c], knots, ua, ub, lx0, lx1, ly0, ly1, pr.sx, pr.sy, bd);
+                // A corner behind the near plane at some time: the moved quad of each sample decides.
+                const int64_t bx0 = bd.valid ? int64_t(std::floor(bd.x0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
+                              bx1 = bd.valid ? int64_t(std::ceil(bd.x1 * kSubpixelScale)) + 1 : INT64_MAX / 4,
+                              by0 = bd.valid ? int64_t(std::floor(bd.y0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
+                              by1 = bd.valid ? int64_t(std::ceil(bd.y1 * kSubpixelScale)) + 1 : INT64_MAX / 4;
+                const Span sp = pixelSpan(reg, bx0, bx1, by0, by1);
+                if (sp.empty()) continue;
+                for (int py = sp.py0; py <= sp.py1; ++py)
+                    for (int px = sp.px0; px <= sp.px1; ++px) {
+                        const size_t pix = size_t(py - reg.y0) * tw + (px - reg.x0);
+                        auto visit = [&](int slot) {
+                            const size_t si = pix * spp + size_t(slot);
+                            if (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 || tile.sy[si] > by1)
+                                return;
+                            ++tests;
+                            int k;
+                            float w;
+                            knotSegment(knots, g.knots, tile.time[si], k, w);
+                            const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
+                            if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
+                            if (testSample<kAttributes>(g, vid, q, si, tile, nearZ)) tile.pixelHit[pix] = 1;
+                        };
+                        if (cut) {
+                            const size_t c0 = pix * cells + cell;
+                            for (uint32_t e = strata.start[c0]; e < strata.start[c0 + 1]; ++e) visit(strata.slot[e]);
                         } else {
-                            sp = pixelSpan(reg, int64_t(std::floor(x0 * kSubpixelScale)),
-                                           int64_t(std::ceil(x1 * kSubpixelScale)),
-                                           int64_t(std::floor(y0 * kSubpixelScale)),
-                                           int64_t(std::ceil(y1 * kSubpixelScale)));
+                            for (int sl = 0; sl < spp; ++sl) visit(sl);
                         }
-                        if (sp.empty()) continue;
-                        const int64_t bx0 = int64_t(std::floor(x0 * kSubpixelScale)) - 1,
-                                      bx1 = int64_t(std::ceil(x1 * kSubpixelScale)) + 1,
-                                      by0 = int64_t(std::floor(y0 * kSubpixelScale)) - 1,
-                                      by1 = int64_t(std::ceil(y1 * kSubpixelScale)) + 1;
-                        for (int py = sp.py0; py <= sp.py1; ++py)
-                            for (int px = sp.px0; px <= sp.px1; ++px) {
-                                const size_t pix = size_t(py - reg.y0) * tw + (px - reg.x0);
-                                auto visit = [&](int slot) {
-                                    const size_t si = pix * spp + size_t(slot);
-                                    if (valid && (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 ||
-                                                  tile.sy[si] > by1))
-                                        return;
-                                    ++tests;
-                                    const MovedQuad q = moved(tile.time[si], tile.lens[si]);
-                                    if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
-                                    if (testSample<kAttributes>(g, vid, q, si, tile, nearZ)) tile.pixelHit[pix] = 1;
-                                };
-                                if (cut) {
-                                    const size_t c0 = pix * cells + cell;
-                                    for (uint32_t e = strata.start[c0]; e < strata.start[c0 + 1]; ++e)
-                                        visit(strata.slot[e]);
-                                } else {
-                                    for (int s = 0; s < spp; ++s) visit(s);
-                                }
-                            }
                     }
-                    break;
-                }
             }
         }
     }
