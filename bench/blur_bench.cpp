@@ -196,17 +196,24 @@ int main(int argc, char** argv) {
         if (stats.contains("rays")) j["rays"] = stats["rays"];
         return j;
     };
-    Image reference;
-    {
+    Image reference, sharpReference;
+    if (refSpp > 0) {
         nlohmann::json j = run(refSpp, BlurSampling::BoundingBox, 4, 64, true, true, 1, &reference);
         j["config"] = "reference";
         std::printf("%s\n", j.dump().c_str());
         std::fflush(stdout);
     }
     if (sharp) {
+        if (refSpp > 0) {
+            nlohmann::json j = run(refSpp, BlurSampling::BoundingBox, 4, 64, false, true, 1, &sharpReference);
+            j["config"] = "sharp_reference";
+            std::printf("%s\n", j.dump().c_str());
+        }
         for (const std::string& sp : words(sppList)) {
-            nlohmann::json j = run(std::stoi(sp), BlurSampling::BoundingBox, 4, 64, false, true, runs, nullptr);
+            Image im;
+            nlohmann::json j = run(std::stoi(sp), BlurSampling::BoundingBox, 4, 64, false, true, runs, &im);
             j["config"] = "sharp";
+            if (refSpp > 0) j["rmse"] = rmse(im, sharpReference);
             std::printf("%s\n", j.dump().c_str());
             std::fflush(stdout);
         }
@@ -229,9 +236,9 @@ int main(int argc, char** argv) {
                     j["strata_bounds"] = strata;
                     if (scheme == BlurSampling::Interleaved) {
                         j["tile"] = K, j["permutations"] = P;
-                        j["tile_peak"] = tilePeak(im, reference, K);
+                        if (refSpp > 0) j["tile_peak"] = tilePeak(im, reference, K);
                     }
-                    j["rmse"] = rmse(im, reference);
+                    if (refSpp > 0) j["rmse"] = rmse(im, reference);
                     std::printf("%s\n", j.dump().c_str());
                     std::fflush(stdout);
                 }

@@ -13,6 +13,10 @@ inline void knotSegment(const std::vector<float>& knots, int gridKnots, float u,
         k = 0, w = 0.f;
         return;
     }
+    if (last == 1) {  // two knots: 0 and 1
+        k = 0, w = std::min(1.f, std::max(0.f, u));
+        return;
+    }
     if (u <= 0.f) {
         k = 0, w = 0.f;
         return;
@@ -24,6 +28,14 @@ inline void knotSegment(const std::vector<float>& knots, int gridKnots, float u,
     k = 0;
     while (k + 1 < last && knots[k + 1] <= u) ++k;
     w = (u - knots[k]) / (knots[k + 1] - knots[k]);
+}
+
+// Raster coordinate to fixed point for moved vertices, after the same clamp as rasterToFixed. Every moved vertex goes through this one function, so shared
+// vertices of neighbouring micropolygons stay bit-identical.
+inline int64_t blurredToFixed(float v) {
+    constexpr float kLimit = float(1 << 20) * kSubpixelScale;
+    const float f = std::min(kLimit, std::max(-kLimit, v * kSubpixelScale));
+    return int64_t(f + (f >= 0.f ? 0.5f : -0.5f));  // float rounding, truncating conversion: no libm call
 }
 
 // A vertex moved to time segment (k, w) and lens point `lens`: fixed-point raster position and depth.
@@ -46,8 +58,8 @@ inline MovedVertex moveVertex(const Grid& g, size_t v, int k, float w, Vec2 lens
         z = g.knotZ[a] + w * (g.knotZ[b] - g.knotZ[a]);
         c = g.knotC[a] + w * (g.knotC[b] - g.knotC[a]);
     }
-    m.X = rasterToFixed(x + lens.x * c * sx);
-    m.Y = rasterToFixed(y + lens.y * c * sy);
+    m.X = blurredToFixed(x + lens.x * c * sx);
+    m.Y = blurredToFixed(y + lens.y * c * sy);
     m.Z = z;
     return m;
 }
@@ -86,6 +98,43 @@ inline int64_t fillBias(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
     const int64_t dy = by - ay, dx = bx - ax;
     return (dy > 0 || (dy == 0 && dx < 0)) ? 0 : 1;
 }
+
+// A moved quad's two triangles (0,1,2) and (0,2,3) set up once, for the passes of the simple and
+// interleaved schemes in which many samples meet the same moved quad.
+struct QuadSetup {
+    int64_t A[2][3], B[2][3], C[2][3];
+    float invArea[2];
+    bool swapped[2], valid[2];
+};
+inline QuadSetup setupQuad(const MovedQuad& q) {
+    QuadSetup t;
+    static constexpr int kTri[2][3] = {{0, 1, 2}, {0, 2, 3}};
+    for (int tri = 0; tri < 2; ++tri) {
+        const int* c = kTri[tri];
+        int64_t xs[3] = {q.X[c[0]], q.X[c[1]], q.X[c[2]]}, ys[3] = {q.Y[c[0]], q.Y[c[1]], q.Y[c[2]]};
+        int64_t area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]);
+        t.valid[tri] = area != 0;
+        t.swapped[tri] = area < 0;
+        if (area < 0) {
+            std::swap(xs[1], xs[2]);
+            std::swap(ys[1], ys[2]);
+            area = -area;
+        }
+        for (int e = 0; e < 3; ++e) {
+            const int a = (e + 1) % 3, b = (e + 2) % 3;
+            t.A[tri][e] = -(ys[b] - ys[a]);
+            t.B[tri][e] = xs[b] - xs[a];
+            t.C[tri][e] = -(t.A[tri][e] * xs[a] + t.B[tri][e] * ys[a]) -
+                          (((ys[b] - ys[a]) > 0 || ((ys[b] - ys[a]) == 0 && (xs[b] - xs[a]) < 0)) ? 0 : 1);
+        }
+        t.invArea[tri] = t.valid[tri] ? 1.f / float(area) : 0.f;
+    }
+    return t;
+}
+
+template <bool kAttributes>
+inline bool testSampleSetup(const Grid& g, const int vid[4], const MovedQuad& q, const QuadSetup& t, size_t i,
+                            SampleTile& tile, float nearZ);
 
 // Test a sample against triangle (c0, c1, c2) of a moved quad with the same exact edge functions and
 // top-left fill rule as the sharp rasterizer; on a hit returns the barycentric weights of the corners.
@@ -147,6 +196,29 @@ inline bool testSample(const Grid& g, const int vid[4], const MovedQuad& q, size
     for (const auto& c : kTri) {
         float l[3];
         if (!insideTriangle(q, c[0], c[1], c[2], sx, sy, l[0], l[1], l[2])) continue;
+        const float z = l[0] * q.Z[c[0]] + l[1] * q.Z[c[1]] + l[2] * q.Z[c[2]];
+        if (z < tile.z[i] && z >= nearZ) writeHit<kAttributes>(g, vid, c, l, z, i, tile);
+        return true;
+    }
+    return false;
+}
+
+template <bool kAttributes>
+inline bool testSampleSetup(const Grid& g, const int vid[4], const MovedQuad& q, const QuadSetup& t, size_t i,
+                            SampleTile& tile, float nearZ) {
+    const int64_t sx = tile.sx[i], sy = tile.sy[i];
+    if (sx < q.minX || sx > q.maxX || sy < q.minY || sy > q.maxY) return false;
+    static constexpr int kTri[2][3] = {{0, 1, 2}, {0, 2, 3}};
+    for (int tri = 0; tri < 2; ++tri) {
+        if (!t.valid[tri]) continue;
+        const int64_t w0 = t.A[tri][0] * sx + t.B[tri][0] * sy + t.C[tri][0];
+        const int64_t w1 = t.A[tri][1] * sx + t.B[tri][1] * sy + t.C[tri][1];
+        const int64_t w2 = t.A[tri][2] * sx + t.B[tri][2] * sy + t.C[tri][2];
+        if ((w0 | w1 | w2) < 0) continue;
+        float l1 = float(w1) * t.invArea[tri], l2 = float(w2) * t.invArea[tri];
+        if (t.swapped[tri]) std::swap(l1, l2);
+        const float l[3] = {1.f - l1 - l2, l1, l2};
+        const int* c = kTri[tri];
         const float z = l[0] * q.Z[c[0]] + l[1] * q.Z[c[1]] + l[2] * q.Z[c[2]];
         if (z < tile.z[i] && z >= nearZ) writeHit<kAttributes>(g, vid, c, l, z, i, tile);
         return true;
@@ -281,11 +353,12 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                     int64_t sign0;
                     openFacing(vid, front0, sign0);
                     if (!facesCamera(g.twoSided, front0, sign0, q)) continue;
+                    const QuadSetup setup = setupQuad(q);
                     if (!interleaved) {
                         for (int py = sp.py0; py <= sp.py1; ++py)
                             for (int px = sp.px0; px <= sp.px1; ++px) {
                                 ++tests;
-                                if (testSample<kAttributes>(g, vid, q, sampleIndex(px, py, n), tile, nearZ))
+                                if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, n), tile, nearZ))
                                     tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                             }
                         continue;
@@ -298,7 +371,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                             const int px = tx * K + inTile % K, py = ty * K + inTile / K;
                             if (px < sp.px0 || px > sp.px1 || py < sp.py0 || py > sp.py1) continue;
                             ++tests;
-                            if (testSample<kAttributes>(g, vid, q, sampleIndex(px, py, slot), tile, nearZ))
+                            if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, slot), tile, nearZ))
                                 tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                         }
                 }
@@ -306,55 +379,124 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
         return tests;
     }
 
-    // Bounding box: per micropolygon, one bound per (time stratum, lens cell) (one for the whole shutter
-    // and lens without strata bounds), then each sample in it at its own (t, lens).
+    // Bounding box: per micropolygon, one bound per (time group, lens cell) (one for the whole shutter
+    // and lens without strata bounds), then each sample in it at its own (t, lens). The tile's samples are
+    // sorted into fine time strata (BlurStrata); a micropolygon groups them so that it moves about one
+    // pixel per group: a slow one takes few groups (few bounds), a fast one many (few samples per bound).
     const bool cut = ctx.strataBounds && !strata.start.empty();
     const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
-    const int cells = T * L * L;
+    const int LL = L * L, cellsPerPixel = T * LL;
+    thread_local std::vector<float> edgeX, edgeY, edgeC;
+    thread_local std::vector<uint8_t> edgeValid;
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
             const int a = j * stride + i;
             const int vid[4] = {a, a + 1, a + stride + 1, a + stride};
+            const size_t nv = size_t(vertices);
+            // Quick reject: the bound over the whole shutter and lens (every corner at every knot, grown
+            // by its circle of confusion) misses this tile; most visits of a blurred grid's buckets end here.
+            float motion = 0.f;
+            {
+                Bound2 all;
+                for (int c = 0; c < 4; ++c) {
+                    for (int kn = 0; kn < g.knots; ++kn) {
+                        const size_t at = size_t(kn) * nv + vid[c];
+                        if (!g.knotValid[at]) all.valid = false;
+                        const float gx = std::abs(g.knotC[at] * pr.sx), gy = std::abs(g.knotC[at] * pr.sy);
+                        all.x0 = std::min(all.x0, g.knotX[at] - gx), all.x1 = std::max(all.x1, g.knotX[at] + gx);
+                        all.y0 = std::min(all.y0, g.knotY[at] - gy), all.y1 = std::max(all.y1, g.knotY[at] + gy);
+                        if (kn > 0) {
+                            const size_t prev = at - nv;
+                            motion = std::max(motion, std::abs(g.knotX[at] - g.knotX[prev]) +
+                                                          std::abs(g.knotY[at] - g.knotY[prev]));
+                        }
+                    }
+                }
+                if (all.valid && pixelSpan(reg, int64_t(std::floor(all.x0 * kSubpixelScale)) - 1,
+                                           int64_t(std::ceil(all.x1 * kSubpixelScale)) + 1,
+                                           int64_t(std::floor(all.y0 * kSubpixelScale)) - 1,
+                                           int64_t(std::ceil(all.y1 * kSubpixelScale)) + 1)
+                                     .empty())
+                    continue;
+                if (g.knots > 2) motion *= float(g.knots - 1);  // path length bound over all segments
+            }
+            // Time groups of `group` fine strata each.
+            const int wanted = std::clamp(int(std::ceil(motion)), 1, T);
+            const int group = std::max(1, T / wanted), groups = (T + group - 1) / group;
+            // The corners at the groups' boundaries (the path is straight between them unless a knot lies
+            // inside a group, which extendVertexBound then adds).
+            edgeX.resize(size_t(4) * (groups + 1)), edgeY.resize(edgeX.size()), edgeC.resize(edgeX.size());
+            edgeValid.resize(edgeX.size());
+            const bool innerKnots = g.knots > 2;
+            for (int c = 0; c < 4; ++c)
+                for (int e = 0; e <= groups; ++e) {
+                    int k;
+                    float w;
+                    knotSegment(knots, g.knots, float(std::min(T, e * group)) / T, k, w);
+                    const size_t ka = size_t(k) * nv + vid[c], kb = g.knots > 1 ? ka + nv : ka,
+                                 at = size_t(c) * (groups + 1) + e;
+                    edgeX[at] = g.knotX[ka] + w * (g.knotX[kb] - g.knotX[ka]);
+                    edgeY[at] = g.knotY[ka] + w * (g.knotY[kb] - g.knotY[ka]);
+                    edgeC[at] = g.knotC[ka] + w * (g.knotC[kb] - g.knotC[ka]);
+                    edgeValid[at] = g.knotValid[ka] & g.knotValid[kb];
+                }
             bool front0;
             int64_t sign0;
             openFacing(vid, front0, sign0);
-            for (int cell = 0; cell < cells; ++cell) {
-                const int tb = cell / (L * L), lc = cell % (L * L);
-                const float ua = float(tb) / T, ub = float(tb + 1) / T;
-                const float lx0 = -1.f + 2.f * float(lc % L) / L, lx1 = -1.f + 2.f * float(lc % L + 1) / L;
-                const float ly0 = -1.f + 2.f * float(lc / L) / L, ly1 = -1.f + 2.f * float(lc / L + 1) / L;
-                Bound2 bd;
-                for (int c = 0; c < 4; ++c)
-                    extendVertexBound(g, vid[c], knots, ua, ub, lx0, lx1, ly0, ly1, pr.sx, pr.sy, bd);
-                // A corner behind the near plane at some time: the moved quad of each sample decides.
-                const int64_t bx0 = bd.valid ? int64_t(std::floor(bd.x0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
-                              bx1 = bd.valid ? int64_t(std::ceil(bd.x1 * kSubpixelScale)) + 1 : INT64_MAX / 4,
-                              by0 = bd.valid ? int64_t(std::floor(bd.y0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
-                              by1 = bd.valid ? int64_t(std::ceil(bd.y1 * kSubpixelScale)) + 1 : INT64_MAX / 4;
-                const Span sp = pixelSpan(reg, bx0, bx1, by0, by1);
-                if (sp.empty()) continue;
-                for (int py = sp.py0; py <= sp.py1; ++py)
-                    for (int px = sp.px0; px <= sp.px1; ++px) {
-                        const size_t pix = size_t(py - reg.y0) * tw + (px - reg.x0);
-                        auto visit = [&](int slot) {
-                            const size_t si = pix * spp + size_t(slot);
-                            if (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 || tile.sy[si] > by1)
-                                return;
-                            ++tests;
-                            int k;
-                            float w;
-                            knotSegment(knots, g.knots, tile.time[si], k, w);
-                            const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
-                            if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
-                            if (testSample<kAttributes>(g, vid, q, si, tile, nearZ)) tile.pixelHit[pix] = 1;
-                        };
-                        if (cut) {
-                            const size_t c0 = pix * cells + cell;
-                            for (uint32_t e = strata.start[c0]; e < strata.start[c0 + 1]; ++e) visit(strata.slot[e]);
-                        } else {
-                            for (int sl = 0; sl < spp; ++sl) visit(sl);
-                        }
+            for (int gi = 0; gi < groups; ++gi) {
+                const int j0 = gi * group, j1 = std::min(T, j0 + group);
+                const float ua = float(j0) / T, ub = float(j1) / T;
+                for (int lc = 0; lc < LL; ++lc) {
+                    const float lx0 = -1.f + 2.f * float(lc % L) / L, lx1 = -1.f + 2.f * float(lc % L + 1) / L;
+                    const float ly0 = -1.f + 2.f * float(lc / L) / L, ly1 = -1.f + 2.f * float(lc / L + 1) / L;
+                    Bound2 bd;
+                    if (innerKnots) {
+                        for (int c = 0; c < 4; ++c)
+                            extendVertexBound(g, vid[c], knots, ua, ub, lx0, lx1, ly0, ly1, pr.sx, pr.sy, bd);
+                    } else {
+                        for (int c = 0; c < 4; ++c)
+                            for (int e = gi; e <= gi + 1; ++e) {
+                                const size_t at = size_t(c) * (groups + 1) + e;
+                                if (!edgeValid[at]) bd.valid = false;
+                                const float ax = edgeC[at] * pr.sx, ay = edgeC[at] * pr.sy;
+                                bd.x0 = std::min(bd.x0, edgeX[at] + std::min(lx0 * ax, lx1 * ax));
+                                bd.x1 = std::max(bd.x1, edgeX[at] + std::max(lx0 * ax, lx1 * ax));
+                                bd.y0 = std::min(bd.y0, edgeY[at] + std::min(ly0 * ay, ly1 * ay));
+                                bd.y1 = std::max(bd.y1, edgeY[at] + std::max(ly0 * ay, ly1 * ay));
+                            }
                     }
+                    // A corner behind the near plane at some time: the moved quad of each sample decides.
+                    const int64_t bx0 = bd.valid ? int64_t(std::floor(bd.x0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
+                                  bx1 = bd.valid ? int64_t(std::ceil(bd.x1 * kSubpixelScale)) + 1 : INT64_MAX / 4,
+                                  by0 = bd.valid ? int64_t(std::floor(bd.y0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
+                                  by1 = bd.valid ? int64_t(std::ceil(bd.y1 * kSubpixelScale)) + 1 : INT64_MAX / 4;
+                    const Span sp = pixelSpan(reg, bx0, bx1, by0, by1);
+                    if (sp.empty()) continue;
+                    for (int py = sp.py0; py <= sp.py1; ++py)
+                        for (int px = sp.px0; px <= sp.px1; ++px) {
+                            const size_t pix = size_t(py - reg.y0) * tw + (px - reg.x0);
+                            auto visit = [&](int slot) {
+                                const size_t si = pix * spp + size_t(slot);
+                                if (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 || tile.sy[si] > by1)
+                                    return;
+                                ++tests;
+                                int k;
+                                float w;
+                                knotSegment(knots, g.knots, tile.time[si], k, w);
+                                const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
+                                if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
+                                if (testSample<kAttributes>(g, vid, q, si, tile, nearZ)) tile.pixelHit[pix] = 1;
+                            };
+                            if (!cut) {
+                                for (int sl = 0; sl < spp; ++sl) visit(sl);
+                                continue;
+                            }
+                            for (int tb = j0; tb < j1; ++tb) {
+                                const size_t c0 = pix * cellsPerPixel + size_t(tb) * LL + lc;
+                                for (uint32_t e = strata.start[c0]; e < strata.start[c0 + 1]; ++e) visit(strata.slot[e]);
+                            }
+                        }
+                }
             }
         }
     }
@@ -366,10 +508,10 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
 void BlurStrata::configure(const BlurPattern& p) {
     timeStrata = 1, lensCells = 1;
     if (p.motion && p.lens) {
-        timeStrata = std::max(1, p.spp / 4);
+        timeStrata = std::min(256, p.spp);
         lensCells = p.spp >= 4 ? 2 : 1;
     } else if (p.motion) {
-        timeStrata = p.spp;
+        timeStrata = std::min(256, 4 * p.spp);  // fine strata; micropolygons group them (rasterizeImpl)
     } else if (p.lens) {
         lensCells = std::max(1, int(std::floor(std::sqrt(float(p.spp)) + 1e-4f)));
     }

@@ -27,8 +27,8 @@ struct BlurStrata {
     std::vector<uint32_t> start;        // per pixel and cell: first entry in `slot` (CSR, one extra end)
     std::vector<uint16_t> slot;
     int cells() const { return timeStrata * lensCells * lensCells; }
-    // Choose the strata for a pattern: time only (spp strata), lens only (about sqrt(spp) cells per axis),
-    // or both (spp / 4 time strata, 2 x 2 lens cells).
+    // Choose the strata for a pattern: time only (4 spp fine strata, which each micropolygon groups by its
+    // motion), lens only (about sqrt(spp) cells per axis), or both (spp time strata, 2 x 2 lens cells).
     void configure(const BlurPattern& pattern);
     void build(const SampleTile& tile);
 };
