@@ -45,7 +45,7 @@ std::vector<double> Transform::sampleTimes(double maxAngleRadians) const {
             if (!f.keys.empty())
                 angle += rotationAngle(decompose(transformAt(f.keys, knots[k - 1])),
                                        decompose(transformAt(f.keys, knots[k])));
-        const int pieces = std::max(1, int(std::ceil(angle / maxAngleRadians - 1e-9)));
+        const int pieces = std::max(1, int(std::ceil(angle / maxAngleRadians - 1e-6)));  // tolerance: keys read back
         for (int i = 1; i < pieces; ++i) out.push_back(knots[k - 1] + (knots[k] - knots[k - 1]) * i / pieces);
         out.push_back(knots[k]);
     }
@@ -132,7 +132,7 @@ void GraphicsState::beginWorld(const Request& r, Camera& camera, const Diagnosti
     // A moving camera (MotionBegin before WorldBegin, RI spec 3.2, sec. 6): keys refined so that no segment
     // turns more than 2 degrees; cameraFromWorld is the camera at shutter open.
     camera.motion.clear();
-    if (transform_.moving()) camera.motion = refineTransformKeys(transform_.keys(), kMaxMotionSegmentRadians);
+    if (transform_.moving()) camera.motion = refineTransformKeys(transform_.keys(), kMaxMotionSegmentRadians * (1 + 1e-6));
     camera.cameraFromWorld = transform_.at(camera.shutterOpen);
     coordinateSystems_["camera"] = Transform(camera.cameraFromWorld.inverse());
     begin(Block::World, diag.file(), r.line);
