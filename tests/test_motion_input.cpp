@@ -284,6 +284,32 @@ TEST(MotionInput, Errors) {
     EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + sq), 6), "WorldEnd is not allowed"));
 }
 
+// Limits (docs/errors.md): a few bytes must not ask for millions of keys.
+TEST(MotionInput, KeyCountsAreLimited) {
+    std::ostringstream times, rotates;
+    times << "[";
+    for (int k = 0; k <= 12; ++k) {
+        times << " " << k;
+        rotates << "Rotate " << 179 * k << " 0 0 1\n";
+    }
+    times << " ]";
+    // 12 segments of 179 degrees: 12 x 90 = 1080 sample times, more than 1025.
+    EXPECT_TRUE(contains(expectError(world("Shutter 0 12", "MotionBegin " + times.str() + "\n" + rotates.str() + "MotionEnd\n" +
+                                                               kSquare),
+                                     4 + 15),
+                         "more than 1025 keys"));
+    std::ostringstream many;
+    many << "MotionBegin [";
+    for (int k = 0; k < 2000; ++k) many << " " << k;
+    many << "]\n";
+    EXPECT_TRUE(contains(expectError(world("", many.str()), 4), "more than 1025 times"));
+    // A closed shutter says that nothing will blur.
+    Loaded l = load(world("", "MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd\n" + std::string(kSquare)));
+    int n = 0;
+    for (const std::string& w : l.warnings) n += contains(w, "closed shutter");
+    EXPECT_EQ(n, 1);
+}
+
 TEST(MotionInput, RibWriterRoundTripsMotion) {
     Loaded l = load(world("Shutter 0 1 DepthOfField 4 0.5 6 Hider \"hidden\" \"string blursampling\" \"simple\" "
                           "Translate 0 0 5 MotionBegin [0 1] Rotate 0 0 1 0 Rotate 10 0 1 0 MotionEnd",

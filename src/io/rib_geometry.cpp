@@ -494,12 +494,19 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
     a.flipNormal = c.state.attributes().rightHanded != mirrored;
 
     // The key times: the deformation keys' and the CTM's (refined to 2 degrees per segment).
-    std::vector<double> sample = ctm.sampleTimes();
+    std::optional<std::vector<double>> ctmTimes = ctm.sampleTimes();
+    if (!ctmTimes)
+        c.diag.fail(line, keys.front().request + ": the moving transformation needs more than " +
+                              std::to_string(kMaxMotionKeys) + " keys (at most 2 degrees of turn each)");
+    std::vector<double> sample = std::move(*ctmTimes);
     if (keys.size() > 1) sample.insert(sample.end(), times.begin(), times.end());
     std::sort(sample.begin(), sample.end());
     std::vector<float> T;  // as stored: strictly increasing in single precision
     for (double t : sample)
         if (T.empty() || float(t) > T.back()) T.push_back(float(t));
+    if (T.size() > kMaxMotionKeys)
+        c.diag.fail(line, keys.front().request + ": more than " + std::to_string(kMaxMotionKeys) +
+                              " motion keys (deformation and transformation times together)");
 
     // Bezier patches are affinely invariant: transforming the control points transforms the surface.
     auto transformed = [&](const Mat4& m, const BezierPatch& object) {

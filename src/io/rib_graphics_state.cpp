@@ -29,32 +29,45 @@ Mat4 Transform::at(double time) const {
     return m;
 }
 
-std::vector<double> Transform::sampleTimes(double maxAngleRadians) const {
+std::optional<std::vector<double>> Transform::sampleTimes(double maxAngleRadians) const {
     std::vector<double> knots;
     for (const Factor& f : factors_)
         for (const TransformKey& k : f.keys) knots.push_back(k.time);
     std::sort(knots.begin(), knots.end());
     knots.erase(std::unique(knots.begin(), knots.end()), knots.end());
-    if (knots.size() < 2) return {};
+    if (knots.size() < 2) return std::vector<double>{};
+    if (knots.size() > kMaxMotionKeys) return std::nullopt;
     // Between two knots every factor is on one segment of its own keys (or clamped), so its rotation
     // there is one slerp: evenly spaced times split every factor's turn evenly.
-    std::vector<double> out{knots.front()};
+    std::vector<int> pieces(knots.size(), 0);
+    size_t total = 1;
     for (size_t k = 1; k < knots.size(); ++k) {
         double angle = 0;
         for (const Factor& f : factors_)
             if (!f.keys.empty())
                 angle += rotationAngle(decompose(transformAt(f.keys, knots[k - 1])),
                                        decompose(transformAt(f.keys, knots[k])));
-        const int pieces = std::max(1, int(std::ceil(angle / maxAngleRadians - 1e-6)));  // tolerance: keys read back
-        for (int i = 1; i < pieces; ++i) out.push_back(knots[k - 1] + (knots[k] - knots[k - 1]) * i / pieces);
+        // The tolerance lets keys written by the RIB writer and read back keep their count.
+        const double n = std::ceil(angle / maxAngleRadians - 1e-6);
+        if (!(n < double(kMaxMotionKeys))) return std::nullopt;
+        pieces[k] = std::max(1, int(n));
+        total += size_t(pieces[k]);
+        if (total > kMaxMotionKeys) return std::nullopt;
+    }
+    std::vector<double> out{knots.front()};
+    for (size_t k = 1; k < knots.size(); ++k) {
+        for (int i = 1; i < pieces[k]; ++i)
+            out.push_back(knots[k - 1] + (knots[k] - knots[k - 1]) * i / pieces[k]);
         out.push_back(knots[k]);
     }
     return out;
 }
 
-std::vector<TransformKey> Transform::keys(double maxAngleRadians) const {
+std::optional<std::vector<TransformKey>> Transform::keys(double maxAngleRadians) const {
+    std::optional<std::vector<double>> times = sampleTimes(maxAngleRadians);
+    if (!times) return std::nullopt;
     std::vector<TransformKey> out;
-    for (double t : sampleTimes(maxAngleRadians)) out.push_back({t, at(t)});
+    for (double t : *times) out.push_back({t, at(t)});
     return out;
 }
 
@@ -132,7 +145,13 @@ void GraphicsState::beginWorld(const Request& r, Camera& camera, const Diagnosti
     // A moving camera (MotionBegin before WorldBegin, RI spec 3.2, sec. 6): keys refined so that no segment
     // turns more than 2 degrees; cameraFromWorld is the camera at shutter open.
     camera.motion.clear();
-    if (transform_.moving()) camera.motion = refineTransformKeys(transform_.keys(), kMaxMotionSegmentRadians * (1 + 1e-6));
+    if (transform_.moving()) {
+        std::optional<std::vector<TransformKey>> keys = transform_.keys();
+        if (!keys)
+            diag.fail(r.line, "WorldBegin: the camera motion needs more than " + std::to_string(kMaxMotionKeys) +
+                                  " keys (at most 2 degrees of turn each)");
+        camera.motion = refineTransformKeys(*keys, kMaxMotionSegmentRadians * (1 + 1e-6));
+    }
     camera.cameraFromWorld = transform_.at(camera.shutterOpen);
     coordinateSystems_["camera"] = Transform(camera.cameraFromWorld.inverse());
     begin(Block::World, diag.file(), r.line);

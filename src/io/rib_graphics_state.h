@@ -25,6 +25,10 @@ namespace tessera::rib {
 // followed by a static Translate moves the object on the arc of the rotation, not on the chord that
 // interpolating the product's keys would give; two moving factors with different times are evaluated at
 // the union of their times.
+// At most this many times per motion block and keys per moving patch or camera (docs/errors.md): 2048
+// degrees of turn at 2 degrees per key; more is an input error, not an allocation.
+inline constexpr size_t kMaxMotionKeys = 1025;
+
 class Transform {
   public:
     Transform() : factors_(1) {}  // identity
@@ -39,10 +43,11 @@ class Transform {
     // The times at which the object-to-world transform must be evaluated so that the control points,
     // moving linearly between them (the scene's motion model), follow it: the union of the factors' key
     // times, with further times so that no segment turns more than `maxAngleRadians` (the sum over the
-    // factors, which bounds the turn of their product). Empty for a static transform.
-    std::vector<double> sampleTimes(double maxAngleRadians = kMaxMotionSegmentRadians) const;
-    // at() at each of sampleTimes(): the keys of a moving camera, refined.
-    std::vector<TransformKey> keys(double maxAngleRadians = kMaxMotionSegmentRadians) const;
+    // factors, which bounds the turn of their product). Empty for a static transform; nullopt when that
+    // takes more than kMaxMotionKeys times.
+    std::optional<std::vector<double>> sampleTimes(double maxAngleRadians = kMaxMotionSegmentRadians) const;
+    // at() at each of sampleTimes(): the keys of a moving camera, refined (nullopt: too many).
+    std::optional<std::vector<TransformKey>> keys(double maxAngleRadians = kMaxMotionSegmentRadians) const;
 
     // Each transformation request concatenates on the object side: CTM = CTM * m (per key).
     void concatenate(const Mat4& m);

@@ -179,6 +179,10 @@ class RibReader {
         ++worldsSeen_;
         // Camera motion blocks come before WorldBegin, possibly before Shutter: their times are checked now.
         for (const MotionBlock& m : cameraMotion_) checkShutterTimes(m);
+        if (!cameraMotion_.empty() && !scene_.camera.hasShutter())
+            diag_.warnOnce("closedshutter", r.line,
+                           "the camera moves but the shutter is closed (Shutter " + fmtNum(scene_.camera.shutterOpen) +
+                               " " + fmtNum(scene_.camera.shutterClose) + "): no motion blur, rendered at shutter open");
         state_.beginWorld(r, scene_.camera, diag_);
     }
     void worldEnd(const Request& r, const Arguments&) { state_.end(Block::World, r, diag_); }
@@ -626,6 +630,8 @@ class RibReader {
         }
         if (m.times.size() < 2)
             diag_.fail(r.line, "MotionBegin needs at least 2 times, got " + std::to_string(m.times.size()));
+        if (m.times.size() > kMaxMotionKeys)
+            diag_.fail(r.line, "MotionBegin: more than " + std::to_string(kMaxMotionKeys) + " times");
         for (size_t i = 0; i < m.times.size(); ++i) {
             if (!std::isfinite(m.times[i]) || std::fabs(m.times[i]) > 1e30)
                 diag_.fail(r.line, "MotionBegin: the times must be finite numbers");
@@ -713,6 +719,11 @@ class RibReader {
         if (!motion_) diag_.fail(r.line, "MotionEnd without a matching MotionBegin");
         MotionBlock m = std::move(*motion_);
         motion_.reset();
+        if (state_.inWorld() && !scene_.camera.hasShutter())
+            diag_.warnOnce("closedshutter", r.line,
+                           "motion block with a closed shutter (Shutter " + fmtNum(scene_.camera.shutterOpen) + " " +
+                               fmtNum(scene_.camera.shutterClose) +
+                               "): no motion blur, the scene is rendered at shutter open");
         if (m.count != m.times.size())
             diag_.fail(r.line, "the motion block opened at " + m.file + ":" + std::to_string(m.line) + " has " +
                                    std::to_string(m.times.size()) + " times but " + std::to_string(m.count) +
