@@ -92,8 +92,8 @@ TEST(MotionInput, ShutterAndDepthOfFieldReachTheCamera) {
 }
 
 TEST(MotionInput, TranslateBlockMovesLinearly) {
-    Loaded l = load(world("Shutter 0 1",
-                          "MotionBegin [0 1]\nTranslate 0 0 0\nTranslate 2 0 0\nMotionEnd\n" + std::string(kSquare)));
+    Loaded l = load(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 0 0 0\nTranslate 2 0 0\nMotionEnd\n" +
+                                             std::string(kSquare)));
     const Scene& s = l.scene;
     ASSERT_EQ(s.patches.size(), 1u);
     EXPECT_TRUE(s.attributes[0].motion.moving());
@@ -111,9 +111,10 @@ TEST(MotionInput, TranslateBlockMovesLinearly) {
 // that grows linearly with time (not on the chord between the keys' positions).
 TEST(MotionInput, RotateBlockStaysOnTheCircle) {
     const float r = 3.f;
-    Loaded l = load(world("Shutter 0 1", "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate 90 0 0 1\nMotionEnd\n"
-                                         "Translate 3 0 0\n"
-                                         "Patch \"bilinear\" \"P\" [0 0 0  0 0 0  0 0 0  0 0 0]\n"));
+    Loaded l = load(world("Shutter 0 1",
+                          "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate 90 0 0 1\nMotionEnd\n"
+                          "Translate 3 0 0\n"
+                          "Patch \"bilinear\" \"P\" [0 0 0  0 0 0  0 0 0  0 0 0]\n"));
     const Scene& s = l.scene;
     ASSERT_TRUE(s.attributes[0].motion.moving());
     EXPECT_EQ(s.attributes[0].motion.count, 46u);  // 90 degrees in 2-degree segments
@@ -124,8 +125,9 @@ TEST(MotionInput, RotateBlockStaysOnTheCircle) {
         EXPECT_NEAR(p.z, 0, 1e-6);
     }
     // The same with the rotation applied to an object placed off the axis.
-    Loaded m = load(world("Shutter 0 1", "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate 90 0 0 1\nMotionEnd\n"
-                                         "Patch \"bilinear\" \"P\" [3 0 0  3 0 0  3 0 0  3 0 0]\n"));
+    Loaded m = load(world("Shutter 0 1",
+                          "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate 90 0 0 1\nMotionEnd\n"
+                          "Patch \"bilinear\" \"P\" [3 0 0  3 0 0  3 0 0  3 0 0]\n"));
     const Vec3 mid = patchAtTime(m.scene, 0, 0.5f).cp[0];
     EXPECT_NEAR(std::hypot(mid.x, mid.y), r, 2e-4 * r);
     EXPECT_NEAR(std::atan2(mid.y, mid.x), kPi / 4, 1e-4);
@@ -133,9 +135,10 @@ TEST(MotionInput, RotateBlockStaysOnTheCircle) {
 
 // Two moving factors with different times: evaluated at the union of times, each on its own keys.
 TEST(MotionInput, TwoMotionBlocksWithDifferentTimes) {
-    Loaded l = load(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 0 0 0\nTranslate 0 0 4\nMotionEnd\n"
-                                         "MotionBegin [0.5 1]\nTranslate 0 0 0\nTranslate 2 0 0\nMotionEnd\n" +
-                                             std::string(kSquare)));
+    Loaded l = load(world("Shutter 0 1",
+                          "MotionBegin [0 1]\nTranslate 0 0 0\nTranslate 0 0 4\nMotionEnd\n"
+                          "MotionBegin [0.5 1]\nTranslate 0 0 0\nTranslate 2 0 0\nMotionEnd\n" +
+                              std::string(kSquare)));
     const Scene& s = l.scene;
     ASSERT_EQ(s.attributes[0].motion.count, 3u);  // times 0, 0.5, 1
     expectVec(patchAtTime(s, 0, 0.25f).cp[0], {0, 0, 1});
@@ -144,8 +147,10 @@ TEST(MotionInput, TwoMotionBlocksWithDifferentTimes) {
 }
 
 TEST(MotionInput, IdenticalKeysAreStatic) {
-    Loaded l = load(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 1 0 0\nTranslate 1 0 0\nMotionEnd\n"
-                                         "MotionBegin [0 1]\n" + std::string(kSquare) + kSquare + "MotionEnd\n"));
+    Loaded l = load(world("Shutter 0 1",
+                          "MotionBegin [0 1]\nTranslate 1 0 0\nTranslate 1 0 0\nMotionEnd\n"
+                          "MotionBegin [0 1]\n" +
+                              std::string(kSquare) + kSquare + "MotionEnd\n"));
     EXPECT_FALSE(l.scene.attributes[0].motion.moving());
     EXPECT_TRUE(l.scene.motionPatches.empty());
     EXPECT_FALSE(l.scene.hasMotion());
@@ -172,8 +177,10 @@ TEST(MotionInput, DeformationKeysAndShutterOpenPosition) {
     // A deforming NuPatch under a moving transformation: both kinds of keys, times at their union.
     const char* nu0 = "NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\n";
     const char* nu1 = "NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 1 1 0 1 0 1 1 1 1 1]\n";
-    Loaded n = load(world("Shutter 0 1", "MotionBegin [0 0.5]\nTranslate 0 0 0\nTranslate 4 0 0\nMotionEnd\n"
-                                         "MotionBegin [0 1]\n" + std::string(nu0) + nu1 + "MotionEnd\n"));
+    Loaded n = load(world("Shutter 0 1",
+                          "MotionBegin [0 0.5]\nTranslate 0 0 0\nTranslate 4 0 0\nMotionEnd\n"
+                          "MotionBegin [0 1]\n" +
+                              std::string(nu0) + nu1 + "MotionEnd\n"));
     ASSERT_EQ(n.scene.attributes[0].motion.count, 3u);
     expectVec(patchAtTime(n.scene, 0, 0.25f).cp[0], {2, 0, 0.25f});
     expectVec(patchAtTime(n.scene, 0, 0.75f).cp[0], {4, 0, 0.75f});
@@ -181,15 +188,16 @@ TEST(MotionInput, DeformationKeysAndShutterOpenPosition) {
 
 TEST(MotionInput, CameraMotionIsRefinedAndStartsAtShutterOpen) {
     // Camera translation: two keys; cameraFromWorld is the camera at shutter open.
-    Loaded t = load(world("Shutter 0.2 1 MotionBegin [0.2 1] Translate 0 0 5 Translate 1 0 5 MotionEnd", kSquare));
+    Loaded t =
+        load(world("Shutter 0.2 1 MotionBegin [0.2 1] Translate 0 0 5 Translate 1 0 5 MotionEnd", kSquare));
     const Camera& c = t.scene.camera;
     ASSERT_EQ(c.motion.size(), 2u);
     EXPECT_TRUE(c.moving());
     expectVec(c.cameraFromWorld.point({0, 0, 0}), {0, 0, 5});
     expectVec(c.cameraFromWorldAt(0.6).point({0, 0, 0}), {0.5f, 0, 5});
     // A 30-degree turn: keys every 2 degrees.
-    Loaded r = load(world("Shutter 0 1 Translate 0 0 5 MotionBegin [0 1] Rotate 0 0 1 0 Rotate 30 0 1 0 MotionEnd",
-                          kSquare));
+    Loaded r = load(world(
+        "Shutter 0 1 Translate 0 0 5 MotionBegin [0 1] Rotate 0 0 1 0 Rotate 30 0 1 0 MotionEnd", kSquare));
     ASSERT_EQ(r.scene.camera.motion.size(), 16u);
     const Vec3 p = r.scene.camera.cameraFromWorldAt(0.5).point({1, 0, 0});
     EXPECT_NEAR(p.x, std::cos(15 * kPi / 180), 1e-4);
@@ -200,11 +208,12 @@ TEST(MotionInput, CameraMotionIsRefinedAndStartsAtShutterOpen) {
 }
 
 TEST(MotionInput, OptionsForBlurAndApproximation) {
-    Loaded l = load(world("Hider \"hidden\" \"string blursampling\" \"interleaved\" \"int blurtilesize\" 8 "
-                          "\"int blurpermutations\" [16] \"jitter\" [1]",
-                          "GeometricApproximation \"motionfactor\" 1.5\nGeometricApproximation \"focusfactor\" 2\n"
-                          "GeometricApproximation \"flatness\" 0.5\n" +
-                              std::string(kSquare)));
+    Loaded l =
+        load(world("Hider \"hidden\" \"string blursampling\" \"interleaved\" \"int blurtilesize\" 8 "
+                   "\"int blurpermutations\" [16] \"jitter\" [1]",
+                   "GeometricApproximation \"motionfactor\" 1.5\nGeometricApproximation \"focusfactor\" 2\n"
+                   "GeometricApproximation \"flatness\" 0.5\n" +
+                       std::string(kSquare)));
     EXPECT_EQ(l.scene.image.blurSampling, "interleaved");
     EXPECT_EQ(l.scene.image.blurTileSize, 8);
     EXPECT_EQ(l.scene.image.blurPermutations, 16);
@@ -220,9 +229,10 @@ TEST(MotionInput, OptionsForBlurAndApproximation) {
 }
 
 TEST(MotionInput, MovingLightsArePlacedAtShutterOpenWithAWarning) {
-    Loaded l = load(world("Shutter 0 1", "MotionBegin [0 1] Translate 1 0 0 Translate 3 0 0 MotionEnd\n"
-                                         "LightSource \"pointlight\" 2 \"from\" [0 0 0]\n" +
-                                             std::string(kSquare)));
+    Loaded l = load(world("Shutter 0 1",
+                          "MotionBegin [0 1] Translate 1 0 0 Translate 3 0 0 MotionEnd\n"
+                          "LightSource \"pointlight\" 2 \"from\" [0 0 0]\n" +
+                              std::string(kSquare)));
     ASSERT_EQ(l.scene.lights.size(), 2u);
     expectVec(l.scene.lights[1].from, {1, 0, 0});
     int n = 0;
@@ -231,7 +241,8 @@ TEST(MotionInput, MovingLightsArePlacedAtShutterOpenWithAWarning) {
 }
 
 TEST(MotionInput, MotionShadingUsesTheFirstKey) {
-    Loaded l = load(world("", "MotionBegin [0 1] Color [1 0 0] Color [0 1 0] MotionEnd\n" + std::string(kSquare)));
+    Loaded l =
+        load(world("", "MotionBegin [0 1] Color [1 0 0] Color [0 1 0] MotionEnd\n" + std::string(kSquare)));
     EXPECT_EQ(l.scene.materials[l.scene.attributes[0].material].Cs, (Color{1, 0, 0}));
 }
 
@@ -243,45 +254,61 @@ TEST(MotionInput, Errors) {
     EXPECT_TRUE(contains(expectError(world("DepthOfField 2 1", sq), 1), "DepthOfField"));
     EXPECT_TRUE(contains(expectError(world("Hider \"hidden\" \"string blursampling\" \"fast\"", sq), 1),
                          "\"blursampling\" must be"));
-    EXPECT_TRUE(contains(expectError(world("Hider \"hidden\" \"int blurtilesize\" 17", sq), 1), "from 2 to 16"));
-    EXPECT_TRUE(contains(expectError(world("Hider \"hidden\" \"int blurpermutations\" 0", sq), 1),
-                         "from 1 to 4096"));
-    EXPECT_TRUE(contains(expectError(world("", "GeometricApproximation \"motionfactor\" -1\n" + sq), 4), ">= 0"));
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0]\nTranslate 1 0 0\nMotionEnd\n" + sq), 4),
-                         "at least 2 times"));
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0.5 0.5]\n" + sq), 4), "must increase"));
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 1 0 0\nMotionEnd\n" + sq), 6),
-                         "has 2 times but 1 requests"));
+    EXPECT_TRUE(
+        contains(expectError(world("Hider \"hidden\" \"int blurtilesize\" 17", sq), 1), "from 2 to 16"));
+    EXPECT_TRUE(
+        contains(expectError(world("Hider \"hidden\" \"int blurpermutations\" 0", sq), 1), "from 1 to 4096"));
+    EXPECT_TRUE(
+        contains(expectError(world("", "GeometricApproximation \"motionfactor\" -1\n" + sq), 4), ">= 0"));
+    EXPECT_TRUE(
+        contains(expectError(world("Shutter 0 1", "MotionBegin [0]\nTranslate 1 0 0\nMotionEnd\n" + sq), 4),
+                 "at least 2 times"));
+    EXPECT_TRUE(
+        contains(expectError(world("Shutter 0 1", "MotionBegin [0.5 0.5]\n" + sq), 4), "must increase"));
+    EXPECT_TRUE(
+        contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 1 0 0\nMotionEnd\n" + sq), 6),
+                 "has 2 times but 1 requests"));
     EXPECT_TRUE(contains(
-        expectError(world("Shutter 0 1", "MotionBegin [0 1]\nScale 1 1 1\nScale 2 2 2\nScale 3 3 3\nMotionEnd\n"), 7),
+        expectError(
+            world("Shutter 0 1", "MotionBegin [0 1]\nScale 1 1 1\nScale 2 2 2\nScale 3 3 3\nMotionEnd\n"), 7),
         "more Scale requests than the 2 times"));
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 1 0 0\nRotate 9 0 0 1\n"), 6),
-                         "mixes Translate (line 5) and Rotate"));
+    EXPECT_TRUE(
+        contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nTranslate 1 0 0\nRotate 9 0 0 1\n"), 6),
+                 "mixes Translate (line 5) and Rotate"));
     EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nAttributeBegin\n"), 5),
                          "AttributeBegin is not allowed inside a motion block"));
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nIdentity\n"), 5), "Identity is not allowed"));
+    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nIdentity\n"), 5),
+                         "Identity is not allowed"));
     EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\nMotionBegin [0 1]\n"), 5),
                          "nested MotionBegin"));
-    EXPECT_TRUE(contains(expectError(world("", "MotionEnd\n" + sq), 4), "MotionEnd without a matching MotionBegin"));
+    EXPECT_TRUE(
+        contains(expectError(world("", "MotionEnd\n" + sq), 4), "MotionEnd without a matching MotionBegin"));
     EXPECT_TRUE(contains(expectError("WorldBegin\nMotionBegin [0 1]\nTranslate 1 0 0\n", 3),
                          "end of file inside the motion block opened at"));
     EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 2]\n"), 4),
                          "time 2 is outside the shutter interval [0, 1]"));
     // Camera motion before Shutter: checked at WorldBegin, reported at its MotionBegin.
-    EXPECT_TRUE(contains(expectError("MotionBegin [0 2]\nTranslate 0 0 1\nTranslate 0 0 2\nMotionEnd\nShutter 0 1\n"
-                                     "WorldBegin\n" + sq + "WorldEnd\n",
-                                     1),
-                         "outside the shutter interval"));
+    EXPECT_TRUE(
+        contains(expectError("MotionBegin [0 2]\nTranslate 0 0 1\nTranslate 0 0 2\nMotionEnd\nShutter 0 1\n"
+                             "WorldBegin\n" +
+                                 sq + "WorldEnd\n",
+                             1),
+                 "outside the shutter interval"));
     std::string bicubic = "Patch \"bicubic\" \"P\" [";
     for (int i = 0; i < 48; ++i) bicubic += " 0";
     bicubic += "]\n";
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + sq + bicubic), 6), "same topology"));
-    const char* mesh2 = "PatchMesh \"bilinear\" 2 \"nonperiodic\" 2 \"nonperiodic\" \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\n";
+    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + sq + bicubic), 6),
+                         "same topology"));
+    const char* mesh2 =
+        "PatchMesh \"bilinear\" 2 \"nonperiodic\" 2 \"nonperiodic\" \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\n";
     const char* mesh3 =
-        "PatchMesh \"bilinear\" 3 \"nonperiodic\" 2 \"nonperiodic\" \"P\" [0 0 0 1 0 0 2 0 0 0 1 0 1 1 0 2 1 0]\n";
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + std::string(mesh2) + mesh3), 6),
-                         "key 2 is PatchMesh \"bilinear\" 3"));
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + sq), 6), "WorldEnd is not allowed"));
+        "PatchMesh \"bilinear\" 3 \"nonperiodic\" 2 \"nonperiodic\" \"P\" [0 0 0 1 0 0 2 0 0 0 1 0 1 1 0 2 1 "
+        "0]\n";
+    EXPECT_TRUE(
+        contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + std::string(mesh2) + mesh3), 6),
+                 "key 2 is PatchMesh \"bilinear\" 3"));
+    EXPECT_TRUE(contains(expectError(world("Shutter 0 1", "MotionBegin [0 1]\n" + sq), 6),
+                         "WorldEnd is not allowed"));
 }
 
 // Limits (docs/errors.md): a few bytes must not ask for millions of keys.
@@ -294,8 +321,8 @@ TEST(MotionInput, KeyCountsAreLimited) {
     }
     times << " ]";
     // 12 segments of 179 degrees: 12 x 90 = 1080 sample times, more than 1025.
-    EXPECT_TRUE(contains(expectError(world("Shutter 0 12", "MotionBegin " + times.str() + "\n" + rotates.str() + "MotionEnd\n" +
-                                                               kSquare),
+    EXPECT_TRUE(contains(expectError(world("Shutter 0 12", "MotionBegin " + times.str() + "\n" +
+                                                               rotates.str() + "MotionEnd\n" + kSquare),
                                      4 + 15),
                          "more than 1025 keys"));
     std::ostringstream many;
@@ -304,18 +331,20 @@ TEST(MotionInput, KeyCountsAreLimited) {
     many << "]\n";
     EXPECT_TRUE(contains(expectError(world("", many.str()), 4), "more than 1025 times"));
     // A closed shutter says that nothing will blur.
-    Loaded l = load(world("", "MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd\n" + std::string(kSquare)));
+    Loaded l = load(
+        world("", "MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd\n" + std::string(kSquare)));
     int n = 0;
     for (const std::string& w : l.warnings) n += contains(w, "closed shutter");
     EXPECT_EQ(n, 1);
 }
 
 TEST(MotionInput, RibWriterRoundTripsMotion) {
-    Loaded l = load(world("Shutter 0 1 DepthOfField 4 0.5 6 Hider \"hidden\" \"string blursampling\" \"simple\" "
-                          "Translate 0 0 5 MotionBegin [0 1] Rotate 0 0 1 0 Rotate 10 0 1 0 MotionEnd",
-                          "GeometricApproximation \"motionfactor\" 1\n"
-                          "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate 20 0 0 1\nMotionEnd\n" +
-                              std::string(kSquare) + "Translate 3 0 0\n" + kSquare));
+    Loaded l =
+        load(world("Shutter 0 1 DepthOfField 4 0.5 6 Hider \"hidden\" \"string blursampling\" \"simple\" "
+                   "Translate 0 0 5 MotionBegin [0 1] Rotate 0 0 1 0 Rotate 10 0 1 0 MotionEnd",
+                   "GeometricApproximation \"motionfactor\" 1\n"
+                   "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate 20 0 0 1\nMotionEnd\n" +
+                       std::string(kSquare) + "Translate 3 0 0\n" + kSquare));
     std::stringstream out;
     tessera::writeRib(l.scene, out);
     Scene back;
@@ -337,7 +366,8 @@ TEST(MotionInput, RibWriterRoundTripsMotion) {
         EXPECT_EQ(back.attributes[i].motion.count, a.attributes[i].motion.count);
         EXPECT_EQ(back.attributes[i].motionFactor, 1.f);
         for (float t : {0.f, 0.3f, 1.f})
-            for (int c = 0; c < 16; ++c) expectVec(patchAtTime(back, i, t).cp[c], patchAtTime(a, i, t).cp[c], 1e-6f);
+            for (int c = 0; c < 16; ++c)
+                expectVec(patchAtTime(back, i, t).cp[c], patchAtTime(a, i, t).cp[c], 1e-6f);
     }
 }
 

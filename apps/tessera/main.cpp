@@ -254,9 +254,11 @@ int runRender(const RenderArgs& a) {
     if (!a.dof.empty()) {
         dof = parseNumberList(a.dof, 3);
         if (!dof)
-            fail(fmt::format("error: --dof '{}' is not FSTOP,FOCALLENGTH,FOCALDISTANCE (three numbers)", a.dof));
+            fail(fmt::format("error: --dof '{}' is not FSTOP,FOCALLENGTH,FOCALDISTANCE (three numbers)",
+                             a.dof));
         if (!((*dof)[0] > 0 && (*dof)[1] > 0 && (*dof)[2] > 0))
-            fail(fmt::format("error: --dof '{}': fstop, focal length and focal distance must be positive", a.dof));
+            fail(fmt::format("error: --dof '{}': fstop, focal length and focal distance must be positive",
+                             a.dof));
     }
     if (!a.output.empty()) {
         if (!isSupportedImageExtension(a.output))
@@ -330,9 +332,10 @@ int runRender(const RenderArgs& a) {
     const int spp = scene.image.pixelSamplesX * scene.image.pixelSamplesY;
     if (settings.blur.enabled && settings.blur.sampling == BlurSampling::Interleaved &&
         int64_t(spp) * settings.blur.tileSize * settings.blur.tileSize > 65536)
-        fail(fmt::format("error: interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, "
-                         "got {} x {}^2 (lower --spp or --blur-tile)",
-                         spp, settings.blur.tileSize));
+        fail(
+            fmt::format("error: interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, "
+                        "got {} x {}^2 (lower --spp or --blur-tile)",
+                        spp, settings.blur.tileSize));
     Progress::Mode mode = a.progressLines                       ? Progress::Mode::Lines
                           : (!a.quiet && isatty(STDERR_FILENO)) ? Progress::Mode::Bar
                                                                 : Progress::Mode::Off;
@@ -475,11 +478,12 @@ int runInfo(const std::string& path, const std::string& formatName, const std::s
     fmt::print("shutter:  {:.6g} .. {:.6g}{}\n", c.shutterOpen, c.shutterClose,
                c.hasShutter() ? "" : " (closed: no motion blur)");
     if (ms.movingPatches > 0 || ms.cameraKeys > 0)
-        fmt::print("motion:   {} moving patches ({} keys), camera {}\n", ms.movingPatches, ms.patchKeys,
-                   ms.cameraKeys > 0 ? fmt::format("moving ({} keys)", ms.cameraKeys) : std::string("static"));
+        fmt::print(
+            "motion:   {} moving patches ({} keys), camera {}\n", ms.movingPatches, ms.patchKeys,
+            ms.cameraKeys > 0 ? fmt::format("moving ({} keys)", ms.cameraKeys) : std::string("static"));
     if (c.lensRadius() > 0)
-        fmt::print("lens:     fstop {:.6g}, focal length {:.6g}, focal distance {:.6g}\n", c.fStop, c.focalLength,
-                   c.focalDistance);
+        fmt::print("lens:     fstop {:.6g}, focal length {:.6g}, focal distance {:.6g}\n", c.fStop,
+                   c.focalLength, c.focalDistance);
     fmt::print("samples:  {}x{} per pixel\n", scene.image.pixelSamplesX, scene.image.pixelSamplesY);
     return 0;
 }
@@ -592,16 +596,20 @@ int main(int argc, char** argv) {
                        "Thin lens FSTOP,FOCALLENGTH,FOCALDISTANCE (overrides the RIB DepthOfField)");
     render->add_flag("--no-blur", ra.noBlur,
                      "No motion blur or depth of field: pinhole camera, everything at shutter open");
-    render->add_option("--blur-sampling", ra.blurSampling,
-                       "Time and lens samples: simple, interleaved or bbox (default: the RIB Hider's "
-                       "\"blursampling\", else bbox)")
+    render
+        ->add_option("--blur-sampling", ra.blurSampling,
+                     "Time and lens samples: simple, interleaved or bbox (default: the RIB Hider's "
+                     "\"blursampling\", else bbox)")
         ->check(CLI::IsMember({"simple", "interleaved", "bbox"}));
-    render->add_option("--blur-tile", ra.blurTile,
-                       "Interleaved sampling: tile size K, 2..16 (default: the RIB's \"blurtilesize\", else 4)")
+    render
+        ->add_option("--blur-tile", ra.blurTile,
+                     "Interleaved sampling: tile size K, 2..16 (default: the RIB's \"blurtilesize\", else 4)")
         ->check(intRange(2, 16));
-    render->add_option("--blur-permutations", ra.blurPermutations,
-                       "Interleaved sampling: permutations P, 1..4096 (default: the RIB's \"blurpermutations\", "
-                       "else 64)")
+    render
+        ->add_option(
+            "--blur-permutations", ra.blurPermutations,
+            "Interleaved sampling: permutations P, 1..4096 (default: the RIB's \"blurpermutations\", "
+            "else 64)")
         ->check(intRange(1, 4096));
     render->add_flag("--progress", ra.progressLines,
                      "Print 'progress N%' on stderr, one line per whole percent (for logs and render farms)");

@@ -121,7 +121,8 @@ class PrimitiveReader {
         shape_.topology = std::move(words);
         uint64_t h = 1469598103934665603ull;  // FNV-1a over the words and the numbers' bytes
         auto add = [&](const void* p, size_t n) {
-            for (size_t i = 0; i < n; ++i) h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
+            for (size_t i = 0; i < n; ++i)
+                h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
         };
         add(shape_.topology.data(), shape_.topology.size());
         add(extra.data(), extra.size() * sizeof(double));
@@ -534,7 +535,8 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         while (times[s] < t) ++s;
         const float w = float((t - times[s - 1]) / (times[s] - times[s - 1]));
         BezierPatch p;
-        for (int q = 0; q < 16; ++q) p.cp[q] = lerp(keys[s - 1].patches[j].cp[q], keys[s].patches[j].cp[q], w);
+        for (int q = 0; q < 16; ++q)
+            p.cp[q] = lerp(keys[s - 1].patches[j].cp[q], keys[s].patches[j].cp[q], w);
         return p;
     };
     std::vector<BezierPatch> world(T.size());

@@ -23,7 +23,8 @@ bool Transform::moving() const {
 }
 
 Mat4 Transform::at(double time) const {
-    Mat4 m = factors_.front().keys.empty() ? factors_.front().matrix : transformAt(factors_.front().keys, time);
+    Mat4 m =
+        factors_.front().keys.empty() ? factors_.front().matrix : transformAt(factors_.front().keys, time);
     for (size_t i = 1; i < factors_.size(); ++i)
         m = m * (factors_[i].keys.empty() ? factors_[i].matrix : transformAt(factors_[i].keys, time));
     return m;
@@ -148,8 +149,8 @@ void GraphicsState::beginWorld(const Request& r, Camera& camera, const Diagnosti
     if (transform_.moving()) {
         std::optional<std::vector<TransformKey>> keys = transform_.keys();
         if (!keys)
-            diag.fail(r.line, "WorldBegin: the camera motion needs more than " + std::to_string(kMaxMotionKeys) +
-                                  " keys (at most 2 degrees of turn each)");
+            diag.fail(r.line, "WorldBegin: the camera motion needs more than " +
+                                  std::to_string(kMaxMotionKeys) + " keys (at most 2 degrees of turn each)");
         camera.motion = refineTransformKeys(*keys, kMaxMotionSegmentRadians * (1 + 1e-6));
     }
     camera.cameraFromWorld = transform_.at(camera.shutterOpen);

@@ -8,8 +8,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <map>
 #include <limits>
+#include <map>
 #include <optional>
 #include <set>
 #include <string_view>
@@ -64,8 +64,8 @@ class RibReader {
             Token t = lex.next();
             if (t.type == TokenType::End) {
                 if (motion_)
-                    diag_.fail(lex.eofLine(), "end of file inside the motion block opened at " + motion_->file +
-                                                  ":" + std::to_string(motion_->line));
+                    diag_.fail(lex.eofLine(), "end of file inside the motion block opened at " +
+                                                  motion_->file + ":" + std::to_string(motion_->line));
                 return;
             }
             if (t.type != TokenType::Request)
@@ -181,8 +181,9 @@ class RibReader {
         for (const MotionBlock& m : cameraMotion_) checkShutterTimes(m);
         if (!cameraMotion_.empty() && !scene_.camera.hasShutter())
             diag_.warnOnce("closedshutter", r.line,
-                           "the camera moves but the shutter is closed (Shutter " + fmtNum(scene_.camera.shutterOpen) +
-                               " " + fmtNum(scene_.camera.shutterClose) + "): no motion blur, rendered at shutter open");
+                           "the camera moves but the shutter is closed (Shutter " +
+                               fmtNum(scene_.camera.shutterOpen) + " " + fmtNum(scene_.camera.shutterClose) +
+                               "): no motion blur, rendered at shutter open");
         state_.beginWorld(r, scene_.camera, diag_);
     }
     void worldEnd(const Request& r, const Arguments&) { state_.end(Block::World, r, diag_); }
@@ -335,8 +336,9 @@ class RibReader {
             return;
         }
         if (r.args.size() != 3 && !(r.args.size() == 1 && r.args[0].isArray()))
-            diag_.fail(r.line,
-                       "DepthOfField takes fstop focallength focaldistance, or no arguments for a pinhole camera");
+            diag_.fail(
+                r.line,
+                "DepthOfField takes fstop focallength focaldistance, or no arguments for a pinhole camera");
         auto v = args.numbers(3, "fstop focallength focaldistance");
         if (!(v[0] > 0) || !(v[1] > 0 && v[1] < 1e30) || !(v[2] > 0 && v[2] < 1e30))
             diag_.fail(r.line, "DepthOfField: fstop, focallength and focaldistance must be positive (got " +
@@ -362,8 +364,10 @@ class RibReader {
             if (p.name == "blursampling") {
                 std::string v = paramString(r, p, diag_);
                 if (v != "simple" && v != "interleaved" && v != "bbox")
-                    diag_.fail(p.line, "Hider \"hidden\": \"blursampling\" must be \"simple\", "
-                                       "\"interleaved\" or \"bbox\", found \"" + printable(v) + "\"");
+                    diag_.fail(p.line,
+                               "Hider \"hidden\": \"blursampling\" must be \"simple\", "
+                               "\"interleaved\" or \"bbox\", found \"" +
+                                   printable(v) + "\"");
                 scene_.image.blurSampling = v;
             } else if (p.name == "blurtilesize" || p.name == "blurpermutations") {
                 const bool tile = p.name == "blurtilesize";
@@ -416,7 +420,8 @@ class RibReader {
         const double v = args.number(1);
         if (type == "motionfactor" || type == "focusfactor") {
             if (!(v >= 0 && v < 1e30))
-                diag_.fail(r.args[1].line, "GeometricApproximation \"" + type + "\" must be >= 0, got " + fmtNum(v));
+                diag_.fail(r.args[1].line,
+                           "GeometricApproximation \"" + type + "\" must be >= 0, got " + fmtNum(v));
             (type == "motionfactor" ? state_.attributes().motionFactor : state_.attributes().focusFactor) =
                 float(v);
             return;
@@ -503,8 +508,9 @@ class RibReader {
         // Lights do not move: a light under a moving transformation is placed where it is at shutter open.
         const Mat4 m = state_.transform().at(scene_.camera.shutterOpen);
         if (state_.transform().moving())
-            diag_.warnOnce("movinglight", r.line,
-                           "LightSource under a moving transformation: lights do not move, placed at shutter open");
+            diag_.warnOnce(
+                "movinglight", r.line,
+                "LightSource under a moving transformation: lights do not move, placed at shutter open");
         light.from = m.point(params.from);
         light.to = m.point(params.to);
         light.coneAngle = params.coneangle;
@@ -569,7 +575,8 @@ class RibReader {
         }
         if (r.name == "Rotate") {
             auto v = args.numbers(4, "angle dx dy dz");
-            if (v[1] == 0 && v[2] == 0 && v[3] == 0) diag_.fail(r.line, "Rotate: the axis is the zero vector");
+            if (v[1] == 0 && v[2] == 0 && v[3] == 0)
+                diag_.fail(r.line, "Rotate: the axis is the zero vector");
             return Mat4::rotate(v[0], v[1], v[2], v[3]);
         }
         if (r.name == "Scale") {
@@ -615,7 +622,7 @@ class RibReader {
         int line = 0;
         std::string kind;  // the first request's name
         int kindLine = 0;
-        size_t count = 0;  // requests so far
+        size_t count = 0;                    // requests so far
         std::vector<Mat4> matrices;          // transformation keys
         std::vector<PrimitiveShape> shapes;  // deformation keys
     };
@@ -655,7 +662,8 @@ class RibReader {
                                      fmtNum(c.shutterOpen) + ", " + fmtNum(c.shutterClose) + "] (Shutter)");
     }
     static bool isMovingTransform(const std::string& n) {
-        return n == "Translate" || n == "Rotate" || n == "Scale" || n == "ConcatTransform" || n == "Transform";
+        return n == "Translate" || n == "Rotate" || n == "Scale" || n == "ConcatTransform" ||
+               n == "Transform";
     }
     // RI spec 3.2, sec. 6 lists the requests a motion block may hold: transformations, geometric primitives
     // and shading requests. Of those, moving shading (Color, Opacity, Surface, LightSource) is read at its
@@ -664,18 +672,28 @@ class RibReader {
     // ShadingRate, ...) is an error, like a nested MotionBegin.
     void motionRequest(const Request& r, Handler h) {
         MotionBlock& m = *motion_;
-        const std::string where = " (the motion block opened at " + m.file + ":" + std::to_string(m.line) + ")";
+        const std::string where =
+            " (the motion block opened at " + m.file + ":" + std::to_string(m.line) + ")";
         if (r.name == "MotionBegin") diag_.fail(r.line, "nested MotionBegin" + where + " is still open");
         static const std::set<std::string> shading = {"Color", "Opacity", "Surface", "LightSource"};
-        static const std::set<std::string> riMoving = {
-            "Skew", "Perspective", "Deformation", "Displacement", "Interior", "Exterior", "Atmosphere",
-            "AreaLightSource", "Bound", "Detail", "Polygon", "GeneralPolygon", "PointsPolygons",
-            "PointsGeneralPolygons", "Sphere", "Cone", "Cylinder", "Hyperboloid", "Paraboloid", "Disk", "Torus",
-            "Points", "Curves", "Blobby", "TrimCurve"};
+        static const std::set<std::string> riMoving = {"Skew",           "Perspective",
+                                                       "Deformation",    "Displacement",
+                                                       "Interior",       "Exterior",
+                                                       "Atmosphere",     "AreaLightSource",
+                                                       "Bound",          "Detail",
+                                                       "Polygon",        "GeneralPolygon",
+                                                       "PointsPolygons", "PointsGeneralPolygons",
+                                                       "Sphere",         "Cone",
+                                                       "Cylinder",       "Hyperboloid",
+                                                       "Paraboloid",     "Disk",
+                                                       "Torus",          "Points",
+                                                       "Curves",         "Blobby",
+                                                       "TrimCurve"};
         const bool transform = isMovingTransform(r.name), primitive = isPrimitiveRequest(r.name),
                    shade = shading.count(r.name) > 0, unsupported = !h && riMoving.count(r.name) > 0;
         if (!h && !unsupported) {  // not a RI request we know: ignored as anywhere else
-            diag_.warnOnce("request:" + r.name, r.line, "unknown or unsupported request '" + r.name + "' ignored");
+            diag_.warnOnce("request:" + r.name, r.line,
+                           "unknown or unsupported request '" + r.name + "' ignored");
             return;
         }
         if (!transform && !primitive && !shade && !unsupported)
@@ -702,16 +720,21 @@ class RibReader {
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
             if (b.topology != a.topology || b.topologyHash != a.topologyHash ||
                 (!a.skipped && !b.skipped && a.patches.size() != b.patches.size()))
-                diag_.fail(r.line, "deformation keys must have the same topology" + where + ": key " +
-                                       std::to_string(m.count) + " is " + b.topology + ", key 1 (line " +
-                                       std::to_string(a.line) + ") is " + a.topology +
-                                       (b.topology == a.topology ? " with other vertex indices, knots or tags" : ""));
+                diag_.fail(r.line,
+                           "deformation keys must have the same topology" + where + ": key " +
+                               std::to_string(m.count) + " is " + b.topology + ", key 1 (line " +
+                               std::to_string(a.line) + ") is " + a.topology +
+                               (b.topology == a.topology ? " with other vertex indices, knots or tags" : ""));
         } else if (m.count == 1) {
             if (shade)
-                diag_.warnOnce("motion:" + r.name, r.line,
-                               r.name + " in a motion block: moving shading is not supported; the first key is used");
-            if (h) (this->*h)(r, args);
-            else diag_.warnOnce("request:" + r.name, r.line, "unknown or unsupported request '" + r.name + "' ignored");
+                diag_.warnOnce(
+                    "motion:" + r.name, r.line,
+                    r.name + " in a motion block: moving shading is not supported; the first key is used");
+            if (h)
+                (this->*h)(r, args);
+            else
+                diag_.warnOnce("request:" + r.name, r.line,
+                               "unknown or unsupported request '" + r.name + "' ignored");
         }
     }
     void motionEnd(const Request& r, const Arguments& args) {
@@ -721,13 +744,13 @@ class RibReader {
         motion_.reset();
         if (state_.inWorld() && !scene_.camera.hasShutter())
             diag_.warnOnce("closedshutter", r.line,
-                           "motion block with a closed shutter (Shutter " + fmtNum(scene_.camera.shutterOpen) + " " +
-                               fmtNum(scene_.camera.shutterClose) +
+                           "motion block with a closed shutter (Shutter " +
+                               fmtNum(scene_.camera.shutterOpen) + " " + fmtNum(scene_.camera.shutterClose) +
                                "): no motion blur, the scene is rendered at shutter open");
         if (m.count != m.times.size())
-            diag_.fail(r.line, "the motion block opened at " + m.file + ":" + std::to_string(m.line) + " has " +
-                                   std::to_string(m.times.size()) + " times but " + std::to_string(m.count) +
-                                   " requests");
+            diag_.fail(r.line, "the motion block opened at " + m.file + ":" + std::to_string(m.line) +
+                                   " has " + std::to_string(m.times.size()) + " times but " +
+                                   std::to_string(m.count) + " requests");
         if (isMovingTransform(m.kind)) {
             std::vector<TransformKey> keys;
             for (size_t i = 0; i < m.times.size(); ++i) keys.push_back({m.times[i], m.matrices[i]});
@@ -838,7 +861,7 @@ class RibReader {
     Declarations decls_;
     GraphicsState state_;
     std::optional<std::string> skipUntil_;
-    std::optional<MotionBlock> motion_;     // the open motion block
+    std::optional<MotionBlock> motion_;      // the open motion block
     std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;
     int archiveDepth_ = 0;  // ReadArchive nesting of the file being read

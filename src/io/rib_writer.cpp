@@ -191,14 +191,16 @@ void writeRib(const Scene& scene, std::ostream& o) {
         o << "ShadingRate " << num(a.shadingRate) << "\n";
         o << "Sides " << (a.twoSided ? 2 : 1) << "\n";
         o << "Orientation \"" << ((a.flipNormal != mirrored) ? "rh" : "lh") << "\"\n";
-        if (a.motionFactor != 0.f) o << "GeometricApproximation \"motionfactor\" " << num(a.motionFactor) << "\n";
-        if (a.focusFactor != 0.f) o << "GeometricApproximation \"focusfactor\" " << num(a.focusFactor) << "\n";
+        if (a.motionFactor != 0.f)
+            o << "GeometricApproximation \"motionfactor\" " << num(a.motionFactor) << "\n";
+        if (a.focusFactor != 0.f)
+            o << "GeometricApproximation \"focusfactor\" " << num(a.focusFactor) << "\n";
         // One block per run of patches with the same attributes.
         for (; i < scene.patches.size(); ++i) {
             const PatchAttributes& b = i < scene.attributes.size() ? scene.attributes[i] : defaults;
             if (b.material != a.material || b.object != a.object || b.shadingRate != a.shadingRate ||
-                b.twoSided != a.twoSided || b.flipNormal != a.flipNormal || b.motionFactor != a.motionFactor ||
-                b.focusFactor != a.focusFactor)
+                b.twoSided != a.twoSided || b.flipNormal != a.flipNormal ||
+                b.motionFactor != a.motionFactor || b.focusFactor != a.focusFactor)
                 break;
             auto patch = [&](const BezierPatch& p) {
                 o << "Patch \"bicubic\" \"P\" [";
