@@ -133,6 +133,27 @@ TEST(MotionInput, RotateBlockStaysOnTheCircle) {
     EXPECT_NEAR(std::atan2(mid.y, mid.x), kPi / 4, 1e-4);
 }
 
+// Rotate keys about one axis interpolate their angle: a full turn between two keys is a full turn (the
+// matrices of Rotate 0 and Rotate 360 are equal), and 270 degrees do not become -90.
+TEST(MotionInput, RotateKeysTurnByTheirAngle) {
+    for (double total : {360.0, 270.0}) {
+        Loaded l =
+            load(world("Shutter 0 1", "MotionBegin [0 1]\nRotate 0 0 0 1\nRotate " + std::to_string(total) +
+                                          " 0 0 1\nMotionEnd\n"
+                                          "Patch \"bilinear\" \"P\" [2 0 0  2 0 0  2 0 0  2 0 0]\n"));
+        const Scene& s = l.scene;
+        ASSERT_TRUE(s.attributes[0].motion.moving()) << total;
+        EXPECT_EQ(s.attributes[0].motion.count, uint32_t(total / 2 + 1));
+        for (float t : {0.1f, 0.25f, 0.5f, 0.8f}) {
+            const Vec3 p = patchAtTime(s, 0, t).cp[0];
+            const double expected = t * total * kPi / 180;
+            EXPECT_NEAR(std::hypot(p.x, p.y), 2, 4e-4) << total << " t " << t;
+            EXPECT_NEAR(std::cos(expected), p.x / 2, 1e-3) << total << " t " << t;
+            EXPECT_NEAR(std::sin(expected), p.y / 2, 1e-3) << total << " t " << t;
+        }
+    }
+}
+
 // Two moving factors with different times: evaluated at the union of times, each on its own keys.
 TEST(MotionInput, TwoMotionBlocksWithDifferentTimes) {
     Loaded l = load(world("Shutter 0 1",

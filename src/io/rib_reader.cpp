@@ -5,6 +5,7 @@
 #include "io/rib_reader.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -624,6 +625,7 @@ class RibReader {
         int kindLine = 0;
         size_t count = 0;                    // requests so far
         std::vector<Mat4> matrices;          // transformation keys
+        std::vector<std::array<double, 4>> rotations;  // Rotate keys: angle dx dy dz
         std::vector<PrimitiveShape> shapes;  // deformation keys
     };
     void motionBegin(const Request& r, const Arguments&) {
@@ -715,6 +717,10 @@ class RibReader {
         Arguments args(r, diag_);
         if (transform) {
             m.matrices.push_back(transformMatrix(r, args));
+            if (r.name == "Rotate") {
+                auto v = args.numbers(4, "angle dx dy dz");
+                m.rotations.push_back({v[0], v[1], v[2], v[3]});
+            }
         } else if (primitive) {
             m.shapes.push_back(readPrimitiveShape(r, primitiveContext()));
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
@@ -753,7 +759,30 @@ class RibReader {
                                    std::to_string(m.count) + " requests");
         if (isMovingTransform(m.kind)) {
             std::vector<TransformKey> keys;
-            for (size_t i = 0; i < m.times.size(); ++i) keys.push_back({m.times[i], m.matrices[i]});
+            for (size_t i = 0; i < m.times.size(); ++i) {
+                // Rotate keys about the same axis interpolate their angle, so that a turn of 180 degrees or
+                // more between two keys (Rotate 0 ... Rotate 360) keeps its direction and size: keys every 90
+                // degrees in between, which the decomposed interpolation then follows exactly.
+                if (i > 0 && !m.rotations.empty()) {
+                    const auto &a = m.rotations[i - 1], &b = m.rotations[i];
+                    const double la = std::sqrt(a[1] * a[1] + a[2] * a[2] + a[3] * a[3]),
+                                 lb = std::sqrt(b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
+                    const bool sameAxis =
+                        a[1] / la == b[1] / lb && a[2] / la == b[2] / lb && a[3] / la == b[3] / lb;
+                    const double pieces = std::ceil(std::fabs(b[0] - a[0]) / 90.0);
+                    if (sameAxis && pieces > 1) {
+                        if (pieces + double(keys.size()) > double(kMaxMotionKeys))
+                            diag_.fail(r.line, "MotionEnd: the Rotate keys turn by more than " +
+                                                   std::to_string(90 * kMaxMotionKeys) + " degrees");
+                        for (int k = 1; k < int(pieces); ++k) {
+                            const double w = k / pieces;
+                            keys.push_back({m.times[i - 1] + w * (m.times[i] - m.times[i - 1]),
+                                            Mat4::rotate(a[0] + w * (b[0] - a[0]), a[1], a[2], a[3])});
+                        }
+                    }
+                }
+                keys.push_back({m.times[i], m.matrices[i]});
+            }
             const Transform moving = Transform::moving(std::move(keys));
             if (!moving.isFinite()) diag_.fail(r.line, "MotionEnd: a transformation key is not finite");
             if (m.kind == "Transform")
