@@ -610,7 +610,9 @@ class RibReader {
     // ---- geometry (RI spec 3.2, sec. 5; rib_geometry.h) ----------------------------------------
     PrimitiveContext primitiveContext() { return {scene_, state_, decls_, diag_}; }
     void primitive(const Request& r, const Arguments&) {
-        addPrimitive({readPrimitiveShape(r, primitiveContext())}, {}, primitiveContext());
+        std::vector<PrimitiveShape> shape;
+        shape.push_back(readPrimitiveShape(r, primitiveContext()));
+        addPrimitive(shape, {}, primitiveContext());
     }
 
     // ---- motion blocks (RI spec 3.2, sec. 6) -----------------------------------------------------
