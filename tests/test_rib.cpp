@@ -559,9 +559,9 @@ TEST(RibFiles, GzippedRib) {
 }
 
 TEST(RibFiles, UnknownRequestsWarnOncePerName) {
-    Loaded l =
-        load(scene("set -x\nHider \"hidden\"\nHider \"hidden\"", "Sphere 1 -1 1 360\nSphere 2 -2 2 360"));
-    EXPECT_EQ(countWarnings(l.warnings, "'Hider'"), 1);
+    Loaded l = load(scene("set -x\nImager \"background\"\nImager \"background\"",
+                          "Sphere 1 -1 1 360\nSphere 2 -2 2 360"));
+    EXPECT_EQ(countWarnings(l.warnings, "'Imager'"), 1);
     EXPECT_EQ(countWarnings(l.warnings, "'Sphere'"), 1);
     EXPECT_EQ(countWarnings(l.warnings, "'set'"), 1);
     EXPECT_EQ(l.scene.patches.size(), 1u);

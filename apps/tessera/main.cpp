@@ -62,7 +62,36 @@ struct RenderArgs {
     double shadingRate = 0;
     unsigned seed = 0;
     bool quiet = false, cullBackfaces = false, noRayBinning = false, progressLines = false;
+    // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's.
+    std::string shutter, dof, blurSampling;
+    int blurTile = 0, blurPermutations = 0;
+    bool noBlur = false;
 };
+
+// `n` comma-separated finite numbers ("0,1"); nullopt if the text is not that.
+std::optional<std::vector<double>> parseNumberList(const std::string& text, size_t n) {
+    std::vector<double> out;
+    size_t at = 0;
+    while (true) {
+        const size_t end = text.find(',', at);
+        const std::string part = text.substr(at, end == std::string::npos ? std::string::npos : end - at);
+        char* stop = nullptr;
+        errno = 0;
+        const double v = std::strtod(part.c_str(), &stop);
+        if (part.empty() || *stop != '\0' || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
+        out.push_back(v);
+        if (end == std::string::npos) break;
+        at = end + 1;
+    }
+    if (out.size() != n) return std::nullopt;
+    return out;
+}
+
+BlurSampling blurSamplingFromName(const std::string& name) {
+    if (name == "simple") return BlurSampling::Simple;
+    if (name == "interleaved") return BlurSampling::Interleaved;
+    return BlurSampling::BoundingBox;
+}
 
 std::optional<UpAxis> parseUp(const std::string& up) {
     if (up.empty()) return std::nullopt;
@@ -215,6 +244,22 @@ int runRender(const RenderArgs& a) {
             fail(fmt::format("{}: error: resolution {}x{} outside 1..{} per axis", a.scene, resW, resH,
                              kMaxResolution));
     }
+    std::optional<std::vector<double>> shutter, dof;
+    if (!a.shutter.empty()) {
+        shutter = parseNumberList(a.shutter, 2);
+        if (!shutter) fail(fmt::format("error: --shutter '{}' is not OPEN,CLOSE (two numbers)", a.shutter));
+        if ((*shutter)[1] < (*shutter)[0])
+            fail(fmt::format("error: --shutter '{}': close is before open", a.shutter));
+    }
+    if (!a.dof.empty()) {
+        dof = parseNumberList(a.dof, 3);
+        if (!dof)
+            fail(fmt::format("error: --dof '{}' is not FSTOP,FOCALLENGTH,FOCALDISTANCE (three numbers)",
+                             a.dof));
+        if (!((*dof)[0] > 0 && (*dof)[1] > 0 && (*dof)[2] > 0))
+            fail(fmt::format("error: --dof '{}': fstop, focal length and focal distance must be positive",
+                             a.dof));
+    }
     if (!a.output.empty()) {
         if (!isSupportedImageExtension(a.output))
             fail(fmt::format("{}: error: unsupported output format (use .png or .exr)", a.output));
@@ -247,6 +292,13 @@ int runRender(const RenderArgs& a) {
     if (a.shadingRate > 0)
         for (auto& attr : scene.attributes) attr.shadingRate = float(a.shadingRate);
     if (scene.patches.empty()) fail(fmt::format("{}: error: the scene has no geometry", a.scene));
+    // The camera overrides: keys outside a new shutter interval are clamped (the motion model).
+    if (shutter) setShutter(scene, float((*shutter)[0]), float((*shutter)[1]));
+    if (dof) {
+        scene.camera.fStop = float((*dof)[0]);
+        scene.camera.focalLength = float((*dof)[1]);
+        scene.camera.focalDistance = float((*dof)[2]);
+    }
 
     std::string output = a.output;
     if (output.empty()) {  // named by the scene: checked now, still before the render
@@ -265,6 +317,25 @@ int runRender(const RenderArgs& a) {
     settings.cullBackfaces = a.cullBackfaces;
     settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
+    // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
+    settings.blur.enabled = !a.noBlur;
+    const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
+    if (!sampling.empty()) settings.blur.sampling = blurSamplingFromName(sampling);
+    if (a.blurTile > 0)
+        settings.blur.tileSize = a.blurTile;
+    else if (scene.image.blurTileSize > 0)
+        settings.blur.tileSize = scene.image.blurTileSize;
+    if (a.blurPermutations > 0)
+        settings.blur.permutations = a.blurPermutations;
+    else if (scene.image.blurPermutations > 0)
+        settings.blur.permutations = scene.image.blurPermutations;
+    const int spp = scene.image.pixelSamplesX * scene.image.pixelSamplesY;
+    if (settings.blur.enabled && settings.blur.sampling == BlurSampling::Interleaved &&
+        int64_t(spp) * settings.blur.tileSize * settings.blur.tileSize > 65536)
+        fail(
+            fmt::format("error: interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, "
+                        "got {} x {}^2 (lower --spp or --blur-tile)",
+                        spp, settings.blur.tileSize));
     Progress::Mode mode = a.progressLines                       ? Progress::Mode::Lines
                           : (!a.quiet && isatty(STDERR_FILENO)) ? Progress::Mode::Bar
                                                                 : Progress::Mode::Off;
@@ -300,6 +371,19 @@ int runRender(const RenderArgs& a) {
     s["output"] = output;
     s["render_ms"] = renderMs;
     s["peak_rss_mb"] = peakRssMb();
+    {  // what the blur was asked for (the engines may add their own counters under "blur")
+        nlohmann::json& b = s["blur"];
+        if (!b.is_object()) b = nlohmann::json::object();
+        const MotionSummary ms = motionSummary(scene);
+        b["enabled"] = settings.blur.enabled;
+        b["sampling"] = blurSamplingName(settings.blur.sampling);
+        b["tile_size"] = settings.blur.tileSize;
+        b["permutations"] = settings.blur.permutations;
+        b["shutter"] = {scene.camera.shutterOpen, scene.camera.shutterClose};
+        b["lens_radius"] = scene.camera.lensRadius();
+        b["moving_patches"] = ms.movingPatches;
+        b["camera_keys"] = ms.cameraKeys;
+    }
     // The statistics go to a temporary file first and are renamed only once the image is in place, so a
     // failed write leaves neither file changed.
     std::string statsTmp;
@@ -390,6 +474,16 @@ int runInfo(const std::string& path, const std::string& formatName, const std::s
                        *format == SceneFormat::Obj ? "OBJ convention" : "chosen from the data");
     }
     fmt::print("clipping: {:.6g} .. {:.6g}\n", c.nearClip, c.farClip);
+    const MotionSummary ms = motionSummary(scene);
+    fmt::print("shutter:  {:.6g} .. {:.6g}{}\n", c.shutterOpen, c.shutterClose,
+               c.hasShutter() ? "" : " (closed: no motion blur)");
+    if (ms.movingPatches > 0 || ms.cameraKeys > 0)
+        fmt::print(
+            "motion:   {} moving patches ({} keys), camera {}\n", ms.movingPatches, ms.patchKeys,
+            ms.cameraKeys > 0 ? fmt::format("moving ({} keys)", ms.cameraKeys) : std::string("static"));
+    if (c.lensRadius() > 0)
+        fmt::print("lens:     fstop {:.6g}, focal length {:.6g}, focal distance {:.6g}\n", c.fStop,
+                   c.focalLength, c.focalDistance);
     fmt::print("samples:  {}x{} per pixel\n", scene.image.pixelSamplesX, scene.image.pixelSamplesY);
     return 0;
 }
@@ -495,6 +589,28 @@ int main(int argc, char** argv) {
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,
                      "rt: per-ray traversal for camera and shadow rays (no binning; same image)");
+    render->add_option("--shutter", ra.shutter,
+                       "Shutter interval OPEN,CLOSE in scene time (overrides the RIB Shutter; motion keys "
+                       "outside it are clamped)");
+    render->add_option("--dof", ra.dof,
+                       "Thin lens FSTOP,FOCALLENGTH,FOCALDISTANCE (overrides the RIB DepthOfField)");
+    render->add_flag("--no-blur", ra.noBlur,
+                     "No motion blur or depth of field: pinhole camera, everything at shutter open");
+    render
+        ->add_option("--blur-sampling", ra.blurSampling,
+                     "Time and lens samples: simple, interleaved or bbox (default: the RIB Hider's "
+                     "\"blursampling\", else bbox)")
+        ->check(CLI::IsMember({"simple", "interleaved", "bbox"}));
+    render
+        ->add_option("--blur-tile", ra.blurTile,
+                     "Interleaved sampling: tile size K, 2..16 (default: the RIB's \"blurtilesize\", else 4)")
+        ->check(intRange(2, 16));
+    render
+        ->add_option(
+            "--blur-permutations", ra.blurPermutations,
+            "Interleaved sampling: permutations P, 1..4096 (default: the RIB's \"blurpermutations\", "
+            "else 64)")
+        ->check(intRange(1, 4096));
     render->add_flag("--progress", ra.progressLines,
                      "Print 'progress N%' on stderr, one line per whole percent (for logs and render farms)");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");

@@ -28,33 +28,31 @@ bool isBezier(const Basis& b) {
     return true;
 }
 
+uint32_t materialIndex(Scene& scene, const Material& m) {
+    for (size_t i = 0; i < scene.materials.size(); ++i)
+        if (sameMaterial(scene.materials[i], m)) return uint32_t(i);
+    scene.materials.push_back(m);
+    return uint32_t(scene.materials.size() - 1);
+}
+
+// Huge coordinates or transformations can overflow single precision: reject them rather than render NaNs.
+void checkFinite(const BezierPatch& b, int line, const Diagnostics& diag) {
+    for (const Vec3& c : b.cp)
+        if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
+            diag.fail(line, "control point out of range after transformation (overflows single precision)");
+}
+
 // Reads one primitive request: Patch and PatchMesh (RI spec 3.2, sec. 5.2), NuPatch (sec. 5.3),
 // SubdivisionMesh (sec. 5.6).
 class PrimitiveReader {
   public:
     PrimitiveReader(const PrimitiveContext& c, const Request& r)
-        : scene_(c.scene), state_(c.state), decls_(c.decls), diag_(c.diag), requestLine_(r.line) {}
-
-    uint32_t materialIndex() {
-        for (size_t i = 0; i < scene_.materials.size(); ++i)
-            if (sameMaterial(scene_.materials[i], state_.attributes().surface)) return uint32_t(i);
-        scene_.materials.push_back(state_.attributes().surface);
-        return uint32_t(scene_.materials.size() - 1);
+        : state_(c.state), decls_(c.decls), diag_(c.diag) {
+        shape_.request = r.name;
+        shape_.line = r.line;
     }
 
-    // Attributes shared by all patches of one primitive request (one object id per request).
-    PatchAttributes primitiveAttributes() {
-        PatchAttributes a;
-        a.material = materialIndex();
-        a.object = scene_.objectCount++;
-        a.shadingRate = state_.attributes().shadingRate;
-        a.twoSided = state_.attributes().twoSided;
-        // RI spec 4.2.4: the surface's outside depends on the orientation attribute and on the
-        // handedness of the current (object-to-camera) transformation.
-        bool mirrored = (scene_.camera.cameraFromWorld * state_.transform().matrix()).det3() < 0;
-        a.flipNormal = state_.attributes().rightHanded != mirrored;
-        return a;
-    }
+    PrimitiveShape& shape() { return shape_; }
 
     void requireWorld(const Request& r) const {
         if (!state_.inWorld()) diag_.fail(r.line, r.name + " outside WorldBegin/WorldEnd");
@@ -98,7 +96,7 @@ class PrimitiveReader {
         return out;
     }
 
-    void addPatch(const Vec3 g[16], bool bicubic, const PatchAttributes& a) {
+    void addPatch(const Vec3 g[16], bool bicubic) {
         BezierPatch b;
         if (!bicubic) {
             // Degree elevation of the bilinear patch: its bicubic Bezier control net samples the
@@ -115,11 +113,20 @@ class PrimitiveReader {
         } else {
             b = toBezier(g, state_.attributes().uBasis, state_.attributes().vBasis);
         }
-        // Bezier patches are affinely invariant: transforming the control points transforms the surface.
-        for (Vec3& c : b.cp) c = state_.transform().point(c);
-        checkFinite(b);
-        scene_.patches.push_back(b);
-        scene_.attributes.push_back(a);
+        shape_.patches.push_back(b);
+    }
+
+    // The topology a deformation key must share with the others: words and a hash of `extra` numbers.
+    void setTopology(std::string words, const std::vector<double>& extra = {}) {
+        shape_.topology = std::move(words);
+        uint64_t h = 1469598103934665603ull;  // FNV-1a over the words and the numbers' bytes
+        auto add = [&](const void* p, size_t n) {
+            for (size_t i = 0; i < n; ++i)
+                h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
+        };
+        add(shape_.topology.data(), shape_.topology.size());
+        add(extra.data(), extra.size() * sizeof(double));
+        shape_.topologyHash = h;
     }
 
     bool patchType(const Request& r, const std::string& type) const {
@@ -142,16 +149,18 @@ class PrimitiveReader {
         });
         requireWorld(r);
         std::string what = "Patch \"" + args.string(0) + "\"";
+        setTopology(what);
         auto pts = positions(r, ps, nv, what);
-        if (!pts) return;
+        if (!pts) return skip();
         Vec3 g[16];
         if (bicubic) {
             for (int k = 0; k < 16; ++k) g[k] = (*pts)[k];
         } else {
             for (int k = 0; k < 4; ++k) g[k] = (*pts)[k];
         }
-        addPatch(g, bicubic, primitiveAttributes());
+        addPatch(g, bicubic);
     }
+    void skip() { shape_.skipped = true; }
 
     // Patches along one direction of a PatchMesh (RI spec 5.2: RiPatchMesh).
     int meshPatches(const Request& r, bool bicubic, int n, bool periodic, int step, const char* dir) const {
@@ -201,9 +210,11 @@ class PrimitiveReader {
             return 1;
         });
         requireWorld(r);
+        setTopology("PatchMesh \"" + args.string(0) + "\" " + std::to_string(nu) + " \"" + args.string(2) +
+                        "\" " + std::to_string(nv) + " \"" + args.string(4) + "\"",
+                    {double(ustep), double(vstep)});
         auto pts = positions(r, ps, nverts, "PatchMesh \"" + args.string(0) + "\"");
-        if (!pts) return;
-        PatchAttributes a = primitiveAttributes();
+        if (!pts) return skip();
         int order = bicubic ? 4 : 2;
         for (int pv = 0; pv < npv; ++pv)
             for (int pu = 0; pu < npu; ++pu) {
@@ -213,25 +224,8 @@ class PrimitiveReader {
                         int u = (pu * ustep + i) % nu, v = (pv * vstep + j) % nv;  // periodic meshes wrap
                         g[j * order + i] = (*pts)[size_t(v) * nu + u];
                     }
-                addPatch(g, bicubic, a);
+                addPatch(g, bicubic);
             }
-    }
-
-    // Huge coordinates or transformations can overflow single precision: reject them rather than render NaNs.
-    void checkFinite(const BezierPatch& b) const {
-        for (const Vec3& c : b.cp)
-            if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
-                diag_.fail(requestLine_,
-                           "control point out of range after transformation (overflows single precision)");
-    }
-
-    // Appends a patch that is already in Bezier form (object space), ignoring the current Basis.
-    void addBezier(const BezierPatch& patch, const PatchAttributes& a) {
-        BezierPatch b = patch;
-        for (Vec3& c : b.cp) c = state_.transform().point(c);
-        checkFinite(b);
-        scene_.patches.push_back(b);
-        scene_.attributes.push_back(a);
     }
 
     // RiNuPatch (RI spec 3.2, sec. 5.3): non-rational NURBS, converted exactly to Bezier patches.
@@ -283,8 +277,16 @@ class PrimitiveReader {
                                    "NuPatch: rational NURBS (\"Pw\" with w != 1) are not supported; only "
                                    "non-rational "
                                    "surfaces (all weights 1) convert exactly to bicubic Bezier patches");
+        {
+            std::vector<double> knots = s.uknot;
+            knots.insert(knots.end(), s.vknot.begin(), s.vknot.end());
+            knots.insert(knots.end(), {double(s.uorder), double(s.vorder), s.umin, s.umax, s.vmin, s.vmax});
+            setTopology("NuPatch " + std::to_string(s.nu) + " x " + std::to_string(s.nv) + " of order " +
+                            std::to_string(s.uorder) + " x " + std::to_string(s.vorder),
+                        knots);
+        }
         auto pts = positions(r, ps, nverts, "NuPatch");
-        if (!pts) return;
+        if (!pts) return skip();
         s.cp = std::move(*pts);
         std::vector<BezierPatch> patches;
         try {
@@ -292,8 +294,7 @@ class PrimitiveReader {
         } catch (const NurbsError& e) {
             diag_.fail(r.line, std::string("NuPatch: ") + e.what());
         }
-        PatchAttributes a = primitiveAttributes();
-        for (const BezierPatch& b : patches) addBezier(b, a);
+        shape_.patches = std::move(patches);
     }
 
     // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted by subdivToBezier().
@@ -376,10 +377,23 @@ class PrimitiveReader {
                            "SubdivisionMesh scheme \"" + scheme +
                                "\" is not supported (only \"catmull-clark\"); "
                                "primitive skipped");
-            return;
+            return skip();
+        }
+        {
+            std::vector<double> topo(nverts.begin(), nverts.end());
+            topo.insert(topo.end(), verts.begin(), verts.end());
+            for (const Tag& t : tags) {
+                topo.push_back(double(t.ints.size()));
+                topo.insert(topo.end(), t.ints.begin(), t.ints.end());
+                topo.insert(topo.end(), t.floats.begin(), t.floats.end());
+            }
+            std::string words = "SubdivisionMesh with " + std::to_string(nverts.size()) + " faces and " +
+                                std::to_string(npoints) + " vertices";
+            for (const Tag& t : tags) words += " \"" + t.name + "\"";
+            setTopology(words, topo);
         }
         auto pts = positions(r, ps, npoints, "SubdivisionMesh");
-        if (!pts) return;
+        if (!pts) return skip();
         mesh.points = std::move(*pts);
         mesh.faceSizes = std::move(nverts);
         mesh.faceVerts = std::move(verts);
@@ -431,31 +445,118 @@ class PrimitiveReader {
         }
         for (const std::string& w : res.warnings)
             diag_.warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
-        PatchAttributes a = primitiveAttributes();
-        for (const BezierPatch& b : res.patches) addBezier(b, a);
+        shape_.patches = std::move(res.patches);
     }
 
   private:
-    Scene& scene_;
     const GraphicsState& state_;
     const Declarations& decls_;
     Diagnostics& diag_;
-    int requestLine_;  // line of the request being read
+    PrimitiveShape shape_;
 };
 
 }  // namespace
 
-void readPatch(const Request& r, const PrimitiveContext& c) {
-    PrimitiveReader(c, r).patch(r);
+bool isPrimitiveRequest(const std::string& name) {
+    return name == "Patch" || name == "PatchMesh" || name == "NuPatch" || name == "SubdivisionMesh";
 }
-void readPatchMesh(const Request& r, const PrimitiveContext& c) {
-    PrimitiveReader(c, r).patchMesh(r);
+
+PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c) {
+    PrimitiveReader reader(c, r);
+    if (r.name == "Patch")
+        reader.patch(r);
+    else if (r.name == "PatchMesh")
+        reader.patchMesh(r);
+    else if (r.name == "NuPatch")
+        reader.nuPatch(r);
+    else
+        reader.subdivisionMesh(r);
+    return std::move(reader.shape());
 }
-void readNuPatch(const Request& r, const PrimitiveContext& c) {
-    PrimitiveReader(c, r).nuPatch(r);
-}
-void readSubdivisionMesh(const Request& r, const PrimitiveContext& c) {
-    PrimitiveReader(c, r).subdivisionMesh(r);
+
+void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<double>& times,
+                  const PrimitiveContext& c) {
+    for (const PrimitiveShape& k : keys)
+        if (k.skipped) return;
+    Scene& scene = c.scene;
+    const Transform& ctm = c.state.transform();
+    const double open = scene.camera.shutterOpen;
+    const int line = keys.front().line;
+    PatchAttributes a;
+    a.material = materialIndex(scene, c.state.attributes().surface);
+    a.object = scene.objectCount++;
+    a.shadingRate = c.state.attributes().shadingRate;
+    a.twoSided = c.state.attributes().twoSided;
+    a.motionFactor = c.state.attributes().motionFactor;
+    a.focusFactor = c.state.attributes().focusFactor;
+    // RI spec 4.2.4: the surface's outside depends on the orientation attribute and on the handedness of
+    // the current (object-to-camera) transformation, here at shutter open.
+    const bool mirrored = (scene.camera.cameraFromWorld * ctm.at(open)).det3() < 0;
+    a.flipNormal = c.state.attributes().rightHanded != mirrored;
+
+    // The key times: the deformation keys' and the CTM's (refined to 2 degrees per segment).
+    std::optional<std::vector<double>> ctmTimes = ctm.sampleTimes();
+    if (!ctmTimes)
+        c.diag.fail(line, keys.front().request + ": the moving transformation needs more than " +
+                              std::to_string(kMaxMotionKeys) + " keys (at most 2 degrees of turn each)");
+    std::vector<double> sample = std::move(*ctmTimes);
+    if (keys.size() > 1) sample.insert(sample.end(), times.begin(), times.end());
+    std::sort(sample.begin(), sample.end());
+    std::vector<float> T;  // as stored: strictly increasing in single precision
+    for (double t : sample)
+        if (T.empty() || float(t) > T.back()) T.push_back(float(t));
+    if (T.size() > kMaxMotionKeys)
+        c.diag.fail(line, keys.front().request + ": more than " + std::to_string(kMaxMotionKeys) +
+                              " motion keys (deformation and transformation times together)");
+
+    // Bezier patches are affinely invariant: transforming the control points transforms the surface.
+    auto transformed = [&](const Mat4& m, const BezierPatch& object) {
+        BezierPatch b;
+        for (int k = 0; k < 16; ++k) b.cp[k] = m.point(object.cp[k]);
+        checkFinite(b, line, c.diag);
+        return b;
+    };
+    const size_t n = keys.front().patches.size();
+    if (T.size() < 2) {
+        const Mat4 m = ctm.at(open);
+        for (size_t j = 0; j < n; ++j) {
+            scene.patches.push_back(transformed(m, keys.front().patches[j]));
+            scene.attributes.push_back(a);
+        }
+        return;
+    }
+    std::vector<Mat4> worldFromObject(T.size());
+    for (size_t k = 0; k < T.size(); ++k) worldFromObject[k] = ctm.at(T[k]);
+    // Deformation: the object-space control points move linearly between their keys (clamped outside).
+    auto objectAt = [&](size_t j, double t) -> BezierPatch {
+        if (keys.size() < 2 || t <= times.front()) return keys.front().patches[j];
+        if (t >= times.back()) return keys.back().patches[j];
+        size_t s = 1;
+        while (times[s] < t) ++s;
+        const float w = float((t - times[s - 1]) / (times[s] - times[s - 1]));
+        BezierPatch p;
+        for (int q = 0; q < 16; ++q)
+            p.cp[q] = lerp(keys[s - 1].patches[j].cp[q], keys[s].patches[j].cp[q], w);
+        return p;
+    };
+    std::vector<BezierPatch> world(T.size());
+    for (size_t j = 0; j < n; ++j) {
+        bool same = true;
+        for (size_t k = 0; k < T.size(); ++k) {
+            world[k] = transformed(worldFromObject[k], objectAt(j, T[k]));
+            for (int q = 0; q < 16 && same && k > 0; ++q) same = world[k].cp[q] == world[0].cp[q];
+        }
+        PatchAttributes pa = a;
+        if (!same) {
+            pa.motion = {uint32_t(scene.motionPatches.size()), uint32_t(T.size())};
+            scene.motionPatches.insert(scene.motionPatches.end(), world.begin(), world.end());
+            scene.motionTimes.insert(scene.motionTimes.end(), T.begin(), T.end());
+        }
+        scene.patches.push_back(world[0]);
+        scene.attributes.push_back(pa);
+        // Scene::patches holds the patch at shutter open (clamped to its keys).
+        if (!same) scene.patches.back() = patchAtTime(scene, scene.patches.size() - 1, float(open));
+    }
 }
 
 }  // namespace tessera::rib

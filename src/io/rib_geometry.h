@@ -2,6 +2,10 @@
 // SubdivisionMesh, each converted to bicubic Bezier patches in world space and added to the scene
 // with the attributes of the current graphics state. One object id per request.
 #pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
 #include "io/rib_graphics_state.h"
 #include "io/rib_params.h"
 #include "io/rib_request.h"
@@ -17,9 +21,29 @@ struct PrimitiveContext {
     Diagnostics& diag;
 };
 
-void readPatch(const Request& r, const PrimitiveContext& c);
-void readPatchMesh(const Request& r, const PrimitiveContext& c);
-void readNuPatch(const Request& r, const PrimitiveContext& c);
-void readSubdivisionMesh(const Request& r, const PrimitiveContext& c);
+// The object-space Bezier patches of one primitive request, before the CTM is applied: what a motion
+// block collects once per time key (deformation blur, RI spec 3.2, sec. 6).
+struct PrimitiveShape {
+    std::string request;  // "Patch", "PatchMesh", ...
+    int line = 0;
+    bool skipped = false;  // not rendered (warned): e.g. "Pz" or an unsupported subdivision scheme
+    std::vector<BezierPatch> patches;
+    // What the keys of a deformation block must share, in words (e.g. `PatchMesh "bicubic" 7
+    // "nonperiodic" 4 "nonperiodic"`) and as a hash that also covers vertex indices, knots and tags.
+    std::string topology;
+    uint64_t topologyHash = 0;
+};
+
+bool isPrimitiveRequest(const std::string& name);
+// Reads Patch, PatchMesh, NuPatch or SubdivisionMesh (r.name) without adding it to the scene.
+PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c);
+// Adds one primitive to the scene with the attributes and the CTM of the graphics state. `keys` holds one
+// shape (no deformation) or one per time of `times` (a deformation block; the caller has checked that
+// their topologies match). A moving CTM and/or deformation keys give every patch keys in
+// Scene::motionPatches at the union of the deformation times and the CTM's sample times (at most 2
+// degrees of turn per segment); Scene::patches holds each patch at shutter open; patches whose keys are
+// all equal are stored as static. One object id per call.
+void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<double>& times,
+                  const PrimitiveContext& c);
 
 }  // namespace tessera::rib

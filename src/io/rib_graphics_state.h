@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/basis.h"
+#include "core/motion_transform.h"
 #include "core/transform.h"
 #include "io/rib_request.h"
 #include "scene/scene.h"
@@ -17,23 +18,49 @@
 namespace tessera::rib {
 
 // The current transformation, object to world inside the world block and object to camera before
-// it (RI spec 3.2, sec. 4.3). A value type saved and restored whole by the block stack; a motion
-// block (sec. 6, MotionBegin/MotionEnd) will make it hold one matrix per time key, which the
-// operations below then apply key by key. Today it holds one matrix.
+// it (RI spec 3.2, sec. 4.3). A value type saved and restored whole by the block stack. A motion block
+// (sec. 6, MotionBegin/MotionEnd) makes it move: it is kept as the product of its factors, static
+// matrices and moving ones (the keys of one motion block each), and evaluated at a time by interpolating
+// each moving factor on its own (decomposed, core/motion_transform.h) and multiplying. So a Rotate block
+// followed by a static Translate moves the object on the arc of the rotation, not on the chord that
+// interpolating the product's keys would give; two moving factors with different times are evaluated at
+// the union of their times.
+// At most this many times per motion block and keys per moving patch or camera (docs/errors.md): 2048
+// degrees of turn at 2 degrees per key; more is an input error, not an allocation.
+inline constexpr size_t kMaxMotionKeys = 1025;
+
 class Transform {
   public:
-    Transform() = default;  // identity
-    explicit Transform(const Mat4& m) : matrix_(m) {}
+    Transform() : factors_(1) {}  // identity
+    explicit Transform(const Mat4& m) : factors_{{m, {}}} {}
+    // The transform of one motion block: its keys in time order (at least 2). Keys that are all equal
+    // give a static transform.
+    static Transform moving(std::vector<TransformKey> keys);
 
-    const Mat4& matrix() const { return matrix_; }
-    // Each transformation request concatenates on the object side: CTM = CTM * m.
-    void concatenate(const Mat4& m) { matrix_ = matrix_ * m; }
+    bool moving() const;
+    // The transform at scene time `time` (each moving factor clamped to its own keys).
+    Mat4 at(double time) const;
+    // The times at which the object-to-world transform must be evaluated so that the control points,
+    // moving linearly between them (the scene's motion model), follow it: the union of the factors' key
+    // times, with further times so that no segment turns more than `maxAngleRadians` (the sum over the
+    // factors, which bounds the turn of their product). Empty for a static transform; nullopt when that
+    // takes more than kMaxMotionKeys times.
+    std::optional<std::vector<double>> sampleTimes(double maxAngleRadians = kMaxMotionSegmentRadians) const;
+    // at() at each of sampleTimes(): the keys of a moving camera, refined (nullopt: too many).
+    std::optional<std::vector<TransformKey>> keys(double maxAngleRadians = kMaxMotionSegmentRadians) const;
+
+    // Each transformation request concatenates on the object side: CTM = CTM * m (per key).
+    void concatenate(const Mat4& m);
+    void concatenate(const Transform& t);
     bool isIdentity() const;
     bool isFinite() const;
-    Vec3 point(Vec3 p) const { return matrix_.point(p); }
 
   private:
-    Mat4 matrix_;
+    struct Factor {
+        Mat4 matrix;                     // when static
+        std::vector<TransformKey> keys;  // when moving (2 or more)
+    };
+    std::vector<Factor> factors_;  // never empty; no two static factors next to each other
 };
 
 // Attributes that primitives take from the graphics state (RI spec 3.2, sec. 4.2).
@@ -45,6 +72,8 @@ struct Attributes {
     bool rightHanded = false;  // Orientation "rh"/"inside"; the initial "outside" counts as "lh"
     Basis uBasis = bezierBasis(), vBasis = bezierBasis();
     std::string identifier;
+    // GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis; scene.h PatchAttributes).
+    float motionFactor = 0.f, focusFactor = 0.f;
 };
 
 enum class Block { Frame, World, Attribute, Transform };

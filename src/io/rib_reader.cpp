@@ -5,11 +5,14 @@
 #include "io/rib_reader.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <string_view>
 #include <unordered_map>
 
@@ -60,7 +63,12 @@ class RibReader {
     void parse(RibLexer& lex) {
         while (true) {
             Token t = lex.next();
-            if (t.type == TokenType::End) return;
+            if (t.type == TokenType::End) {
+                if (motion_)
+                    diag_.fail(lex.eofLine(), "end of file inside the motion block opened at " +
+                                                  motion_->file + ":" + std::to_string(motion_->line));
+                return;
+            }
             if (t.type != TokenType::Request)
                 diag_.fail(t.line, "expected a RIB request, found " + describe(t));
             Request r{t.text, t.line, {}};
@@ -68,6 +76,10 @@ class RibReader {
             collectArgs(lex, r, /*tolerant=*/!h || skipUntil_.has_value());
             if (skipUntil_) {  // inside a frame or world we do not load
                 if (r.name == *skipUntil_) skipUntil_.reset();
+                continue;
+            }
+            if (motion_ && r.name != "MotionEnd") {
+                motionRequest(r, h);
                 continue;
             }
             if (!h) {
@@ -166,6 +178,13 @@ class RibReader {
             return;
         }
         ++worldsSeen_;
+        // Camera motion blocks come before WorldBegin, possibly before Shutter: their times are checked now.
+        for (const MotionBlock& m : cameraMotion_) checkShutterTimes(m);
+        if (!cameraMotion_.empty() && !scene_.camera.hasShutter())
+            diag_.warnOnce("closedshutter", r.line,
+                           "the camera moves but the shutter is closed (Shutter " +
+                               fmtNum(scene_.camera.shutterOpen) + " " + fmtNum(scene_.camera.shutterClose) +
+                               "): no motion blur, rendered at shutter open");
         state_.beginWorld(r, scene_.camera, diag_);
     }
     void worldEnd(const Request& r, const Arguments&) { state_.end(Block::World, r, diag_); }
@@ -287,6 +306,89 @@ class RibReader {
         }
         scene_.image.displayName = name;
     }
+    // Options that must come before WorldBegin (RI spec 3.2, sec. 4.1); false: ignore the request (after
+    // the world block, warned).
+    bool beforeWorld(const Request& r) {
+        if (state_.inWorld())
+            diag_.fail(r.line, r.name + " is an option (RI spec 3.2, sec. 4.1): give it before WorldBegin");
+        if (worldsSeen_ > 0) {
+            diag_.warn(r.line, r.name + " after the world block has no effect; ignored");
+            return false;
+        }
+        return true;
+    }
+    // Shutter open close (RI spec 3.2, sec. 4.1.1): the times the camera sees; RI default 0 0 (no blur).
+    void shutter(const Request& r, const Arguments& args) {
+        auto v = args.numbers(2, "open close");
+        if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || std::fabs(v[0]) > 1e30 || std::fabs(v[1]) > 1e30)
+            diag_.fail(r.line, "Shutter: open and close must be finite numbers");
+        if (v[1] < v[0])
+            diag_.fail(r.line, "Shutter: close (" + fmtNum(v[1]) + ") is before open (" + fmtNum(v[0]) + ")");
+        if (!beforeWorld(r)) return;
+        scene_.camera.shutterOpen = float(v[0]);
+        scene_.camera.shutterClose = float(v[1]);
+    }
+    // DepthOfField fstop focallength focaldistance (RI spec 3.2, sec. 4.1.1); no arguments: a pinhole.
+    void depthOfField(const Request& r, const Arguments& args) {
+        Camera& c = scene_.camera;
+        if (r.args.empty()) {
+            if (!beforeWorld(r)) return;
+            c.fStop = std::numeric_limits<float>::infinity();
+            return;
+        }
+        if (r.args.size() != 3 && !(r.args.size() == 1 && r.args[0].isArray()))
+            diag_.fail(
+                r.line,
+                "DepthOfField takes fstop focallength focaldistance, or no arguments for a pinhole camera");
+        auto v = args.numbers(3, "fstop focallength focaldistance");
+        if (!(v[0] > 0) || !(v[1] > 0 && v[1] < 1e30) || !(v[2] > 0 && v[2] < 1e30))
+            diag_.fail(r.line, "DepthOfField: fstop, focallength and focaldistance must be positive (got " +
+                                   fmtNum(v[0]) + " " + fmtNum(v[1]) + " " + fmtNum(v[2]) + ")");
+        if (!beforeWorld(r)) return;
+        c.fStop = float(v[0]);
+        c.focalLength = float(v[1]);
+        c.focalDistance = float(v[2]);
+    }
+    // Hider "hidden" (RI spec 3.2, sec. 4.1.5) with our motion-blur parameters (docs/motion.md):
+    // "string blursampling" "simple" | "interleaved" | "bbox", "int blurtilesize" K (2..16),
+    // "int blurpermutations" P (1..4096).
+    void hider(const Request& r, const Arguments& args) {
+        args.atLeast(1, "type ...parameterlist...");
+        const std::string& type = args.string(0);
+        auto ps = parseParams(r, 1, decls_, diag_);
+        if (type != "hidden") {
+            diag_.warnOnce("hider:" + type, r.line,
+                           "Hider \"" + type + "\" is not supported; the hidden-surface hider is used");
+            return;
+        }
+        for (const Param& p : ps) {
+            if (p.name == "blursampling") {
+                std::string v = paramString(r, p, diag_);
+                if (v != "simple" && v != "interleaved" && v != "bbox")
+                    diag_.fail(p.line,
+                               "Hider \"hidden\": \"blursampling\" must be \"simple\", "
+                               "\"interleaved\" or \"bbox\", found \"" +
+                                   printable(v) + "\"");
+                scene_.image.blurSampling = v;
+            } else if (p.name == "blurtilesize" || p.name == "blurpermutations") {
+                const bool tile = p.name == "blurtilesize";
+                const float v = paramFloat(r, p, diag_);
+                const int lo = tile ? 2 : 1, hi = tile ? 16 : 4096;
+                if (!(v >= lo && v <= hi) || v != std::floor(v))
+                    diag_.fail(p.line, "Hider \"hidden\": \"" + p.name + "\" must be an integer from " +
+                                           std::to_string(lo) + " to " + std::to_string(hi) + ", found " +
+                                           fmtNum(v));
+                (tile ? scene_.image.blurTileSize : scene_.image.blurPermutations) = int(v);
+            } else {
+                warnIgnoredParam(p, "Hider \"hidden\"", diag_);
+            }
+        }
+    }
+    static std::string fmtNum(double v) {
+        char buf[40];
+        std::snprintf(buf, sizeof buf, "%.9g", v);
+        return buf;
+    }
     void option(const Request& r, const Arguments& args) {
         args.atLeast(1, "name ...parameterlist...");
         const std::string& name = args.string(0);
@@ -310,6 +412,23 @@ class RibReader {
             return;
         }
         diag_.warnOnce("attribute:" + name, r.line, "Attribute \"" + name + "\" is not supported; ignored");
+    }
+    // GeometricApproximation type value (RI spec 3.2, sec. 4.2.5): "motionfactor" and "focusfactor" (PRMan,
+    // Aqsis) coarsen the shading of blurred geometry; "flatness" and others are not used.
+    void geometricApproximation(const Request& r, const Arguments& args) {
+        args.count(2, "type value");
+        const std::string& type = args.string(0);
+        const double v = args.number(1);
+        if (type == "motionfactor" || type == "focusfactor") {
+            if (!(v >= 0 && v < 1e30))
+                diag_.fail(r.args[1].line,
+                           "GeometricApproximation \"" + type + "\" must be >= 0, got " + fmtNum(v));
+            (type == "motionfactor" ? state_.attributes().motionFactor : state_.attributes().focusFactor) =
+                float(v);
+            return;
+        }
+        diag_.warnOnce("geomapprox:" + type, r.line,
+                       "GeometricApproximation \"" + printable(type) + "\" is not supported; ignored");
     }
     void color(const Request&, const Arguments& args) {
         auto v = args.numbers(3, "r g b");
@@ -387,8 +506,14 @@ class RibReader {
         Light light;
         light.type = shader->type;
         light.color = params.lightcolor * params.intensity;
-        light.from = state_.transform().point(params.from);
-        light.to = state_.transform().point(params.to);
+        // Lights do not move: a light under a moving transformation is placed where it is at shutter open.
+        const Mat4 m = state_.transform().at(scene_.camera.shutterOpen);
+        if (state_.transform().moving())
+            diag_.warnOnce(
+                "movinglight", r.line,
+                "LightSource under a moving transformation: lights do not move, placed at shutter open");
+        light.from = m.point(params.from);
+        light.to = m.point(params.to);
         light.coneAngle = params.coneangle;
         light.coneDeltaAngle = params.conedeltaangle;
         light.beamDistribution = params.beamdistribution;
@@ -443,27 +568,32 @@ class RibReader {
         args.count(0, "no arguments");
         state_.transform() = Transform();
     }
-    static Mat4 matrixArg(const Arguments& args) {
-        auto v = args.numbers(16, "a 4x4 matrix");
+    // The matrix of Translate, Rotate, Scale, ConcatTransform or Transform (one key of a motion block).
+    Mat4 transformMatrix(const Request& r, const Arguments& args) const {
+        if (r.name == "Translate") {
+            auto v = args.numbers(3, "dx dy dz");
+            return Mat4::translate(v[0], v[1], v[2]);
+        }
+        if (r.name == "Rotate") {
+            auto v = args.numbers(4, "angle dx dy dz");
+            if (v[1] == 0 && v[2] == 0 && v[3] == 0)
+                diag_.fail(r.line, "Rotate: the axis is the zero vector");
+            return Mat4::rotate(v[0], v[1], v[2], v[3]);
+        }
+        if (r.name == "Scale") {
+            auto v = args.numbers(3, "sx sy sz");
+            return Mat4::scale(v[0], v[1], v[2]);
+        }
+        auto v = args.numbers(16, "a 4x4 matrix");  // ConcatTransform, Transform
         return Mat4::fromRib(v.data());
     }
     // Inside the world the CTM maps object to world space, so Transform is relative to the world.
-    void transform(const Request&, const Arguments& args) { state_.transform() = Transform(matrixArg(args)); }
-    void concatTransform(const Request&, const Arguments& args) {
-        state_.transform().concatenate(matrixArg(args));
+    void transform(const Request& r, const Arguments& args) {
+        state_.transform() = Transform(transformMatrix(r, args));
     }
-    void translate(const Request&, const Arguments& args) {
-        auto v = args.numbers(3, "dx dy dz");
-        state_.transform().concatenate(Mat4::translate(v[0], v[1], v[2]));
-    }
-    void rotate(const Request& r, const Arguments& args) {
-        auto v = args.numbers(4, "angle dx dy dz");
-        if (v[1] == 0 && v[2] == 0 && v[3] == 0) diag_.fail(r.line, "Rotate: the axis is the zero vector");
-        state_.transform().concatenate(Mat4::rotate(v[0], v[1], v[2], v[3]));
-    }
-    void scale(const Request&, const Arguments& args) {
-        auto v = args.numbers(3, "sx sy sz");
-        state_.transform().concatenate(Mat4::scale(v[0], v[1], v[2]));
+    // ConcatTransform, Translate, Rotate, Scale.
+    void concatenate(const Request& r, const Arguments& args) {
+        state_.transform().concatenate(transformMatrix(r, args));
     }
     void coordinateSystem(const Request&, const Arguments& args) {
         args.count(1, "name");
@@ -479,10 +609,193 @@ class RibReader {
 
     // ---- geometry (RI spec 3.2, sec. 5; rib_geometry.h) ----------------------------------------
     PrimitiveContext primitiveContext() { return {scene_, state_, decls_, diag_}; }
-    void patch(const Request& r, const Arguments&) { readPatch(r, primitiveContext()); }
-    void patchMesh(const Request& r, const Arguments&) { readPatchMesh(r, primitiveContext()); }
-    void nuPatch(const Request& r, const Arguments&) { readNuPatch(r, primitiveContext()); }
-    void subdivisionMesh(const Request& r, const Arguments&) { readSubdivisionMesh(r, primitiveContext()); }
+    void primitive(const Request& r, const Arguments&) {
+        std::vector<PrimitiveShape> shape;
+        shape.push_back(readPrimitiveShape(r, primitiveContext()));
+        addPrimitive(shape, {}, primitiveContext());
+    }
+
+    // ---- motion blocks (RI spec 3.2, sec. 6) -----------------------------------------------------
+    // MotionBegin [t0 t1 ...] ... MotionEnd: every request in the block gives one key, in the order of the
+    // times. Transformations (Translate, Rotate, Scale, ConcatTransform, Transform) make the CTM move
+    // (before WorldBegin: the camera); primitives given once per time with the same topology deform.
+    struct MotionBlock {
+        std::vector<double> times;
+        std::string file;
+        int line = 0;
+        std::string kind;  // the first request's name
+        int kindLine = 0;
+        size_t count = 0;                    // requests so far
+        std::vector<Mat4> matrices;          // transformation keys
+        std::vector<std::array<double, 4>> rotations;  // Rotate keys: angle dx dy dz
+        std::vector<PrimitiveShape> shapes;  // deformation keys
+    };
+    void motionBegin(const Request& r, const Arguments&) {
+        MotionBlock m;
+        m.file = diag_.file();
+        m.line = r.line;
+        for (const Value& v : r.args) {
+            if (!v.numeric())
+                diag_.fail(v.line, "MotionBegin: the times must be numbers, found " + describe(v));
+            m.times.insert(m.times.end(), v.nums.begin(), v.nums.end());
+        }
+        if (m.times.size() < 2)
+            diag_.fail(r.line, "MotionBegin needs at least 2 times, got " + std::to_string(m.times.size()));
+        if (m.times.size() > kMaxMotionKeys)
+            diag_.fail(r.line, "MotionBegin: more than " + std::to_string(kMaxMotionKeys) + " times");
+        for (size_t i = 0; i < m.times.size(); ++i) {
+            if (!std::isfinite(m.times[i]) || std::fabs(m.times[i]) > 1e30)
+                diag_.fail(r.line, "MotionBegin: the times must be finite numbers");
+            if (i > 0 && !(float(m.times[i]) > float(m.times[i - 1])))
+                diag_.fail(r.line, "MotionBegin: the times must increase, but " + fmtNum(m.times[i]) +
+                                       " follows " + fmtNum(m.times[i - 1]));
+        }
+        if (state_.inWorld()) checkShutterTimes(m);  // Shutter is known (it cannot change in the world)
+        motion_ = std::move(m);
+    }
+    // With an open shutter (close > open) every key must lie inside it. A closed shutter (the RI default
+    // 0 0) renders no blur: the keys are kept (--shutter may open it) and the scene is at shutter open,
+    // clamped to the keys.
+    void checkShutterTimes(const MotionBlock& m) const {
+        const Camera& c = scene_.camera;
+        if (!c.hasShutter()) return;
+        for (double t : m.times)
+            if (float(t) < c.shutterOpen || float(t) > c.shutterClose)
+                throw InputError(m.file, m.line,
+                                 "MotionBegin: time " + fmtNum(t) + " is outside the shutter interval [" +
+                                     fmtNum(c.shutterOpen) + ", " + fmtNum(c.shutterClose) + "] (Shutter)");
+    }
+    static bool isMovingTransform(const std::string& n) {
+        return n == "Translate" || n == "Rotate" || n == "Scale" || n == "ConcatTransform" ||
+               n == "Transform";
+    }
+    // RI spec 3.2, sec. 6 lists the requests a motion block may hold: transformations, geometric primitives
+    // and shading requests. Of those, moving shading (Color, Opacity, Surface, LightSource) is read at its
+    // first key with a warning; ones this reader does not support at all (Skew, Perspective, Sphere, ...)
+    // are ignored with the usual warning. Anything else (attribute and transform blocks, options, Identity,
+    // ShadingRate, ...) is an error, like a nested MotionBegin.
+    void motionRequest(const Request& r, Handler h) {
+        MotionBlock& m = *motion_;
+        const std::string where =
+            " (the motion block opened at " + m.file + ":" + std::to_string(m.line) + ")";
+        if (r.name == "MotionBegin") diag_.fail(r.line, "nested MotionBegin" + where + " is still open");
+        static const std::set<std::string> shading = {"Color", "Opacity", "Surface", "LightSource"};
+        static const std::set<std::string> riMoving = {"Skew",           "Perspective",
+                                                       "Deformation",    "Displacement",
+                                                       "Interior",       "Exterior",
+                                                       "Atmosphere",     "AreaLightSource",
+                                                       "Bound",          "Detail",
+                                                       "Polygon",        "GeneralPolygon",
+                                                       "PointsPolygons", "PointsGeneralPolygons",
+                                                       "Sphere",         "Cone",
+                                                       "Cylinder",       "Hyperboloid",
+                                                       "Paraboloid",     "Disk",
+                                                       "Torus",          "Points",
+                                                       "Curves",         "Blobby",
+                                                       "TrimCurve"};
+        const bool transform = isMovingTransform(r.name), primitive = isPrimitiveRequest(r.name),
+                   shade = shading.count(r.name) > 0, unsupported = !h && riMoving.count(r.name) > 0;
+        if (!h && !unsupported) {  // not a RI request we know: ignored as anywhere else
+            diag_.warnOnce("request:" + r.name, r.line,
+                           "unknown or unsupported request '" + r.name + "' ignored");
+            return;
+        }
+        if (!transform && !primitive && !shade && !unsupported)
+            diag_.fail(r.line, r.name + " is not allowed inside a motion block" + where +
+                                   ": RI spec 3.2, sec. 6 allows only transformations, geometric primitives "
+                                   "and shading requests there");
+        if (m.count == 0) {
+            m.kind = r.name;
+            m.kindLine = r.line;
+        } else if (r.name != m.kind) {
+            diag_.fail(r.line, "motion block mixes " + m.kind + " (line " + std::to_string(m.kindLine) +
+                                   ") and " + r.name + where +
+                                   ": all requests in a motion block must be the same (RI spec 3.2, sec. 6)");
+        }
+        if (m.count == m.times.size())
+            diag_.fail(r.line, "more " + r.name + " requests than the " + std::to_string(m.times.size()) +
+                                   " times of MotionBegin" + where);
+        ++m.count;
+        Arguments args(r, diag_);
+        if (transform) {
+            m.matrices.push_back(transformMatrix(r, args));
+            if (r.name == "Rotate") {
+                auto v = args.numbers(4, "angle dx dy dz");
+                m.rotations.push_back({v[0], v[1], v[2], v[3]});
+            }
+        } else if (primitive) {
+            m.shapes.push_back(readPrimitiveShape(r, primitiveContext()));
+            const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
+            if (b.topology != a.topology || b.topologyHash != a.topologyHash ||
+                (!a.skipped && !b.skipped && a.patches.size() != b.patches.size()))
+                diag_.fail(r.line,
+                           "deformation keys must have the same topology" + where + ": key " +
+                               std::to_string(m.count) + " is " + b.topology + ", key 1 (line " +
+                               std::to_string(a.line) + ") is " + a.topology +
+                               (b.topology == a.topology ? " with other vertex indices, knots or tags" : ""));
+        } else if (m.count == 1) {
+            if (shade)
+                diag_.warnOnce(
+                    "motion:" + r.name, r.line,
+                    r.name + " in a motion block: moving shading is not supported; the first key is used");
+            if (h)
+                (this->*h)(r, args);
+            else
+                diag_.warnOnce("request:" + r.name, r.line,
+                               "unknown or unsupported request '" + r.name + "' ignored");
+        }
+    }
+    void motionEnd(const Request& r, const Arguments& args) {
+        args.count(0, "no arguments");
+        if (!motion_) diag_.fail(r.line, "MotionEnd without a matching MotionBegin");
+        MotionBlock m = std::move(*motion_);
+        motion_.reset();
+        if (state_.inWorld() && !scene_.camera.hasShutter())
+            diag_.warnOnce("closedshutter", r.line,
+                           "motion block with a closed shutter (Shutter " +
+                               fmtNum(scene_.camera.shutterOpen) + " " + fmtNum(scene_.camera.shutterClose) +
+                               "): no motion blur, the scene is rendered at shutter open");
+        if (m.count != m.times.size())
+            diag_.fail(r.line, "the motion block opened at " + m.file + ":" + std::to_string(m.line) +
+                                   " has " + std::to_string(m.times.size()) + " times but " +
+                                   std::to_string(m.count) + " requests");
+        if (isMovingTransform(m.kind)) {
+            std::vector<TransformKey> keys;
+            for (size_t i = 0; i < m.times.size(); ++i) {
+                // Rotate keys about the same axis interpolate their angle, so that a turn of 180 degrees or
+                // more between two keys (Rotate 0 ... Rotate 360) keeps its direction and size: keys every 90
+                // degrees in between, which the decomposed interpolation then follows exactly.
+                if (i > 0 && !m.rotations.empty()) {
+                    const auto &a = m.rotations[i - 1], &b = m.rotations[i];
+                    const double la = std::sqrt(a[1] * a[1] + a[2] * a[2] + a[3] * a[3]),
+                                 lb = std::sqrt(b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
+                    const bool sameAxis =
+                        a[1] / la == b[1] / lb && a[2] / la == b[2] / lb && a[3] / la == b[3] / lb;
+                    const double pieces = std::ceil(std::fabs(b[0] - a[0]) / 90.0);
+                    if (sameAxis && pieces > 1) {
+                        if (pieces + double(keys.size()) > double(kMaxMotionKeys))
+                            diag_.fail(r.line, "MotionEnd: the Rotate keys turn by more than " +
+                                                   std::to_string(90 * kMaxMotionKeys) + " degrees");
+                        for (int k = 1; k < int(pieces); ++k) {
+                            const double w = k / pieces;
+                            keys.push_back({m.times[i - 1] + w * (m.times[i] - m.times[i - 1]),
+                                            Mat4::rotate(a[0] + w * (b[0] - a[0]), a[1], a[2], a[3])});
+                        }
+                    }
+                }
+                keys.push_back({m.times[i], m.matrices[i]});
+            }
+            const Transform moving = Transform::moving(std::move(keys));
+            if (!moving.isFinite()) diag_.fail(r.line, "MotionEnd: a transformation key is not finite");
+            if (m.kind == "Transform")
+                state_.transform() = moving;
+            else
+                state_.transform().concatenate(moving);
+            if (!state_.inWorld() && moving.moving()) cameraMotion_.push_back(std::move(m));
+        } else if (isPrimitiveRequest(m.kind)) {
+            addPrimitive(m.shapes, m.times, primitiveContext());
+        }
+    }
 
     // ---- ReadArchive (RI spec 3.2, sec. 8.1) -----------------------------------------------------
     void readArchive(const Request& r, const Arguments& args) {
@@ -551,16 +864,22 @@ class RibReader {
             {"Declare", &RibReader::declare},
             {"Identity", &RibReader::identity},
             {"Transform", &RibReader::transform},
-            {"ConcatTransform", &RibReader::concatTransform},
-            {"Translate", &RibReader::translate},
-            {"Rotate", &RibReader::rotate},
-            {"Scale", &RibReader::scale},
+            {"ConcatTransform", &RibReader::concatenate},
+            {"Translate", &RibReader::concatenate},
+            {"Rotate", &RibReader::concatenate},
+            {"Scale", &RibReader::concatenate},
+            {"Shutter", &RibReader::shutter},
+            {"DepthOfField", &RibReader::depthOfField},
+            {"Hider", &RibReader::hider},
+            {"GeometricApproximation", &RibReader::geometricApproximation},
+            {"MotionBegin", &RibReader::motionBegin},
+            {"MotionEnd", &RibReader::motionEnd},
             {"CoordinateSystem", &RibReader::coordinateSystem},
             {"CoordSysTransform", &RibReader::coordSysTransform},
-            {"Patch", &RibReader::patch},
-            {"PatchMesh", &RibReader::patchMesh},
-            {"NuPatch", &RibReader::nuPatch},
-            {"SubdivisionMesh", &RibReader::subdivisionMesh},
+            {"Patch", &RibReader::primitive},
+            {"PatchMesh", &RibReader::primitive},
+            {"NuPatch", &RibReader::primitive},
+            {"SubdivisionMesh", &RibReader::primitive},
             {"ReadArchive", &RibReader::readArchive},
         };
         auto it = handlers.find(name);
@@ -573,6 +892,8 @@ class RibReader {
     Declarations decls_;
     GraphicsState state_;
     std::optional<std::string> skipUntil_;
+    std::optional<MotionBlock> motion_;      // the open motion block
+    std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;
     int archiveDepth_ = 0;  // ReadArchive nesting of the file being read
 };

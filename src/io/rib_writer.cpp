@@ -121,15 +121,39 @@ void writeRib(const Scene& scene, std::ostream& o) {
     else
         o << "Exposure " << num(img.exposureGain) << " " << num(img.exposureGamma) << "\n";
     if (!img.displayName.empty()) o << "Display " << quoted(img.displayName) << " \"file\" \"rgba\"\n";
+    // Motion blur and depth of field (RI spec 3.2, sec. 4.1.1 and 4.1.5; docs/motion.md).
+    if (cam.shutterOpen != 0.f || cam.shutterClose != 0.f)
+        o << "Shutter " << num(cam.shutterOpen) << " " << num(cam.shutterClose) << "\n";
+    if (cam.lensRadius() > 0.f)
+        o << "DepthOfField " << num(cam.fStop) << " " << num(cam.focalLength) << " " << num(cam.focalDistance)
+          << "\n";
+    if (!img.blurSampling.empty() || img.blurTileSize > 0 || img.blurPermutations > 0) {
+        o << "Hider \"hidden\"";
+        if (!img.blurSampling.empty()) o << " \"string blursampling\" " << quoted(img.blurSampling);
+        if (img.blurTileSize > 0) o << " \"int blurtilesize\" [" << img.blurTileSize << "]";
+        if (img.blurPermutations > 0) o << " \"int blurpermutations\" [" << img.blurPermutations << "]";
+        o << "\n";
+    }
     if (cam.perspective)
         o << "Projection \"perspective\" \"fov\" [" << num(cam.fovDegrees) << "]\n";
     else
         o << "Projection \"orthographic\"\n";
     // RIB matrices are row-major for row vectors: element [i*4+j] is our m[j][i].
-    o << "Transform [";
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) o << (i || j ? " " : "") << num(cam.cameraFromWorld.m[j][i]);
-    o << "]\n";
+    auto transform = [&](const Mat4& m) {
+        o << "Transform [";
+        for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j) o << (i || j ? " " : "") << num(m.m[j][i]);
+        o << "]\n";
+    };
+    if (cam.motion.size() > 1) {  // a moving camera: its (refined) keys
+        o << "MotionBegin [";
+        for (size_t k = 0; k < cam.motion.size(); ++k) o << (k ? " " : "") << num(cam.motion[k].time);
+        o << "]\n";
+        for (const TransformKey& k : cam.motion) transform(k.matrix);
+        o << "MotionEnd\n";
+    } else {
+        transform(cam.cameraFromWorld);
+    }
     o << "WorldBegin\n";
     int handle = 1;
     for (const Light& l : scene.lights) {
@@ -167,16 +191,32 @@ void writeRib(const Scene& scene, std::ostream& o) {
         o << "ShadingRate " << num(a.shadingRate) << "\n";
         o << "Sides " << (a.twoSided ? 2 : 1) << "\n";
         o << "Orientation \"" << ((a.flipNormal != mirrored) ? "rh" : "lh") << "\"\n";
+        if (a.motionFactor != 0.f)
+            o << "GeometricApproximation \"motionfactor\" " << num(a.motionFactor) << "\n";
+        if (a.focusFactor != 0.f)
+            o << "GeometricApproximation \"focusfactor\" " << num(a.focusFactor) << "\n";
         // One block per run of patches with the same attributes.
         for (; i < scene.patches.size(); ++i) {
             const PatchAttributes& b = i < scene.attributes.size() ? scene.attributes[i] : defaults;
             if (b.material != a.material || b.object != a.object || b.shadingRate != a.shadingRate ||
-                b.twoSided != a.twoSided || b.flipNormal != a.flipNormal)
+                b.twoSided != a.twoSided || b.flipNormal != a.flipNormal ||
+                b.motionFactor != a.motionFactor || b.focusFactor != a.focusFactor)
                 break;
-            o << "Patch \"bicubic\" \"P\" [";
-            const BezierPatch& p = scene.patches[i];
-            for (int k = 0; k < 16; ++k) o << (k ? " " : "") << triple(p.cp[k]);
-            o << "]\n";
+            auto patch = [&](const BezierPatch& p) {
+                o << "Patch \"bicubic\" \"P\" [";
+                for (int k = 0; k < 16; ++k) o << (k ? " " : "") << triple(p.cp[k]);
+                o << "]\n";
+            };
+            if (b.motion.moving()) {  // deformation keys, world space (RI spec 3.2, sec. 6)
+                o << "MotionBegin [";
+                for (uint32_t k = 0; k < b.motion.count; ++k)
+                    o << (k ? " " : "") << num(scene.motionTimes[b.motion.first + k]);
+                o << "]\n";
+                for (uint32_t k = 0; k < b.motion.count; ++k) patch(scene.motionPatches[b.motion.first + k]);
+                o << "MotionEnd\n";
+            } else {
+                patch(scene.patches[i]);
+            }
         }
         o << "AttributeEnd\n";
     }
