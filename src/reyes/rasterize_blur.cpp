@@ -249,47 +249,10 @@ inline Span pixelSpan(const Rect& reg, int64_t minX, int64_t maxX, int64_t minY,
     return s;
 }
 
-// Raster bound (float) of a vertex over the time interval [ua, ub] and the lens cell [lx0,lx1]x[ly0,ly1]
-// (unit-disk coordinates): the positions at both ends and at every knot inside (the path is straight
-// between knots), each grown by the shift range of the lens cell at its depth.
 struct Bound2 {
     float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
     bool valid = true;
 };
-inline void extendVertexBound(const Grid& g, int v, const std::vector<float>& knots, float ua, float ub, float lx0,
-                              float lx1, float ly0, float ly1, float sx, float sy, Bound2& bd) {
-    const size_t n = size_t(g.vertexCount());
-    auto add = [&](float x, float y, float c, bool valid) {
-        if (!valid) {
-            bd.valid = false;
-            return;
-        }
-        const float ax = c * sx, ay = c * sy;
-        bd.x0 = std::min(bd.x0, x + std::min(lx0 * ax, lx1 * ax)), bd.x1 = std::max(bd.x1, x + std::max(lx0 * ax, lx1 * ax));
-        bd.y0 = std::min(bd.y0, y + std::min(ly0 * ay, ly1 * ay)), bd.y1 = std::max(bd.y1, y + std::max(ly0 * ay, ly1 * ay));
-    };
-    auto addAt = [&](float u) {
-        int k;
-        float w;
-        knotSegment(knots, g.knots, u, k, w);
-        if (g.knots == 1) {
-            add(g.knotX[v], g.knotY[v], g.knotC[v], g.knotValid[v]);
-            return;
-        }
-        const size_t a = size_t(k) * n + v, b = a + n;
-        add(g.knotX[a] + w * (g.knotX[b] - g.knotX[a]), g.knotY[a] + w * (g.knotY[b] - g.knotY[a]),
-            g.knotC[a] + w * (g.knotC[b] - g.knotC[a]), g.knotValid[a] & g.knotValid[b]);
-    };
-    addAt(ua);
-    if (g.knots > 1) {
-        for (int kn = 1; kn + 1 < g.knots; ++kn)
-            if (knots[kn] > ua && knots[kn] < ub) {
-                const size_t a = size_t(kn) * n + v;
-                add(g.knotX[a], g.knotY[a], g.knotC[a], g.knotValid[a]);
-            }
-        addAt(ub);
-    }
-}
 
 template <bool kAttributes>
 uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,
@@ -381,95 +344,114 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
 
     // Bounding box: per micropolygon, one bound per (time group, lens cell) (one for the whole shutter
     // and lens without strata bounds), then each sample in it at its own (t, lens). The tile's samples are
-    // sorted into fine time strata (BlurStrata); a micropolygon groups them so that it moves about one
-    // pixel per group: a slow one takes few groups (few bounds), a fast one many (few samples per bound).
+    // sorted into fine time strata (BlurStrata); the grid groups them so that its fastest vertex moves
+    // about one pixel per group: a slow grid takes few groups (few bounds), a fast one many (few samples per
+    // bound).
     const bool cut = ctx.strataBounds && !strata.start.empty();
     const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
     const int LL = L * L, cellsPerPixel = T * LL;
-    thread_local std::vector<float> edgeX, edgeY, edgeC;
-    thread_local std::vector<uint8_t> edgeValid;
+    const size_t nv = size_t(vertices);
+    float motion = 0.f;  // largest raster path of a vertex over the shutter (L1 per segment, summed)
+    bool allValid = true;
+    for (size_t v = 0; v < nv; ++v) {
+        float path = 0.f;
+        for (int kn = 0; kn < g.knots; ++kn) {
+            const size_t at = size_t(kn) * nv + v;
+            allValid = allValid && g.knotValid[at];
+            if (kn > 0) path += std::abs(g.knotX[at] - g.knotX[at - nv]) + std::abs(g.knotY[at] - g.knotY[at - nv]);
+        }
+        motion = std::max(motion, path);
+    }
+    // Cost model: a group costs a bound (about two sample tests' worth of work) and the samples in its bound
+    // number about spp (1 + motion / groups) per covered pixel, so the total is least near
+    // groups = sqrt(spp * motion / 2) (measured with callgrind on the moving teapot, docs/motion.md).
+    const int wanted = std::clamp(int(std::ceil(std::sqrt(0.5f * float(spp) * motion))), 1, T);
+    const int group = std::max(1, T / wanted), groups = (T + group - 1) / group;
+    const bool lensOn = pr.hasLens() && pr.perspective;
+    // A micropolygon's box and lens-coefficient range at each knot. Between two knots every corner moves
+    // linearly, and the minimum of linear functions is concave (the maximum convex), so the box at time t
+    // lies inside the linear interpolation of the two knot boxes: a group's bound is the union of the
+    // interpolated boxes at its ends and of the knot boxes inside it, with no per-corner work.
+    struct KnotBox {
+        float x0, x1, y0, y1, c0, c1;
+    };
+    auto lerpBox = [](const KnotBox& p, const KnotBox& q, float w) {
+        return KnotBox{p.x0 + w * (q.x0 - p.x0), p.x1 + w * (q.x1 - p.x1), p.y0 + w * (q.y0 - p.y0),
+                       p.y1 + w * (q.y1 - p.y1), p.c0 + w * (q.c0 - p.c0), p.c1 + w * (q.c1 - p.c1)};
+    };
+    thread_local std::vector<KnotBox> knotBox;
+    knotBox.resize(size_t(g.knots));
+    // The groups' ends on the knot timeline.
+    thread_local std::vector<int> endKnot;
+    thread_local std::vector<float> endWeight;
+    endKnot.resize(size_t(groups) + 1), endWeight.resize(size_t(groups) + 1);
+    for (int e = 0; e <= groups; ++e) knotSegment(knots, g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
             const int a = j * stride + i;
             const int vid[4] = {a, a + 1, a + stride + 1, a + stride};
-            const size_t nv = size_t(vertices);
-            // Quick reject: the bound over the whole shutter and lens (every corner at every knot, grown
-            // by its circle of confusion) misses this tile; most visits of a blurred grid's buckets end here.
-            float motion = 0.f;
-            {
-                Bound2 all;
+            KnotBox all{INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY, -INFINITY};
+            for (int kn = 0; kn < g.knots; ++kn) {
+                KnotBox kb{INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY, -INFINITY};
                 for (int c = 0; c < 4; ++c) {
-                    for (int kn = 0; kn < g.knots; ++kn) {
-                        const size_t at = size_t(kn) * nv + vid[c];
-                        if (!g.knotValid[at]) all.valid = false;
-                        const float gx = std::abs(g.knotC[at] * pr.sx), gy = std::abs(g.knotC[at] * pr.sy);
-                        all.x0 = std::min(all.x0, g.knotX[at] - gx), all.x1 = std::max(all.x1, g.knotX[at] + gx);
-                        all.y0 = std::min(all.y0, g.knotY[at] - gy), all.y1 = std::max(all.y1, g.knotY[at] + gy);
-                        if (kn > 0) {
-                            const size_t prev = at - nv;
-                            motion = std::max(motion, std::abs(g.knotX[at] - g.knotX[prev]) +
-                                                          std::abs(g.knotY[at] - g.knotY[prev]));
-                        }
-                    }
+                    const size_t at = size_t(kn) * nv + vid[c];
+                    kb.x0 = std::min(kb.x0, g.knotX[at]), kb.x1 = std::max(kb.x1, g.knotX[at]);
+                    kb.y0 = std::min(kb.y0, g.knotY[at]), kb.y1 = std::max(kb.y1, g.knotY[at]);
+                    kb.c0 = std::min(kb.c0, g.knotC[at]), kb.c1 = std::max(kb.c1, g.knotC[at]);
                 }
-                if (all.valid && pixelSpan(reg, int64_t(std::floor(all.x0 * kSubpixelScale)) - 1,
-                                           int64_t(std::ceil(all.x1 * kSubpixelScale)) + 1,
-                                           int64_t(std::floor(all.y0 * kSubpixelScale)) - 1,
-                                           int64_t(std::ceil(all.y1 * kSubpixelScale)) + 1)
-                                     .empty())
-                    continue;
-                if (g.knots > 2) motion *= float(g.knots - 1);  // path length bound over all segments
+                knotBox[kn] = kb;
+                all.x0 = std::min(all.x0, kb.x0), all.x1 = std::max(all.x1, kb.x1);
+                all.y0 = std::min(all.y0, kb.y0), all.y1 = std::max(all.y1, kb.y1);
+                all.c0 = std::min(all.c0, kb.c0), all.c1 = std::max(all.c1, kb.c1);
             }
-            // Time groups of `group` fine strata each.
-            const int wanted = std::clamp(int(std::ceil(motion)), 1, T);
-            const int group = std::max(1, T / wanted), groups = (T + group - 1) / group;
-            // The corners at the groups' boundaries (the path is straight between them unless a knot lies
-            // inside a group, which extendVertexBound then adds).
-            edgeX.resize(size_t(4) * (groups + 1)), edgeY.resize(edgeX.size()), edgeC.resize(edgeX.size());
-            edgeValid.resize(edgeX.size());
-            const bool innerKnots = g.knots > 2;
-            for (int c = 0; c < 4; ++c)
-                for (int e = 0; e <= groups; ++e) {
-                    int k;
-                    float w;
-                    knotSegment(knots, g.knots, float(std::min(T, e * group)) / T, k, w);
-                    const size_t ka = size_t(k) * nv + vid[c], kb = g.knots > 1 ? ka + nv : ka,
-                                 at = size_t(c) * (groups + 1) + e;
-                    edgeX[at] = g.knotX[ka] + w * (g.knotX[kb] - g.knotX[ka]);
-                    edgeY[at] = g.knotY[ka] + w * (g.knotY[kb] - g.knotY[ka]);
-                    edgeC[at] = g.knotC[ka] + w * (g.knotC[kb] - g.knotC[ka]);
-                    edgeValid[at] = g.knotValid[ka] & g.knotValid[kb];
-                }
+            // Quick reject: the bound over the whole shutter and lens misses this tile; most visits of a
+            // blurred grid's buckets end here.
+            {
+                const float cmax = std::max(std::abs(all.c0), std::abs(all.c1));
+                const float gx = cmax * std::abs(pr.sx), gy = cmax * std::abs(pr.sy);
+                if (allValid && (all.x1 + gx < float(reg.x0) - 1.f || all.x0 - gx > float(reg.x1) + 1.f ||
+                                 all.y1 + gy < float(reg.y0) - 1.f || all.y0 - gy > float(reg.y1) + 1.f))
+                    continue;
+            }
             bool front0;
             int64_t sign0;
             openFacing(vid, front0, sign0);
             for (int gi = 0; gi < groups; ++gi) {
                 const int j0 = gi * group, j1 = std::min(T, j0 + group);
-                const float ua = float(j0) / T, ub = float(j1) / T;
+                KnotBox box;
+                if (g.knots == 1) {
+                    box = knotBox[0];
+                } else {
+                    const int ka = endKnot[gi], kb = endKnot[gi + 1];
+                    const KnotBox p = lerpBox(knotBox[ka], knotBox[ka + 1], endWeight[gi]);
+                    const KnotBox q = lerpBox(knotBox[kb], knotBox[kb + 1], endWeight[gi + 1]);
+                    box = KnotBox{std::min(p.x0, q.x0), std::max(p.x1, q.x1), std::min(p.y0, q.y0),
+                                  std::max(p.y1, q.y1), std::min(p.c0, q.c0), std::max(p.c1, q.c1)};
+                    for (int kn = ka + 1; kn <= kb; ++kn) {
+                        const KnotBox& m = knotBox[kn];
+                        box = KnotBox{std::min(box.x0, m.x0), std::max(box.x1, m.x1), std::min(box.y0, m.y0),
+                                      std::max(box.y1, m.y1), std::min(box.c0, m.c0), std::max(box.c1, m.c1)};
+                    }
+                }
+                const float x0 = box.x0, x1 = box.x1, y0 = box.y0, y1 = box.y1, c0 = box.c0, c1 = box.c1;
                 for (int lc = 0; lc < LL; ++lc) {
                     const float lx0 = -1.f + 2.f * float(lc % L) / L, lx1 = -1.f + 2.f * float(lc % L + 1) / L;
                     const float ly0 = -1.f + 2.f * float(lc / L) / L, ly1 = -1.f + 2.f * float(lc / L + 1) / L;
                     Bound2 bd;
-                    if (innerKnots) {
-                        for (int c = 0; c < 4; ++c)
-                            extendVertexBound(g, vid[c], knots, ua, ub, lx0, lx1, ly0, ly1, pr.sx, pr.sy, bd);
-                    } else {
-                        for (int c = 0; c < 4; ++c)
-                            for (int e = gi; e <= gi + 1; ++e) {
-                                const size_t at = size_t(c) * (groups + 1) + e;
-                                if (!edgeValid[at]) bd.valid = false;
-                                const float ax = edgeC[at] * pr.sx, ay = edgeC[at] * pr.sy;
-                                bd.x0 = std::min(bd.x0, edgeX[at] + std::min(lx0 * ax, lx1 * ax));
-                                bd.x1 = std::max(bd.x1, edgeX[at] + std::max(lx0 * ax, lx1 * ax));
-                                bd.y0 = std::min(bd.y0, edgeY[at] + std::min(ly0 * ay, ly1 * ay));
-                                bd.y1 = std::max(bd.y1, edgeY[at] + std::max(ly0 * ay, ly1 * ay));
-                            }
+                    bd.valid = allValid;
+                    // x + l c sx >= min x + min (l c sx) over the corners (likewise for the maxima).
+                    bd.x0 = x0, bd.x1 = x1, bd.y0 = y0, bd.y1 = y1;
+                    if (lensOn) {
+                        const float xs[4] = {lx0 * c0 * pr.sx, lx0 * c1 * pr.sx, lx1 * c0 * pr.sx, lx1 * c1 * pr.sx};
+                        const float ys[4] = {ly0 * c0 * pr.sy, ly0 * c1 * pr.sy, ly1 * c0 * pr.sy, ly1 * c1 * pr.sy};
+                        bd.x0 += std::min({xs[0], xs[1], xs[2], xs[3]}), bd.x1 += std::max({xs[0], xs[1], xs[2], xs[3]});
+                        bd.y0 += std::min({ys[0], ys[1], ys[2], ys[3]}), bd.y1 += std::max({ys[0], ys[1], ys[2], ys[3]});
                     }
                     // A corner behind the near plane at some time: the moved quad of each sample decides.
-                    const int64_t bx0 = bd.valid ? int64_t(std::floor(bd.x0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
-                                  bx1 = bd.valid ? int64_t(std::ceil(bd.x1 * kSubpixelScale)) + 1 : INT64_MAX / 4,
-                                  by0 = bd.valid ? int64_t(std::floor(bd.y0 * kSubpixelScale)) - 1 : INT64_MIN / 4,
-                                  by1 = bd.valid ? int64_t(std::ceil(bd.y1 * kSubpixelScale)) + 1 : INT64_MAX / 4;
+                    const int64_t bx0 = bd.valid ? int64_t(bd.x0 * kSubpixelScale) - 2 : INT64_MIN / 4,
+                                  bx1 = bd.valid ? int64_t(bd.x1 * kSubpixelScale) + 2 : INT64_MAX / 4,
+                                  by0 = bd.valid ? int64_t(bd.y0 * kSubpixelScale) - 2 : INT64_MIN / 4,
+                                  by1 = bd.valid ? int64_t(bd.y1 * kSubpixelScale) + 2 : INT64_MAX / 4;
                     const Span sp = pixelSpan(reg, bx0, bx1, by0, by1);
                     if (sp.empty()) continue;
                     for (int py = sp.py0; py <= sp.py1; ++py)
@@ -491,9 +473,15 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                                 for (int sl = 0; sl < spp; ++sl) visit(sl);
                                 continue;
                             }
+                            const size_t base = pix * cellsPerPixel + lc;
+                            if (LL == 1) {  // the group's fine strata are one run of the pixel's list
+                                for (uint32_t e = strata.start[base + j0]; e < strata.start[base + j1]; ++e)
+                                    visit(strata.slot[e]);
+                                continue;
+                            }
                             for (int tb = j0; tb < j1; ++tb) {
-                                const size_t c0 = pix * cellsPerPixel + size_t(tb) * LL + lc;
-                                for (uint32_t e = strata.start[c0]; e < strata.start[c0 + 1]; ++e) visit(strata.slot[e]);
+                                const size_t c0i = base + size_t(tb) * LL;
+                                for (uint32_t e = strata.start[c0i]; e < strata.start[c0i + 1]; ++e) visit(strata.slot[e]);
                             }
                         }
                 }
