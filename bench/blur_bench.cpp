@@ -4,7 +4,7 @@
 //   tessera_blur_bench SCENE [--engine reyes|rt] [--res WxH] [--threads N] [--translate X,Y,Z]
 //       [--spin DEGREES,AX,AY,AZ] [--dof FSTOP,FOCALLENGTH,FOCALDISTANCE] [--spp "16 25 64"]
 //       [--schemes "simple interleaved bbox"] [--tiles "2 3 4"] [--perms "1 64"] [--ref-spp 1024]
-//       [--runs 3] [--no-strata] [--sharp]
+//       [--runs 3] [--no-strata] [--sharp] [--no-motion]
 // --translate / --spin add a motion over the shutter [0, 1] to every patch (world space; the spin turns
 // about the axis through the centre of the scene's bounds): for scenes without their own motion blocks.
 // One JSON object per line on stdout: configuration, engine_ms (median over --runs), sample tests, and
@@ -133,7 +133,7 @@ int main(int argc, char** argv) {
                 tiles = "4", perms = "64";
     std::vector<double> translate, spin, dof;
     int threads = 0, refSpp = 1024, runs = 3;
-    bool strata = true, sharp = false;
+    bool strata = true, sharp = false, noMotion = false;
     for (int i = 2; i < argc; ++i) {
         const std::string a = argv[i];
         auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
@@ -151,6 +151,7 @@ int main(int argc, char** argv) {
         else if (a == "--runs") runs = std::stoi(next());
         else if (a == "--no-strata") strata = false;
         else if (a == "--sharp") sharp = true;
+        else if (a == "--no-motion") noMotion = true;
         else {
             std::fprintf(stderr, "unknown option %s\n", a.c_str());
             return 2;
@@ -163,6 +164,10 @@ int main(int argc, char** argv) {
         scene.camera.height = h;
     }
     if (!translate.empty() || !spin.empty()) addMotion(scene, translate, spin);
+    if (noMotion) {  // the scene's own motion off: every patch at shutter open, the camera still
+        for (PatchAttributes& a : scene.attributes) a.motion = MotionKeys{};
+        scene.camera.motion.clear();
+    }
     if (dof.size() == 3) {
         scene.camera.fStop = float(dof[0]);
         scene.camera.focalLength = float(dof[1]);

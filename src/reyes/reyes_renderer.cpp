@@ -64,19 +64,21 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
         for (size_t i = 0; i < patches.size(); ++i)
             if (motion.moving(i)) patches[i] = motion.patchKeys(i)[0];
     const float weldTolerance = defaultWeldTolerance(patches);
-    const WeldResult weld = weldSharedEdges(patches, weldTolerance);
-    // Blurred frames: the patches at every other knot of the shutter timeline, welded the same way.
+    WeldPlan weldPlan;
+    const WeldResult weld = weldSharedEdges(patches, weldTolerance, motion.blurred() ? &weldPlan : nullptr);
+    // Blurred frames: the patches at every other knot of the shutter timeline, with the same control points
+    // identified as at knot 0 (so shared edges are bit-identical at every knot, and cheaply).
     std::vector<std::vector<BezierPatch>> knotArrays;
     uint64_t movingPatches = 0;
     if (motion.blurred()) {
         knotArrays.resize(motion.knotCount() - 1);
-        for (int k = 1; k < motion.knotCount(); ++k) {
+        tbb::parallel_for(1, motion.knotCount(), [&](int k) {
             std::vector<BezierPatch>& arr = knotArrays[k - 1];
             arr = patches;
             for (size_t i = 0; i < patches.size(); ++i)
                 if (motion.moving(i)) arr[i] = motion.patchKeys(i)[k];
-            weldSharedEdges(arr, weldTolerance);
-        }
+            applyWeldPlan(weldPlan, arr);
+        });
         for (size_t i = 0; i < patches.size(); ++i) movingPatches += motion.moving(i);
     }
     const double weldMs = msSince(tWeld);

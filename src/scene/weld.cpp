@@ -41,7 +41,11 @@ float defaultWeldTolerance(const std::vector<BezierPatch>& patches) {
     return std::isfinite(d) ? d * 1e-5f : 0.f;
 }
 
-WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
+void applyWeldPlan(const WeldPlan& plan, std::vector<BezierPatch>& patches) {
+    for (const WeldCopy& c : plan) patches[c.dstPatch].cp[c.dstCp] = patches[c.srcPatch].cp[c.srcCp];
+}
+
+WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPlan* plan) {
     WeldResult result;
     if (!(tol > 0.f)) return result;
     const float cell = tol * 4.f;
@@ -49,20 +53,26 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
         return CellKey{int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)), int64_t(std::floor(p.z / cell))};
     };
     // 1. Corners: the first corner seen in a cell (or a neighbouring cell) is the representative.
-    std::unordered_map<CellKey, std::vector<Vec3>, CellHash> reps;
+    struct Rep {
+        Vec3 p;
+        uint32_t patch;
+        uint8_t cp;
+    };
+    std::unordered_map<CellKey, std::vector<Rep>, CellHash> reps;
     reps.reserve(patches.size() * 2);
     static const int kCorners[4] = {0, 3, 12, 15};
-    for (auto& patch : patches) {
+    for (uint32_t pi = 0; pi < patches.size(); ++pi) {
+        BezierPatch& patch = patches[pi];
         for (int c : kCorners) {
             Vec3& p = patch.cp[c];
             if (!isFinite(p)) continue;
             CellKey k = keyOf(p);
-            const Vec3* found = nullptr;
+            const Rep* found = nullptr;
             auto search = [&](CellKey cellKey) {
                 auto it = reps.find(cellKey);
                 if (it == reps.end()) return;
-                for (const Vec3& r : it->second)
-                    if (near(r, p, tol)) {
+                for (const Rep& r : it->second)
+                    if (near(r.p, p, tol)) {
                         found = &r;
                         return;
                     }
@@ -74,12 +84,13 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
                     for (int64_t dz = -1; dz <= 1 && !found; ++dz)
                         if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
             if (found) {
-                if (!(*found == p)) {
-                    p = *found;
+                if (plan) plan->push_back({pi, found->patch, uint8_t(c), found->cp});
+                if (!(found->p == p)) {
+                    p = found->p;
                     ++result.cornersMoved;
                 }
             } else {
-                reps[k].push_back(p);
+                reps[k].push_back({p, pi, uint8_t(c)});
             }
         }
     }
@@ -123,7 +134,9 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol) {
                     if (!match) continue;
                     bool changed = false;
                     for (int k = 1; k <= 2; ++k) {
-                        Vec3 src = q.cp[edgeIndex(other.edge, dir == 0 ? k : 3 - k)];
+                        const int srcCp = edgeIndex(other.edge, dir == 0 ? k : 3 - k);
+                        if (plan) plan->push_back({pi, other.patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
+                        Vec3 src = q.cp[srcCp];
                         Vec3& dst = patch.cp[edgeIndex(e, k)];
                         changed |= !(dst == src);
                         dst = src;
