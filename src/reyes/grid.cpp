@@ -116,10 +116,21 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
         for (int kn = 1; kn < grid.knots; ++kn) {
             // The same lattice points and (u,v) on the patch at knot kn: shared edges stay identical, so
             // the blurred grid stays crack-free at every time.
+            // Boundary curves in the order fixed at shutter open (orientedBoundary), once per edge.
             const BezierPatch& at = view.knotPatches[kn][piece.patch];
-            for (int v = 0; v < count; ++v)
-                store(size_t(kn) * count + v, owners[v] >= 0 ? latticePosition(at, e[owners[v]], lattice[v])
-                                                             : evalPatch(at, UVs[v].x, UVs[v].y));
+            Vec3 curve[4][4];
+            for (int ed = 0; ed < 4; ++ed)
+                if (e[ed].boundary >= 0) orientedBoundary(at, e[ed], curve[ed]);
+            for (int v = 0; v < count; ++v) {
+                Vec3 P;
+                if (owners[v] >= 0 && e[owners[v]].boundary >= 0)
+                    P = evalCurve(curve[owners[v]], float(lattice[v]) / float(e[owners[v]].total));
+                else if (owners[v] >= 0)
+                    P = latticePosition(at, e[owners[v]], lattice[v]);  // an interior line: through the patch
+                else
+                    P = evalPatch(at, UVs[v].x, UVs[v].y);
+                store(size_t(kn) * count + v, P);
+            }
         }
     }
     SurfacePoints points;

@@ -175,6 +175,14 @@ void canonicalBoundary(const BezierPatch& patch, int e, Vec3 cp[4], Vec2& a, Vec
     b = reverse ? kStart[e] : kEnd[e];
 }
 
+void orientedBoundary(const BezierPatch& patch, const PieceEdge& e, Vec3 cp[4]) {
+    static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
+    Vec3 c[4];
+    patchEdge(patch, e.boundary, c);
+    const bool natural = e.a.x == kStart[e.boundary].x && e.a.y == kStart[e.boundary].y;
+    for (int i = 0; i < 4; ++i) cp[i] = natural ? c[i] : c[3 - i];
+}
+
 Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k) {
     if (e.boundary >= 0) {
         Vec3 cp[4];

@@ -88,6 +88,12 @@ inline Vec2 latticeUV(const PieceEdge& e, int k) {
 // Position of lattice point k of an edge: from the boundary curve's control points or the patch.
 Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k);
 
+// The control points of a boundary edge's curve in the edge's own canonical order (the order chosen when the
+// edge was made, i.e. at shutter open), for the same patch at another time: its lattice point k is then
+// evalCurve(cp, k / total), identical for both patches sharing the edge even where the motion changes
+// which endpoint is lexicographically first.
+void orientedBoundary(const BezierPatch& patch, const PieceEdge& e, Vec3 cp[4]);
+
 // Split and cull one surface into diceable pieces, appended to `out`: dispatches on the surface kind.
 struct PatchAttributes;
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
