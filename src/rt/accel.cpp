@@ -16,18 +16,35 @@ double msSince(Clock::time_point t0) {
 
 }  // namespace
 
-Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
+void patchAtTime(const RtAccel& acc, uint32_t patch, float u, BezierPatch& out) {
+    out = acc.motion.patchAt(patch, u);
+}
+
+void patchSoaAtTime(const RtAccel& acc, uint32_t patch, float u, PatchSoa& out, BezierPatch& outPatch) {
+    outPatch = acc.motion.patchAt(patch, u);
+    for (int k = 0; k < 16; ++k) out.x[k] = outPatch.cp[k].x, out.y[k] = outPatch.cp[k].y, out.z[k] = outPatch.cp[k].z;
+    out.boxMagnitude = acc.patchSoa[patch].boxMagnitude;
+    out.boxExtent = acc.patchSoa[patch].boxExtent;
+}
+
+Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time) {
     Vec3 N = cross(h.dpdu, h.dpdv);
     const float scale = dot(h.dpdu, h.dpdu) + dot(h.dpdv, h.dpdv);
-    if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(acc.patches[patch], h.u, h.v);
+    if (!(dot(N, N) > 1e-12f * scale * scale))
+        N = acc.moving(patch) ? patchNormal(acc.motion.patchAt(patch, time), h.u, h.v)
+                              : patchNormal(acc.patches[patch], h.u, h.v);
     N = normalize(N);
     if (!isFinite(N) || dot(N, N) == 0.f) N = Vec3{0, 0, 1};
     return acc.flip[patch] ? -N : N;
 }
 
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc) {
+                  RtAccel& acc, const FrameMotion* motion) {
     const size_t n = scene.patches.size();
+    acc.motion = motion && motion->blurred() ? *motion : FrameMotion();
+    acc.movingPatches = 0;
+    if (acc.motion.firstKey.size() != n) acc.motion = FrameMotion();  // no moving patch (or a foreign one)
+    for (size_t i = 0; i < acc.motion.firstKey.size(); ++i) acc.movingPatches += acc.motion.moving(i);
     acc.patches.resize(n);
     acc.flip.resize(n);
     acc.twoSided.resize(n);
@@ -37,7 +54,10 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         // written for them); a new kind gets its case here and its own bound/intersect stage.
         switch (scene.attributes[i].kind) {
             case SurfaceKind::BicubicBezier:
-                for (int k = 0; k < 16; ++k) acc.patches[i].cp[k] = toSpace.point(scene.patches[i].cp[k]);
+                if (acc.moving(uint32_t(i)))  // knot 0: shutter open, in the timeline's space
+                    acc.patches[i] = acc.motion.patchKeys(i)[0];
+                else
+                    for (int k = 0; k < 16; ++k) acc.patches[i].cp[k] = toSpace.point(scene.patches[i].cp[k]);
                 break;
         }
         acc.flip[i] = scene.attributes[i].flipNormal;
@@ -45,7 +65,8 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         acc.material[i] = scene.attributes[i].material;
     });
     auto t0 = Clock::now();
-    buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip);
+    buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
+                        acc.movingPatches ? &acc.motion : nullptr);
     acc.subpatchMs = msSince(t0);
     acc.patchSoa.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "core/transform.h"
+#include "engine/motion.h"
 #include "rt/bvh.h"
 #include "rt/intersect.h"
 #include "rt/subpatch_tree.h"
@@ -31,14 +32,30 @@ struct RtAccel {
     Bounds3 bounds;        // of all traced patches (their root boxes)
     float offset = 1e-4f;  // self-intersection offset along the normal for secondary ray origins
     double bvhMs = 0, subpatchMs = 0;
+    // Motion blur (paper 002, sec. 5.3.3): the frame's camera-space timeline and, for every patch that
+    // moves, its control points at each knot (engine/motion.h). `patches` / `patchSoa` hold knot 0; the
+    // subpatch boxes (and so the BVH) of a moving patch bound it over the whole shutter. Empty `firstKey`:
+    // nothing moves, and every stage takes its static path.
+    FrameMotion motion;
+    size_t movingPatches = 0;
+    bool moving(uint32_t patch) const { return motion.moving(patch); }
 };
+
+// The control points of a moving patch at normalised shutter time u (the lerp of the two knots around u,
+// as FrameMotion::patchAt), as a patch and as the Newton stage's coordinate arrays (box figures from the
+// patch's swept root box).
+void patchAtTime(const RtAccel& acc, uint32_t patch, float u, BezierPatch& out);
+void patchSoaAtTime(const RtAccel& acc, uint32_t patch, float u, PatchSoa& out, BezierPatch& outPatch);
 
 // Transform the patches by `toSpace` and build both levels. `cullFromOrigin` also marks subpatches that
 // face away from the origin (the eye, in camera space) for --cull-backfaces.
+// `motion` (in the space of `toSpace`, i.e. camera space for the renderer): the moving patches' keys;
+// nullptr or a static timeline: a static accel, bit-identical to one built without it.
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc);
+                  RtAccel& acc, const FrameMotion* motion = nullptr);
 
-// Unit shading normal at a hit (geometric, orientation flipped per the patch attributes).
-Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h);
+// Unit shading normal at a hit (geometric, orientation flipped per the patch attributes); `time`: the
+// ray's normalised shutter time (moving patches are evaluated there).
+Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time = 0.f);
 
 }  // namespace tessera

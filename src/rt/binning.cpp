@@ -375,10 +375,21 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
 
     // Whether the rectangle of box b can hold a sample of the tile, and the rectangle clipped to the
     // region (the whole region when the box reaches behind the eye).
+    // With a lens (depth of field, paper 002, sec. 5.3.4) a camera ray starts at lens point a and passes
+    // through its sample's focal-plane point: at depth z the eye sees it at the sample's raster position
+    // plus a (1/z - 1/fd) (raster units), so a box is hit only by samples within the largest circle of
+    // confusion over its depths of its rectangle (|1/z - 1/fd| is largest at its nearest or farthest z).
+    const bool lens = proj.hasLens() && proj.perspective;
     auto overlaps = [&](const Bounds3& b, Rect2& rect) {
         if (!screenRect(proj, b, rect.x0, rect.x1, rect.y0, rect.y1)) {
             rect = {rx0, rx1, ry0, ry1};
             return true;
+        }
+        if (lens) {
+            const float k = proj.lensRadius * std::max(std::fabs(1.f / proj.focalDistance - 1.f / b.lo.z),
+                                                       std::fabs(1.f / proj.focalDistance - 1.f / b.hi.z));
+            const float gx = k * std::fabs(proj.sx) * 1.0001f + 1e-3f, gy = k * std::fabs(proj.sy) * 1.0001f + 1e-3f;
+            rect.x0 -= gx, rect.x1 += gx, rect.y0 -= gy, rect.y1 += gy;
         }
         rect = {std::max(rect.x0, rx0), std::min(rect.x1, rx1), std::max(rect.y0, ry0),
                 std::min(rect.y1, ry1)};

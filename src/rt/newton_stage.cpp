@@ -51,6 +51,12 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         SurfacePoint bestSp;
         ProjectedPatch<float> pp;
         alignas(16) float depth[16];  // the control points' distances along the ray (t units)
+        // Motion blur: the ray's time and, when the projected patch moves, that patch at the ray's time
+        // (the Newton stage intersects it; static patches read the accel's copy).
+        float time = 0.f;
+        const BezierPatch* patch = nullptr;  // the projected patch's control points at the ray's time
+        PatchSoa movedSoa;
+        BezierPatch movedPatch;
     };
 
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
@@ -105,8 +111,16 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         auto finishRay = [&](LaneRay& s) {
             if (s.bestPatch != kNone) {
                 RayHit& best = hits[s.r];
-                const SurfacePoint sp =
-                    s.bestHasDeriv ? s.bestSp : evalPatchDeriv(acc.patches[s.bestPatch], s.bestU, s.bestV);
+                SurfacePoint sp;
+                if (s.bestHasDeriv) {
+                    sp = s.bestSp;
+                } else if (acc.moving(s.bestPatch)) {
+                    BezierPatch moved;
+                    patchAtTime(acc, s.bestPatch, s.time, moved);
+                    sp = evalPatchDeriv(moved, s.bestU, s.bestV);
+                } else {
+                    sp = evalPatchDeriv(acc.patches[s.bestPatch], s.bestU, s.bestV);
+                }
                 best.hit = true;
                 best.patch = s.bestPatch;
                 best.h.hit = true;
@@ -129,6 +143,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 s.end = ch.segEnd[nextRay++];
                 s.ray = Ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
                 s.opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
+                s.time = rays.time[r];
                 if (anyHit) s.opt.anyHit = true;
                 s.pl = makeRayPlanes(s.ray.o, s.ray.d);
                 s.invDD = 1.f / dot(s.ray.d, s.ray.d);
@@ -164,10 +179,17 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     continue;
                 }
                 if (c.patch != s.projected) {
-                    projectLane(acc.patchSoa[c.patch], s, lanes, l);
+                    const PatchSoa* soa = &acc.patchSoa[c.patch];
+                    s.patch = &acc.patches[c.patch];
+                    if (acc.moving(c.patch)) {  // the patch at the ray's time (paper 002, sec. 5.3.3)
+                        patchSoaAtTime(acc, c.patch, s.time, s.movedSoa, s.movedPatch);
+                        soa = &s.movedSoa;
+                        s.patch = &s.movedPatch;
+                    }
+                    projectLane(*soa, s, lanes, l);
                     s.projected = c.patch;
                     if (c.patch == s.opt.ignorePatch && dot(s.originN, s.ray.d) > 0.f) {
-                        const PatchSoa& ps = acc.patchSoa[c.patch];
+                        const PatchSoa& ps = *soa;
                         const Vec3 o = s.ray.o, nrm = s.originN;
                         for (int k = 0; k < 16; ++k)
                             s.selfHeight[k] =
@@ -231,7 +253,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             }
             if (found) {
                 s.rootPatch = c.patch, s.rootU = uc, s.rootV = vc;
-                const BezierPatch& patch = acc.patches[c.patch];
+                const BezierPatch& patch = *s.patch;
                 float bu[4], bv[4];
                 bernstein3(uc, bu);
                 bernstein3(vc, bv);

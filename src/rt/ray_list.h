@@ -18,6 +18,7 @@ struct TraceOptions {
     bool cullBackfaces = false;         // skip subpatches marked back-facing (camera rays, --cull-backfaces)
     uint32_t ignorePatch = UINT32_MAX;  // reject hits on this patch with t < ignoreT (self-intersection)
     float ignoreT = 0.f;
+    float time = 0.f;  // the ray's normalised shutter time: moving patches are intersected there
 };
 
 struct RayHit {
@@ -48,24 +49,29 @@ struct RayList {
     // the ray stays on the far side of the plane through o orthogonal to n; zero when unknown.
     std::vector<Vec3> originN;
     std::vector<uint8_t> kind, depth;
+    // Normalised shutter time in [0,1] (paper 002, sec. 5.3.3): camera rays get their sample's, shadow,
+    // reflection and refraction rays their parent's. Read only for moving patches.
+    std::vector<float> time;
     size_t size() const { return o.size(); }
     void resize(size_t n) {
         o.resize(n), d.resize(n), tmin.resize(n), tmax.resize(n), owner.resize(n), weight.resize(n);
         ignore.resize(n), ignoreUV.resize(n), originN.resize(n), kind.resize(n), depth.resize(n);
+        time.resize(n);
     }
     void reserve(size_t n) {
         o.reserve(n), d.reserve(n), tmin.reserve(n), tmax.reserve(n), owner.reserve(n), weight.reserve(n);
         ignore.reserve(n), ignoreUV.reserve(n), originN.reserve(n), kind.reserve(n), depth.reserve(n);
+        time.reserve(n);
     }
     void clear() {
         o.clear(), d.clear(), tmin.clear(), tmax.clear(), owner.clear(), weight.clear(), ignore.clear();
-        ignoreUV.clear(), originN.clear(), kind.clear(), depth.clear();
+        ignoreUV.clear(), originN.clear(), kind.clear(), depth.clear(), time.clear();
     }
     void push(Vec3 o_, Vec3 d_, float t0, float t1, uint32_t own, Color w, uint32_t ign, uint8_t k,
-              uint8_t dep, Vec2 uv = {-1.f, -1.f}, Vec3 n = {0.f, 0.f, 0.f}) {
+              uint8_t dep, Vec2 uv = {-1.f, -1.f}, Vec3 n = {0.f, 0.f, 0.f}, float tm = 0.f) {
         o.push_back(o_), d.push_back(d_), tmin.push_back(t0), tmax.push_back(t1), owner.push_back(own);
         weight.push_back(w), ignore.push_back(ign), ignoreUV.push_back(uv), originN.push_back(n);
-        kind.push_back(k), depth.push_back(dep);
+        kind.push_back(k), depth.push_back(dep), time.push_back(tm);
     }
 };
 
@@ -106,8 +112,9 @@ struct Chunk {
 };
 
 // The rules of a ray of `kind` (`cull`: --cull-backfaces), as the scalar path's TraceOptions.
-inline TraceOptions optionsFor(uint8_t kind, uint32_t ignore, float offset, bool cull) {
+inline TraceOptions optionsFor(uint8_t kind, uint32_t ignore, float offset, bool cull, float time = 0.f) {
     TraceOptions o;
+    o.time = time;
     o.anyHit = kind == kShadow;
     o.respectSides = kind == kPrimary;
     o.cullBackfaces = kind == kPrimary && cull;

@@ -62,7 +62,7 @@ SurfacePoints hitBatch(const RtAccel& acc, Workspace& ws) {
         const uint32_t r = ws.hitRay[k];
         const RayHit& rh = ws.hits[r];
         ws.hitP[k] = rh.h.p;
-        ws.hitN[k] = hitNormal(acc, rh.patch, rh.h);
+        ws.hitN[k] = hitNormal(acc, rh.patch, rh.h, rays.time[r]);
         ws.hitI[k] = normalize(rays.d[r]);
         ws.hitMaterial[k] = acc.material[rh.patch];
     }
@@ -100,7 +100,7 @@ void makeShadowRays(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
             if (std::isfinite(tmax)) tmax -= acc.offset;
             ws.shadowIdx[k * nL + l] = uint32_t(ws.shadow.size());
             ws.shadow.push(o, L, 0.f, tmax, ws.hitRay[k], Color{}, rh.patch, kShadow, 0, Vec2{rh.h.u, rh.h.v},
-                           Nf);
+                           Nf, ws.rays.time[ws.hitRay[k]]);  // the parent's time
         }
         if (ws.shadow.size() > runBegin)
             ws.shadowRuns.push_back(
@@ -157,7 +157,7 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
             ws.next.push(pts.P[k] + Nf * (t ? -fr.acc.offset : fr.acc.offset), lobes[j].direction, 0.f,
                          std::numeric_limits<float>::infinity(), s, lobes[j].weight, rh.patch,
                          t ? kRefraction : kReflection, uint8_t(rays.depth[r] + 1), Vec2{rh.h.u, rh.h.v},
-                         t ? -Nf : Nf);
+                         t ? -Nf : Nf, rays.time[r]);
         }
     }
 }
@@ -187,7 +187,10 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
 
 // Raster rectangle holding the projection of the whole scene (the bounding rectangle of its box's projected
 // corners, which contains the projection of the box when the box lies in front of the eye), grown by a
-// pixel for rounding: a camera ray outside it cannot hit anything, so it is not traced.
+// pixel for rounding: a camera ray outside it cannot hit anything, so it is not traced. With a lens, a
+// camera ray from lens point a through the focal-plane point of raster x meets depth z where the eye sees
+// x + a (1/z - 1/fd) (raster units), so the rectangle grows by the largest circle of confusion over the
+// box's depths (Projector::circleOfConfusion; it is largest at the nearest or farthest depth).
 struct SceneRect {
     float x0 = -INFINITY, x1 = INFINITY, y0 = -INFINITY, y1 = INFINITY;
 };
@@ -199,7 +202,8 @@ SceneRect sceneRect(const RtAccel& acc, const Projector& proj) {
         sr.x0 = sr.y0 = INFINITY, sr.x1 = sr.y1 = -INFINITY;  // nothing to hit
     } else if (proj.rasterBounds(acc.bounds, x0, x1, y0, y1) && std::isfinite(x0) && std::isfinite(x1) &&
                std::isfinite(y0) && std::isfinite(y1)) {
-        sr.x0 = x0 - 1.f, sr.x1 = x1 + 1.f, sr.y0 = y0 - 1.f, sr.y1 = y1 + 1.f;
+        const float coc = std::max(proj.circleOfConfusion(acc.bounds.lo.z), proj.circleOfConfusion(acc.bounds.hi.z));
+        sr.x0 = x0 - 1.f - coc, sr.x1 = x1 + 1.f + coc, sr.y0 = y0 - 1.f - coc, sr.y1 = y1 + 1.f + coc;
     }
     return sr;
 }
@@ -218,6 +222,7 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
         v->resize(ns + 4);
     cs.rayOfSample.resize(ns + 4);
     size_t m = 0;
+    const bool blurred = !ws.tile.time.empty();
     for (size_t i = 0; i < ns + 4; ++i) {
         const float x = i < ns ? float(ws.tile.sx[i]) / kSubpixelScale : NAN;
         const float y = i < ns ? float(ws.tile.sy[i]) / kSubpixelScale : NAN;
@@ -227,9 +232,18 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
             cs.originX[i] = cs.originY[i] = cs.invX[i] = cs.invY[i] = cs.invZ[i] = 0.f;
             continue;
         }
-        const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
-        const Vec3 o = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
-        const Vec3 d = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
+        Vec3 o, d;
+        if (blurred) {
+            // Paper 002, sec. 5.3.4: from the sample's lens point through its focal-plane point (thin
+            // lens), scaled to d.z = 1 so that t stays the camera-space depth; at the sample's time.
+            const CameraRay cr = generateRay(proj, Vec2{x, y}, ws.tile.lens[i]);
+            o = cr.origin, d = cr.direction / cr.direction.z;
+            rl.time[m] = ws.tile.time[i];
+        } else {
+            const float cx = (x - proj.ox) / proj.sx, cy = (y - proj.oy) / proj.sy;
+            o = proj.perspective ? Vec3{0, 0, 0} : Vec3{cx, cy, 0};
+            d = proj.perspective ? Vec3{cx, cy, 1.f} : Vec3{0, 0, 1.f};
+        }
         const Vec3 inv = safeInverse(d);
         rl.o[m] = o, rl.d[m] = d;
         cs.rayOfSample[i] = uint32_t(m);
@@ -247,6 +261,7 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
     std::fill(rl.originN.begin(), rl.originN.end(), Vec3{0.f, 0.f, 0.f});
     std::fill(rl.kind.begin(), rl.kind.end(), uint8_t(kPrimary));
     std::fill(rl.depth.begin(), rl.depth.end(), uint8_t(0));
+    if (!blurred) std::fill(rl.time.begin(), rl.time.end(), 0.f);
 }
 
 // Work per tile for the progress, in sample units: its samples (set-up, filtering), its camera rays
@@ -298,7 +313,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     // Build: camera space (eye at the origin), both levels of the hierarchy.
     const auto tBuild = EngineClock::now();
     RtAccel acc;
-    buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc);
+    buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc, &frame.motion);
     const double buildMs = msSince(tBuild);
     // Binning (camera and shadow rays) pays when the subpatch leaves are few compared with the samples, i.e.
     // boxes cover several samples each: the per-tile descent then replaces many per-ray box tests. With
@@ -394,6 +409,11 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["ray_binning"] = binning;
     s["leaves_per_sample"] = leavesPerSample;
     s["max_depth"] = fr.maxDepth;
+    s["blur"] = frame.blurred();
+    s["moving_patches"] = acc.movingPatches;
+    s["motion_knots"] = acc.motion.knotCount();
+    s["lens_radius"] = proj.lensRadius;
+    s["blur_sampling"] = blurSamplingName(frame.blur.scheme);
     s["stage_ms"] = {{"traversal_cpu", total.traversalMs},
                      {"newton_cpu", total.newtonMs},
                      {"shading_cpu", shadeMs},

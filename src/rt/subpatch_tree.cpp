@@ -242,7 +242,7 @@ void transposeQuad(const float* b, SubpatchQuad& q) {
 }  // namespace
 
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
-                         bool backfaceFromOrigin, std::span<const uint8_t> flip) {
+                         bool backfaceFromOrigin, std::span<const uint8_t> flip, const FrameMotion* motion) {
     depth = std::clamp(depth, 0, kMaxSubpatchDepth);
     f.depth = depth;
     f.nodesPerPatch = (2u << depth) - 1u;
@@ -289,11 +289,23 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
             TreeBuilder tb(depth);  // scratch grid, reused over the range
+            std::vector<Bounds3> knotBoxes;
             for (size_t i = r.begin(); i != r.end(); ++i) {
                 uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
                 float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
-                tb.build(patches[i], f.boxes.data() + i * f.nodesPerPatch, back, sign);
-                const Bounds3* bx = f.boxes.data() + i * f.nodesPerPatch;
+                Bounds3* boxes = f.boxes.data() + i * f.nodesPerPatch;
+                tb.build(patches[i], boxes, back, sign);
+                if (motion && motion->moving(i)) {
+                    // Swept boxes: the union over the knots (knot 0 is patches[i]).
+                    knotBoxes.resize(f.nodesPerPatch);
+                    const BezierPatch* keys = motion->patchKeys(i);
+                    for (int k = 1; k < motion->knotCount(); ++k) {
+                        tb.build(keys[k], knotBoxes.data(), nullptr, sign);
+                        for (uint32_t nd = 0; nd < f.nodesPerPatch; ++nd) boxes[nd].extend(knotBoxes[nd]);
+                    }
+                    if (back) std::fill(back, back + f.nodesPerPatch, uint8_t(0));
+                }
+                const Bounds3* bx = boxes;
                 SubpatchQuad* q = f.quads.data() + i * f.quadsPerPatch;
                 uint8_t* qb = backfaceFromOrigin ? f.quadBack.data() + i * f.quadsPerPatch : nullptr;
                 for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/bezier.h"
+#include "engine/motion.h"
 
 namespace tessera {
 
@@ -103,8 +104,13 @@ Bounds3 enlargedHull(const BezierPatch& p);
 
 // Build the trees of all patches (parallel over patches). With `backfaceFromOrigin`, also mark nodes
 // whose subpatch faces away from the origin everywhere (conservative: Bernstein bound of the normal;
-// `flip[i]` reverses patch i's orientation).
+// `flip[i]` reverses patch i's orientation). With `motion`, the boxes of a patch that moves are the unions
+// of its trees at every knot: control points move linearly between knots, and so do a subpatch's (they
+// are fixed linear combinations of the patch's), so the union of the knots' hulls holds the subpatch at
+// every time of the shutter (paper 002, sec. 5.3.3: bounds swept over the shutter). Moving patches get no
+// back-facing marks (their orientation changes over the shutter).
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& forest,
-                         bool backfaceFromOrigin = false, std::span<const uint8_t> flip = {});
+                         bool backfaceFromOrigin = false, std::span<const uint8_t> flip = {},
+                         const FrameMotion* motion = nullptr);
 
 }  // namespace tessera

@@ -120,8 +120,10 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
             PatchHit h;
             const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(patch) : nullptr;
             auto accept = [&](const PatchHit& ph) { return acceptHit(acc, r, opt, patch, ph); };
-            if (intersectPatch<float>(acc.patches[patch], acc.forest, patch, r, h, back, nullptr, nullptr,
-                                      accept)) {
+            BezierPatch moved;
+            if (acc.moving(patch)) patchAtTime(acc, patch, opt.time, moved);  // at the ray's time
+            if (intersectPatch<float>(acc.moving(patch) ? moved : acc.patches[patch], acc.forest, patch, r, h,
+                                      back, nullptr, nullptr, accept)) {
                 out.hit = true;
                 out.patch = patch;
                 out.h = h;
@@ -140,7 +142,9 @@ void traceBatch(const RtAccel& acc, std::span<const Ray> rays, const TraceOption
                          : (opt.respectSides || opt.cullBackfaces) ? kPrimary
                                                                    : kReflection;
     RayList list;
-    for (const Ray& r : rays) list.push(r.o, r.d, r.tmin, r.tmax, 0, {1, 1, 1}, opt.ignorePatch, kind, 0);
+    for (const Ray& r : rays)
+        list.push(r.o, r.d, r.tmin, r.tmax, 0, {1, 1, 1}, opt.ignorePatch, kind, 0, {-1.f, -1.f}, {0.f, 0.f, 0.f},
+                  opt.time);
     TraceService service(acc, {opt.cullBackfaces, false});
     service.trace(list, hits);
 }
