@@ -26,6 +26,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     const Vec2* leafCentre = acc.forest.leafCentre.data();
     const LeafBasis* leafBasis = acc.forest.leafBasis.data();
     const LeafBasis* quarterBasis = acc.forest.quarterBasis.data();
+    const bool motion = acc.movingPatches > 0;
 
     // The ray a lane is working on.
     struct LaneRay {
@@ -54,6 +55,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         // Motion blur: the ray's time and, when the projected patch moves, that patch at the ray's time
         // (the Newton stage intersects it; static patches read the accel's copy).
         float time = 0.f;
+        int segK = 0;      // the time's segment of the timeline and the weight in it
+        float segW = 0.f;
+        Vec3 inv;          // 1 / d, for the per-time leaf box test
         const BezierPatch* patch = nullptr;  // the projected patch's control points at the ray's time
         PatchSoa movedSoa;
         BezierPatch movedPatch;
@@ -63,7 +67,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         Chunk& ch = chunks[ci];
         const size_t r0 = ci * kChunk;
         const uint32_t nRays = uint32_t(ch.segEnd.size());
-        uint64_t runs = 0, iterTotal = 0, culled = 0;
+        uint64_t runs = 0, iterTotal = 0, culled = 0, timeCulled = 0;
         NewtonLanes lanes;
         LaneRay lane[kNewtonLanes];
         uint32_t nextRay = 0;
@@ -144,6 +148,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 s.ray = Ray{rays.o[r], rays.d[r], rays.tmin[r], rays.tmax[r]};
                 s.opt = optionsFor(rays.kind[r], rays.ignore[r], acc.offset, cull);
                 s.time = rays.time[r];
+                if (motion) acc.motion.segment(s.time, s.segK, s.segW), s.inv = safeInverse(s.ray.d);
                 if (anyHit) s.opt.anyHit = true;
                 s.pl = makeRayPlanes(s.ray.o, s.ray.d);
                 s.invDD = 1.f / dot(s.ray.d, s.ray.d);
@@ -171,6 +176,17 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 if (c.tEnter > s.ray.tmax) {
                     finishRay(s);
                     continue;
+                }
+                // A moving patch's leaf box swept over the shutter may be much larger than the leaf at
+                // the ray's time: test the box at that time (lerp of the knots' boxes, exact) first.
+                if (motion && acc.moving(c.patch)) {
+                    float te;
+                    if (!rayBox(knotLeafBox(acc.forest, acc.motion.firstKey[c.patch], s.segK, s.segW, c.leaf),
+                                s.ray.o, s.inv, s.ray.tmin, s.ray.tmax, te)) {
+                        ++timeCulled;
+                        ++s.cur;
+                        continue;
+                    }
                 }
                 const Vec2 c0 = leafCentre[c.leaf];
                 if (c.patch == s.rootPatch && std::fabs(s.rootU - c0.x) <= du &&
@@ -295,6 +311,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         }
         ch.c.newtonRuns = runs;
         ch.c.hullCulled = culled;
+        ch.c.timeCulled = timeCulled;
         ch.c.newtonIterations = iterTotal;
     });
 }

@@ -84,6 +84,7 @@ struct Candidate {
 // Counters of one chunk of a stage (merged in chunk order).
 struct StageCounters {
     uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
+    uint64_t timeCulled = 0;  // candidates of moving patches whose leaf box at the ray's time is missed
     std::array<uint64_t, kHistBins> hist{};
 };
 

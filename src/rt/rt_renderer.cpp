@@ -385,6 +385,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["box_tests"] = total.boxTests;
     s["newton_runs"] = total.newtonRuns;
     s["hull_culled"] = total.hullCulled;
+    s["time_culled"] = total.timeCulled;
     s["shadow_lists"] = {{"binned", total.shadowListsBinned}, {"traversed", total.shadowListsTraversed}};
     s["newton_iterations"] = {
         {"total", total.newtonIterations},

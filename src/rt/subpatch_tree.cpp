@@ -253,6 +253,8 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     f.quads.resize(patches.size() * f.quadsPerPatch);
     f.quadBack.clear();
     if (backfaceFromOrigin) f.quadBack.assign(f.quads.size(), 0);
+    f.knotLeaves.clear();
+    if (motion) f.knotLeaves.resize(motion->keys.size() << depth);
     const uint32_t leaves = 1u << depth;
     f.leafCentre.resize(leaves);
     f.leafBasis.resize(leaves);
@@ -296,11 +298,15 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                 Bounds3* boxes = f.boxes.data() + i * f.nodesPerPatch;
                 tb.build(patches[i], boxes, back, sign);
                 if (motion && motion->moving(i)) {
-                    // Swept boxes: the union over the knots (knot 0 is patches[i]).
+                    // Swept boxes: the union over the knots (knot 0 is patches[i]); the leaves per knot.
                     knotBoxes.resize(f.nodesPerPatch);
                     const BezierPatch* keys = motion->patchKeys(i);
+                    const uint32_t leaves = 1u << depth, first = f.firstLeaf();
+                    Bounds3* kl = f.knotLeaves.data() + (size_t(motion->firstKey[i]) << depth);
+                    std::copy(boxes + first, boxes + first + leaves, kl);
                     for (int k = 1; k < motion->knotCount(); ++k) {
                         tb.build(keys[k], knotBoxes.data(), nullptr, sign);
+                        std::copy(knotBoxes.data() + first, knotBoxes.data() + first + leaves, kl + k * leaves);
                         for (uint32_t nd = 0; nd < f.nodesPerPatch; ++nd) boxes[nd].extend(knotBoxes[nd]);
                     }
                     if (back) std::fill(back, back + f.nodesPerPatch, uint8_t(0));

@@ -76,6 +76,11 @@ struct SubpatchForest {
     // With `backfacing`, per quad: bit i set when grandchild i or its parent (the odd level in between)
     // is backfacing, i.e. the traversal's cull test of the four grandchildren as one 4-bit mask.
     std::vector<uint8_t> quadBack;
+    // Motion blur: per moving patch, its leaf boxes at every knot of the timeline (`boxes` holds their
+    // unions), at [(FrameMotion::firstKey[patch] + knot) * leaves + leaf]. Control points move linearly
+    // between knots, so the lerp of a leaf's boxes at the two knots around a time holds the leaf then
+    // (min of lerps >= lerp of mins): the Newton stage tests it per candidate (knotLeafBox).
+    std::vector<Bounds3> knotLeaves;
 
     const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
     const uint8_t* backfaceBits(uint32_t patch) const {
@@ -91,9 +96,20 @@ struct SubpatchForest {
     size_t memoryBytes() const {
         return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
                quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
-               (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis);
+               (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis) + knotLeaves.size() * sizeof(Bounds3);
     }
 };
+
+// The box holding leaf `leaf` of a moving patch at weight w of timeline segment k (its keys start at
+// `firstKey`): the lerp of the leaf's boxes at knots k and k + 1.
+inline Bounds3 knotLeafBox(const SubpatchForest& f, uint32_t firstKey, int k, float w, uint32_t leaf) {
+    const uint32_t leaves = 1u << f.depth;
+    const Bounds3& a = f.knotLeaves[size_t(firstKey + k) * leaves + leaf];
+    const Bounds3& b = f.knotLeaves[size_t(firstKey + k + 1) * leaves + leaf];
+    Bounds3 r;
+    r.lo = lerp(a.lo, b.lo, w), r.hi = lerp(a.hi, b.hi, w);
+    return r;
+}
 
 // Parameter rectangle of leaf `leaf` (0 .. 2^depth-1) of a tree of the given depth.
 void subpatchLeafRect(int depth, uint32_t leaf, float& u0, float& u1, float& v0, float& v1);
