@@ -18,8 +18,10 @@ using namespace tessera;
 
 int main(int argc, char** argv) {
     if (argc < 2) {
-        std::fprintf(stderr, "usage: %s SCENE [--res WxH] [--spp N] [--threads N] [--move F] [--fstop F] "
-                             "[--no-ray-binning] [--no-blur] [-o out.exr]\n", argv[0]);
+        std::fprintf(stderr,
+                     "usage: %s SCENE [--res WxH] [--spp N] [--threads N] [--move F] [--fstop F] "
+                     "[--no-ray-binning] [--no-blur] [-o out.exr]\n",
+                     argv[0]);
         return 2;
     }
     Scene s = loadScene(argv[1], [](const std::string& m) { std::fprintf(stderr, "%s\n", m.c_str()); });
@@ -77,9 +79,9 @@ int main(int argc, char** argv) {
     RenderResult r = render(s, rs);
     if (!out.empty()) writeExr(out, r.image);
     nlohmann::json j;
-    for (const char* k : {"trace_ms", "rays_total", "rays", "candidates", "candidates_per_ray", "box_tests",
-                          "newton_runs", "build_ms", "ray_binning", "blur", "moving_patches", "lens_radius",
-                          "stage_ms", "mrays_per_s"})
+    for (const char* k :
+         {"trace_ms", "rays_total", "rays", "candidates", "candidates_per_ray", "box_tests", "newton_runs",
+          "build_ms", "ray_binning", "blur", "moving_patches", "lens_radius", "stage_ms", "mrays_per_s"})
         if (r.stats.contains(k)) j[k] = r.stats[k];
     std::printf("%s\n", j.dump().c_str());
     return 0;

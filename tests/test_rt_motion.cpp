@@ -152,8 +152,8 @@ TEST(RtMotion, LensBlursAnEdgeByTheCircleOfConfusion) {
             const float a = alphaAt(r.image, x, 1);
             ramp += a > 0.01f && a < 0.99f;
         }
-        std::printf("lens, z %.0f: circle of confusion %.2f px, ramp %d px, max |alpha - analytic| %.4f\n",
-                    z, c, ramp, maxErr);
+        std::printf("lens, z %.0f: circle of confusion %.2f px, ramp %d px, max |alpha - analytic| %.4f\n", z,
+                    c, ramp, maxErr);
         EXPECT_LT(maxErr, 0.06) << z;
         if (z == s.camera.focalDistance) {
             EXPECT_LE(ramp, 1);  // in the focal plane: sharp
@@ -282,7 +282,8 @@ TEST(RtMotion, WavefrontAgreesWithScalarAtEachRaysTime) {
     Scene s;
     BezierPatch p;
     for (int j = 0; j < 4; ++j)
-        for (int i = 0; i < 4; ++i) p.at(i, j) = {-1.f + i * 0.66f, -1.f + j * 0.66f, 5.f + 0.3f * ((i + j) % 2)};
+        for (int i = 0; i < 4; ++i)
+            p.at(i, j) = {-1.f + i * 0.66f, -1.f + j * 0.66f, 5.f + 0.3f * ((i + j) % 2)};
     addPatch(s, p);
     s.camera.shutterOpen = 0.f, s.camera.shutterClose = 1.f;
     PatchAttributes& a = s.attributes[0];

@@ -20,13 +20,6 @@ void patchAtTime(const RtAccel& acc, uint32_t patch, float u, BezierPatch& out) 
     out = acc.motion.patchAt(patch, u);
 }
 
-void patchSoaAtTime(const RtAccel& acc, uint32_t patch, float u, PatchSoa& out, BezierPatch& outPatch) {
-    outPatch = acc.motion.patchAt(patch, u);
-    for (int k = 0; k < 16; ++k) out.x[k] = outPatch.cp[k].x, out.y[k] = outPatch.cp[k].y, out.z[k] = outPatch.cp[k].z;
-    out.boxMagnitude = acc.patchSoa[patch].boxMagnitude;
-    out.boxExtent = acc.patchSoa[patch].boxExtent;
-}
-
 Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time) {
     Vec3 N = cross(h.dpdu, h.dpdv);
     const float scale = dot(h.dpdu, h.dpdu) + dot(h.dpdv, h.dpdv);

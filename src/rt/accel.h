@@ -42,10 +42,25 @@ struct RtAccel {
 };
 
 // The control points of a moving patch at normalised shutter time u (the lerp of the two knots around u,
-// as FrameMotion::patchAt), as a patch and as the Newton stage's coordinate arrays (box figures from the
-// patch's swept root box).
+// as FrameMotion::patchAt).
 void patchAtTime(const RtAccel& acc, uint32_t patch, float u, BezierPatch& out);
-void patchSoaAtTime(const RtAccel& acc, uint32_t patch, float u, PatchSoa& out, BezierPatch& outPatch);
+// The same at weight w of timeline segment k (FrameMotion::segment), as the Newton stage's coordinate
+// arrays (the same arithmetic as lerp, so bit-identical to patchAtTime; the box figures are the patch's
+// swept root box's).
+inline void patchSoaAt(const RtAccel& acc, uint32_t patch, int k, float w, PatchSoa& out) {
+    const BezierPatch& a = acc.motion.keys[acc.motion.firstKey[patch] + k];
+    const BezierPatch& b = acc.motion.keys[acc.motion.firstKey[patch] + k + 1];
+    for (int c = 0; c < 16; ++c) {
+        out.x[c] = a.cp[c].x + (b.cp[c].x - a.cp[c].x) * w;
+        out.y[c] = a.cp[c].y + (b.cp[c].y - a.cp[c].y) * w;
+        out.z[c] = a.cp[c].z + (b.cp[c].z - a.cp[c].z) * w;
+    }
+    out.boxMagnitude = acc.patchSoa[patch].boxMagnitude;
+    out.boxExtent = acc.patchSoa[patch].boxExtent;
+}
+inline void soaToPatch(const PatchSoa& s, BezierPatch& out) {
+    for (int c = 0; c < 16; ++c) out.cp[c] = {s.x[c], s.y[c], s.z[c]};
+}
 
 // Transform the patches by `toSpace` and build both levels. `cullFromOrigin` also marks subpatches that
 // face away from the origin (the eye, in camera space) for --cull-backfaces.

@@ -388,7 +388,8 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
         if (lens) {
             const float k = proj.lensRadius * std::max(std::fabs(1.f / proj.focalDistance - 1.f / b.lo.z),
                                                        std::fabs(1.f / proj.focalDistance - 1.f / b.hi.z));
-            const float gx = k * std::fabs(proj.sx) * 1.0001f + 1e-3f, gy = k * std::fabs(proj.sy) * 1.0001f + 1e-3f;
+            const float gx = k * std::fabs(proj.sx) * 1.0001f + 1e-3f,
+                        gy = k * std::fabs(proj.sy) * 1.0001f + 1e-3f;
             rect.x0 -= gx, rect.x1 += gx, rect.y0 -= gy, rect.y1 += gy;
         }
         rect = {std::max(rect.x0, rx0), std::min(rect.x1, rx1), std::max(rect.y0, ry0),

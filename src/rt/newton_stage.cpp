@@ -55,12 +55,11 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         // Motion blur: the ray's time and, when the projected patch moves, that patch at the ray's time
         // (the Newton stage intersects it; static patches read the accel's copy).
         float time = 0.f;
-        int segK = 0;      // the time's segment of the timeline and the weight in it
+        int segK = 0;  // the time's segment of the timeline and the weight in it
         float segW = 0.f;
-        Vec3 inv;          // 1 / d, for the per-time leaf box test
-        const BezierPatch* patch = nullptr;  // the projected patch's control points at the ray's time
+        Vec3 inv;                            // 1 / d, for the per-time leaf box test
+        bool movedPatch = false;  // the projected patch moves: movedSoa holds it at the ray's time
         PatchSoa movedSoa;
-        BezierPatch movedPatch;
     };
 
     tbb::parallel_for(size_t(0), nChunks, [&](size_t ci) {
@@ -120,7 +119,10 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     sp = s.bestSp;
                 } else if (acc.moving(s.bestPatch)) {
                     BezierPatch moved;
-                    patchAtTime(acc, s.bestPatch, s.time, moved);
+                    if (s.projected == s.bestPatch)
+                        soaToPatch(s.movedSoa, moved);
+                    else
+                        patchAtTime(acc, s.bestPatch, s.time, moved);
                     sp = evalPatchDeriv(moved, s.bestU, s.bestV);
                 } else {
                     sp = evalPatchDeriv(acc.patches[s.bestPatch], s.bestU, s.bestV);
@@ -196,11 +198,10 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 }
                 if (c.patch != s.projected) {
                     const PatchSoa* soa = &acc.patchSoa[c.patch];
-                    s.patch = &acc.patches[c.patch];
-                    if (acc.moving(c.patch)) {  // the patch at the ray's time (paper 002, sec. 5.3.3)
-                        patchSoaAtTime(acc, c.patch, s.time, s.movedSoa, s.movedPatch);
+                    s.movedPatch = motion && acc.moving(c.patch);
+                    if (s.movedPatch) {  // the patch at the ray's time (paper 002, sec. 5.3.3)
+                        patchSoaAt(acc, c.patch, s.segK, s.segW, s.movedSoa);
                         soa = &s.movedSoa;
-                        s.patch = &s.movedPatch;
                     }
                     projectLane(*soa, s, lanes, l);
                     s.projected = c.patch;
@@ -269,7 +270,6 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             }
             if (found) {
                 s.rootPatch = c.patch, s.rootU = uc, s.rootV = vc;
-                const BezierPatch& patch = *s.patch;
                 float bu[4], bv[4];
                 bernstein3(uc, bu);
                 bernstein3(vc, bv);
@@ -281,7 +281,13 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     t > s.ray.tmin && t < s.ray.tmax && !(c.patch == s.opt.ignorePatch && t < s.opt.ignoreT);
                 bool haveDeriv = false;
                 if (ok && s.opt.respectSides && !acc.twoSided[c.patch]) {
-                    s.bestSp = evalPatchDeriv(patch, uc, vc);
+                    if (s.movedPatch) {
+                        BezierPatch moved;
+                        soaToPatch(s.movedSoa, moved);
+                        s.bestSp = evalPatchDeriv(moved, uc, vc);
+                    } else {
+                        s.bestSp = evalPatchDeriv(acc.patches[c.patch], uc, vc);
+                    }
                     haveDeriv = true;
                     Vec3 N = cross(s.bestSp.dpdu, s.bestSp.dpdv);
                     if (acc.flip[c.patch]) N = -N;

@@ -202,7 +202,8 @@ SceneRect sceneRect(const RtAccel& acc, const Projector& proj) {
         sr.x0 = sr.y0 = INFINITY, sr.x1 = sr.y1 = -INFINITY;  // nothing to hit
     } else if (proj.rasterBounds(acc.bounds, x0, x1, y0, y1) && std::isfinite(x0) && std::isfinite(x1) &&
                std::isfinite(y0) && std::isfinite(y1)) {
-        const float coc = std::max(proj.circleOfConfusion(acc.bounds.lo.z), proj.circleOfConfusion(acc.bounds.hi.z));
+        const float coc =
+            std::max(proj.circleOfConfusion(acc.bounds.lo.z), proj.circleOfConfusion(acc.bounds.hi.z));
         sr.x0 = x0 - 1.f - coc, sr.x1 = x1 + 1.f + coc, sr.y0 = y0 - 1.f - coc, sr.y1 = y1 + 1.f + coc;
     }
     return sr;
@@ -313,7 +314,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     // Build: camera space (eye at the origin), both levels of the hierarchy.
     const auto tBuild = EngineClock::now();
     RtAccel acc;
-    buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc, &frame.motion);
+    buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc,
+                 &frame.motion);
     const double buildMs = msSince(tBuild);
     // Binning (camera and shadow rays) pays when the subpatch leaves are few compared with the samples, i.e.
     // boxes cover several samples each: the per-tile descent then replaces many per-ray box tests. With

@@ -306,7 +306,8 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                     std::copy(boxes + first, boxes + first + leaves, kl);
                     for (int k = 1; k < motion->knotCount(); ++k) {
                         tb.build(keys[k], knotBoxes.data(), nullptr, sign);
-                        std::copy(knotBoxes.data() + first, knotBoxes.data() + first + leaves, kl + k * leaves);
+                        std::copy(knotBoxes.data() + first, knotBoxes.data() + first + leaves,
+                                  kl + k * leaves);
                         for (uint32_t nd = 0; nd < f.nodesPerPatch; ++nd) boxes[nd].extend(knotBoxes[nd]);
                     }
                     if (back) std::fill(back, back + f.nodesPerPatch, uint8_t(0));

@@ -96,7 +96,8 @@ struct SubpatchForest {
     size_t memoryBytes() const {
         return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
                quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
-               (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis) + knotLeaves.size() * sizeof(Bounds3);
+               (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis) +
+               knotLeaves.size() * sizeof(Bounds3);
     }
 };
 

@@ -143,8 +143,8 @@ void traceBatch(const RtAccel& acc, std::span<const Ray> rays, const TraceOption
                                                                    : kReflection;
     RayList list;
     for (const Ray& r : rays)
-        list.push(r.o, r.d, r.tmin, r.tmax, 0, {1, 1, 1}, opt.ignorePatch, kind, 0, {-1.f, -1.f}, {0.f, 0.f, 0.f},
-                  opt.time);
+        list.push(r.o, r.d, r.tmin, r.tmax, 0, {1, 1, 1}, opt.ignorePatch, kind, 0, {-1.f, -1.f},
+                  {0.f, 0.f, 0.f}, opt.time);
     TraceService service(acc, {opt.cullBackfaces, false});
     service.trace(list, hits);
 }
