@@ -81,7 +81,7 @@ int main(int argc, char** argv) {
     nlohmann::json j;
     for (const char* k :
          {"trace_ms", "rays_total", "rays", "candidates", "candidates_per_ray", "box_tests", "newton_runs",
-          "build_ms", "ray_binning", "blur", "moving_patches", "lens_radius", "stage_ms", "mrays_per_s"})
+          "build_ms", "ray_binning", "blur", "time_culled", "stage_ms", "mrays_per_s"})
         if (r.stats.contains(k)) j[k] = r.stats[k];
     std::printf("%s\n", j.dump().c_str());
     return 0;

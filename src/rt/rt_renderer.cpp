@@ -412,11 +412,13 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["ray_binning"] = binning;
     s["leaves_per_sample"] = leavesPerSample;
     s["max_depth"] = fr.maxDepth;
-    s["blur"] = frame.blurred();
-    s["moving_patches"] = acc.movingPatches;
-    s["motion_knots"] = acc.motion.knotCount();
-    s["lens_radius"] = proj.lensRadius;
-    s["blur_sampling"] = blurSamplingName(frame.blur.scheme);
+    if (frame.blurred())  // as Reyes has it (the app adds what was asked for)
+        s["blur"] = {{"sampling", blurSamplingName(frame.blur.scheme)},
+                     {"motion", frame.blur.motion},
+                     {"lens", frame.blur.lens},
+                     {"knots", acc.motion.knotCount()},
+                     {"moving_patches", acc.movingPatches},
+                     {"lens_radius", proj.lensRadius}};
     s["stage_ms"] = {{"traversal_cpu", total.traversalMs},
                      {"newton_cpu", total.newtonMs},
                      {"shading_cpu", shadeMs},
