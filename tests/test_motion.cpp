@@ -447,3 +447,18 @@ TEST(MotionBlur, LaterKnotsKeepTheEdgeLatticeOrder) {
             }
     }
 }
+
+TEST(BlurPattern, PreparedTimeAndLensSeedsMatchTheSampler) {
+    // SampleTile::setBlur's per-pixel fast path gives the same bits as sampleBits.
+    for (uint32_t px = 0; px < 40; ++px) {
+        const uint32_t ps = pixelSeed(int(px), int(px * 7 % 13), 3);
+        const TimeLensSeeds seeds = timeLensSeeds(ps);
+        for (uint32_t i = 0; i < 300; ++i) {
+            EXPECT_EQ(timeBits(seeds, i), sampleBits(ps, i, kDimTime));
+            uint32_t u, v;
+            lensBits(seeds, i, u, v);
+            EXPECT_EQ(u, sampleBits(ps, i, kDimLensU));
+            EXPECT_EQ(v, sampleBits(ps, i, kDimLensV));
+        }
+    }
+}

@@ -1,5 +1,7 @@
 #include "film/film.h"
 
+#include "scene/camera.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -74,6 +76,24 @@ void SampleTile::setBlur(const BlurPattern* pattern) {
     time.resize(n);
     lens.resize(n);
     size_t i = 0;
+    if (blur->scheme == BlurSampling::BoundingBox) {
+        // Per pixel: its seeds once (BlurPattern::sampleAt for every sample would hash them per sample).
+        for (int py = region.y0; py < region.y1; ++py)
+            for (int px = region.x0; px < region.x1; ++px) {
+                const TimeLensSeeds seeds = timeLensSeeds(pixelSeed(px, py, blur->seed));
+                for (int s = 0; s < spp; ++s, ++i) {
+                    time[i] = blur->motion ? bitsToUnit(timeBits(seeds, sampleIndex[i])) : 0.f;
+                    if (blur->lens) {
+                        uint32_t u, v;
+                        lensBits(seeds, sampleIndex[i], u, v);
+                        lens[i] = squareToDisk(bitsToUnit(u), bitsToUnit(v));
+                    } else {
+                        lens[i] = Vec2{};
+                    }
+                }
+            }
+        return;
+    }
     for (int py = region.y0; py < region.y1; ++py)
         for (int px = region.x0; px < region.x1; ++px)
             for (int s = 0; s < spp; ++s, ++i) blur->sampleAt(px, py, s, sampleIndex[i], time[i], lens[i]);

@@ -205,6 +205,25 @@ TESSERA_HD uint32_t sampleBits(uint32_t pixelSeed, uint32_t index, uint32_t dim)
 TESSERA_HD float sampleDimension(uint32_t pixelSeed, uint32_t index, uint32_t dim) {
     return bitsToUnit(sampleBits(pixelSeed, index, dim));
 }
+// The time and lens dimensions of a pixel's samples with the pixel's seeds prepared once (the blurred
+// film fills them for every sample of every tile): equal to sampleBits for kDimTime, kDimLensU, kDimLensV,
+// with the lens pair's index shuffle computed once for both.
+struct TimeLensSeeds {
+    uint32_t time, lensShuffle, lensU, lensV;
+};
+TESSERA_HD TimeLensSeeds timeLensSeeds(uint32_t pixelSeed) {
+    return {scrambleSeed(pixelSeed, kDimTime), shuffleSeed(pixelSeed, sampleGroup(kDimLensU)),
+            scrambleSeed(pixelSeed, kDimLensU), scrambleSeed(pixelSeed, kDimLensV)};
+}
+TESSERA_HD uint32_t timeBits(const TimeLensSeeds& s, uint32_t index) {
+    return nestedUniformScramble(sobolBits2(index), s.time);
+}
+TESSERA_HD void lensBits(const TimeLensSeeds& s, uint32_t index, uint32_t& u, uint32_t& v) {
+    const uint32_t shuffled = nestedUniformScramble(index, s.lensShuffle);
+    u = reverseBits32(laineKarrasPermutation(shuffled, s.lensU));
+    v = reverseBits32(laineKarrasPermutation(sobolBits1Reversed(shuffled), s.lensV));
+}
+
 // Dimensions (dim, dim + 1); for the named pairs (film, lens, light, ...) a (0,2)-sequence.
 struct Sample2D {
     float u = 0, v = 0;
