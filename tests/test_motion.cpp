@@ -462,3 +462,27 @@ TEST(BlurPattern, PreparedTimeAndLensSeedsMatchTheSampler) {
         }
     }
 }
+
+TEST(MotionBlur, MotionFactorCoarsensOnlyBlurredGeometry) {
+    // GeometricApproximation "motionfactor": the shading rate of a moving patch grows with its blur
+    // (rate * max(1, factor * blur / 16)); a still patch, and every patch at factor 0, keeps its rate.
+    Scene s = coverageScene(96, 64);
+    addMovingPatch(s, flatSquare(1.f, 5.f, -0.6f, 0.f), flatSquare(1.f, 5.f, 0.6f, 0.f));
+    addPatch(s, flatSquare(0.6f, 5.f, 0.f, 0.5f));
+    setSpp(s, 4, 4);
+    const RenderResult plain = render(s, settingsFor("reyes", 16));
+    Scene coarse = s;
+    for (PatchAttributes& a : coarse.attributes) a.motionFactor = 4.f;
+    const RenderResult r = render(coarse, settingsFor("reyes", 16));
+    EXPECT_LT(r.stats["micropolygons"].get<uint64_t>(), plain.stats["micropolygons"].get<uint64_t>() / 2);
+    // In the same blurred frame a still patch is not coarsened: the factor on the still square alone changes
+    // nothing.
+    Scene stillFactor = s;
+    stillFactor.attributes[1].motionFactor = 4.f;
+    const RenderResult st = render(stillFactor, settingsFor("reyes", 16));
+    EXPECT_EQ(st.stats["micropolygons"], plain.stats["micropolygons"]);
+    EXPECT_EQ(st.image.rgba, plain.image.rgba);
+    // Coarser shading of a flat constant square changes its coverage by little.
+    const ImageDiff d = compareImages(plain.image, r.image, 0.1f);
+    EXPECT_LT(d.meanAbsAlpha, 0.01);
+}
