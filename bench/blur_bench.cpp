@@ -137,21 +137,36 @@ int main(int argc, char** argv) {
     for (int i = 2; i < argc; ++i) {
         const std::string a = argv[i];
         auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
-        if (a == "--engine") engine = next();
-        else if (a == "--res") res = next();
-        else if (a == "--threads") threads = std::stoi(next());
-        else if (a == "--translate") translate = numbers(next());
-        else if (a == "--spin") spin = numbers(next());
-        else if (a == "--dof") dof = numbers(next());
-        else if (a == "--spp") sppList = next();
-        else if (a == "--schemes") schemes = next();
-        else if (a == "--tiles") tiles = next();
-        else if (a == "--perms") perms = next();
-        else if (a == "--ref-spp") refSpp = std::stoi(next());
-        else if (a == "--runs") runs = std::stoi(next());
-        else if (a == "--no-strata") strata = false;
-        else if (a == "--sharp") sharp = true;
-        else if (a == "--no-motion") noMotion = true;
+        if (a == "--engine")
+            engine = next();
+        else if (a == "--res")
+            res = next();
+        else if (a == "--threads")
+            threads = std::stoi(next());
+        else if (a == "--translate")
+            translate = numbers(next());
+        else if (a == "--spin")
+            spin = numbers(next());
+        else if (a == "--dof")
+            dof = numbers(next());
+        else if (a == "--spp")
+            sppList = next();
+        else if (a == "--schemes")
+            schemes = next();
+        else if (a == "--tiles")
+            tiles = next();
+        else if (a == "--perms")
+            perms = next();
+        else if (a == "--ref-spp")
+            refSpp = std::stoi(next());
+        else if (a == "--runs")
+            runs = std::stoi(next());
+        else if (a == "--no-strata")
+            strata = false;
+        else if (a == "--sharp")
+            sharp = true;
+        else if (a == "--no-motion")
+            noMotion = true;
         else {
             std::fprintf(stderr, "unknown option %s\n", a.c_str());
             return 2;
@@ -193,10 +208,8 @@ int main(int argc, char** argv) {
             if (out && r == repeats - 1) *out = std::move(res.image);
         }
         std::sort(ms.begin(), ms.end());
-        nlohmann::json j = {{"engine", engine},
-                            {"spp", spp},
-                            {"engine_ms", ms[ms.size() / 2]},
-                            {"engine_ms_all", ms}};
+        nlohmann::json j = {
+            {"engine", engine}, {"spp", spp}, {"engine_ms", ms[ms.size() / 2]}, {"engine_ms_all", ms}};
         if (stats.contains("sample_tests")) j["sample_tests"] = stats["sample_tests"];
         if (stats.contains("rays")) j["rays"] = stats["rays"];
         return j;

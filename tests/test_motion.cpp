@@ -8,11 +8,11 @@
 #include <numbers>
 #include <string>
 
+#include "core/motion_transform.h"
 #include "film/blur_pattern.h"
 #include "film/image_compare.h"
-#include "io/scene_loader.h"
-#include "core/motion_transform.h"
 #include "io/image_io.h"
+#include "io/scene_loader.h"
 #include "render/render.h"
 #include "reyes/grid.h"
 #include "reyes/split.h"
@@ -59,13 +59,15 @@ void setSpp(Scene& s, int nx, int ny) {
     s.image.pixelSamplesY = ny;
 }
 
-
 void dumpIfAsked(const Image& im, const std::string& name) {
-    if (const char* dir = std::getenv("TESSERA_TEST_IMAGES")) writePng(std::string(dir) + "/" + name + ".png", im, {});
+    if (const char* dir = std::getenv("TESSERA_TEST_IMAGES"))
+        writePng(std::string(dir) + "/" + name + ".png", im, {});
 }
 
 // Overlap of [a0, a1] with [b0, b1].
-double overlap(double a0, double a1, double b0, double b1) { return std::max(0.0, std::min(a1, b1) - std::max(a0, b0)); }
+double overlap(double a0, double a1, double b0, double b1) {
+    return std::max(0.0, std::min(a1, b1) - std::max(a0, b0));
+}
 
 double rmse(const Image& a, const Image& b) {
     double s = 0;
@@ -77,8 +79,8 @@ double rmse(const Image& a, const Image& b) {
 
 TEST(MotionBlur, MovingSquareCoverageIsTheTimeAveragedSweep) {
     // A square at depth 5 slides +0.6 along x over the shutter. The raster x of its edges moves linearly
-    // (a fronto-parallel square: raster = x / z * sx + ox), so the alpha of pixel column [x, x + 1] in a row the
-    // square covers is the time average of the overlap of [x, x+1] with [L(t), R(t)], integrated here by
+    // (a fronto-parallel square: raster = x / z * sx + ox), so the alpha of pixel column [x, x + 1] in a row
+    // the square covers is the time average of the overlap of [x, x+1] with [L(t), R(t)], integrated here by
     // brute force over 20000 time steps.
     Scene s = coverageScene(96, 64);
     addMovingPatch(s, flatSquare(1.f, 5.f, -0.3f, 0.f), flatSquare(1.f, 5.f, 0.3f, 0.f));
@@ -88,7 +90,8 @@ TEST(MotionBlur, MovingSquareCoverageIsTheTimeAveragedSweep) {
     const double shift = (0.6 / 5.0) * pr.sx;
     const int y = 32;  // a row inside the square at every time
     for (const char* engine : {"reyes", "rt"}) {
-        for (BlurSampling scheme : {BlurSampling::BoundingBox, BlurSampling::Interleaved, BlurSampling::Simple}) {
+        for (BlurSampling scheme :
+             {BlurSampling::BoundingBox, BlurSampling::Interleaved, BlurSampling::Simple}) {
             const RenderResult r = render(s, settingsFor(engine, 256, scheme));
             dumpIfAsked(r.image, std::string("moving_square_") + engine + "_" + blurSamplingName(scheme));
             double maxErr = 0, sumErr = 0;
@@ -105,13 +108,16 @@ TEST(MotionBlur, MovingSquareCoverageIsTheTimeAveragedSweep) {
                 sumErr += err;
             }
             SCOPED_TRACE(std::string(engine) + " " + blurSamplingName(scheme));
-            RecordProperty(std::string("max_error_") + engine + "_" + blurSamplingName(scheme), std::to_string(maxErr));
+            RecordProperty(std::string("max_error_") + engine + "_" + blurSamplingName(scheme),
+                           std::to_string(maxErr));
             // 256 samples per pixel. bbox and simple: each pixel's (x, t) pairs are jointly stratified (one
-            // Sobol' point), a few 1/256 at worst. Interleaved: a pixel's times are stratified but paired with
-            // its film positions by a permutation (a Latin hypercube), so its error is about twice as large.
+            // Sobol' point), a few 1/256 at worst. Interleaved: a pixel's times are stratified but paired
+            // with its film positions by a permutation (a Latin hypercube), so its error is about twice as
+            // large.
             const bool interleaved = scheme == BlurSampling::Interleaved;
             EXPECT_LT(maxErr, interleaved ? 0.04 : 0.02) << "max |alpha - analytic| over the row";
-            EXPECT_LT(sumErr / s.camera.width, interleaved ? 0.008 : 0.004) << "mean |alpha - analytic| over the row";
+            EXPECT_LT(sumErr / s.camera.width, interleaved ? 0.008 : 0.004)
+                << "mean |alpha - analytic| over the row";
         }
     }
 }
@@ -163,7 +169,8 @@ TEST(DepthOfField, EdgeBlurIsTheThinLensCircleOfConfusion) {
                 for (int k = 0; k < 200; ++k) expected += covered(x + (k + 0.5) / 200 - edge);
                 expected /= 200;
                 maxErr = std::max(maxErr, std::abs(alphaAt(r.image, x, 32) - expected));
-                if (std::getenv("TESSERA_TEST_VERBOSE")) printf("x %d alpha %f expected %f\n", x, alphaAt(r.image, x, 32), expected);
+                if (std::getenv("TESSERA_TEST_VERBOSE"))
+                    printf("x %d alpha %f expected %f\n", x, alphaAt(r.image, x, 32), expected);
             }
             EXPECT_LT(maxErr, 0.04) << engine << " " << blurSamplingName(scheme);
         }
@@ -325,7 +332,8 @@ namespace {
 Scene crossEngineScene() {
     Scene s = cameraSpaceScene(96, 72, 40.f);
     s.camera.shutterClose = 1.f;
-    s.lights = {{LightType::Ambient, {0.2f, 0.2f, 0.2f}, {}, {}}, {LightType::Distant, {1, 1, 1}, {0, 0, 0}, {0.3f, -0.4f, 1.f}}};
+    s.lights = {{LightType::Ambient, {0.2f, 0.2f, 0.2f}, {}, {}},
+                {LightType::Distant, {1, 1, 1}, {0, 0, 0}, {0.3f, -0.4f, 1.f}}};
     return s;
 }
 void expectEnginesAgree(const Scene& s, BlurSampling scheme, const char* what) {
@@ -334,8 +342,10 @@ void expectEnginesAgree(const Scene& s, BlurSampling scheme, const char* what) {
     dumpIfAsked(a.image, std::string("cross_reyes_") + what);
     dumpIfAsked(b.image, std::string("cross_rt_") + what);
     const ImageDiff d = compareImages(a.image, b.image, 0.1f);
-    ::testing::Test::RecordProperty(std::string("psnr_") + what + "_" + blurSamplingName(scheme), std::to_string(d.psnrColor));
-    ::testing::Test::RecordProperty(std::string("alpha_") + what + "_" + blurSamplingName(scheme), std::to_string(d.alphaMismatch));
+    ::testing::Test::RecordProperty(std::string("psnr_") + what + "_" + blurSamplingName(scheme),
+                                    std::to_string(d.psnrColor));
+    ::testing::Test::RecordProperty(std::string("alpha_") + what + "_" + blurSamplingName(scheme),
+                                    std::to_string(d.alphaMismatch));
     EXPECT_GE(d.psnrColor, 35.0) << what << " " << blurSamplingName(scheme);
     EXPECT_LT(d.alphaMismatch, 0.005) << what << " " << blurSamplingName(scheme);
     EXPECT_LT(d.meanAbsAlpha, 0.01) << what << " " << blurSamplingName(scheme);
@@ -383,9 +393,11 @@ TEST(MotionBlurCrossEngine, RotatingSquareAgrees) {
 }
 
 TEST(MotionBlurCrossEngine, ShippedMotionScenesAgree) {
-    // scenes/motion_teapot.rib and dof_teapot.rib at 160x120, 64 spp, lit from the eye (Reyes has no shadows).
+    // scenes/motion_teapot.rib and dof_teapot.rib at 160x120, 64 spp, lit from the eye (Reyes has no
+    // shadows).
     for (const char* name : {"motion_teapot", "dof_teapot"}) {
-        Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib", [](const std::string&) {});
+        Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib",
+                            [](const std::string&) {});
         s.camera.width = 160;
         s.camera.height = 120;
         setSpp(s, 8, 8);

@@ -13,8 +13,8 @@ namespace tessera {
 struct DecomposedTransform {
     double translation[3] = {0, 0, 0};
     double rotation[4] = {0, 0, 0, 1};  // unit quaternion (x, y, z, w)
-    Mat4 stretch;                        // symmetric 3x3 in the upper-left block (sign carries a reflection)
-    bool projective = false;             // the bottom row is not (0 0 0 1): not decomposable, lerp instead
+    Mat4 stretch;                       // symmetric 3x3 in the upper-left block (sign carries a reflection)
+    bool projective = false;            // the bottom row is not (0 0 0 1): not decomposable, lerp instead
     Mat4 original;
 };
 

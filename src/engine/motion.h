@@ -15,9 +15,9 @@ namespace tessera {
 
 struct FrameMotion {
     static constexpr uint32_t kStatic = 0xffffffffu;
-    std::vector<float> knots{0.f};      // increasing normalised shutter times; knots[0] = 0; one knot: no motion
-    std::vector<uint32_t> firstKey;      // per patch: index into `keys` of its first knot, or kStatic
-    std::vector<BezierPatch> keys;       // camera space, knots.size() per moving patch
+    std::vector<float> knots{0.f};   // increasing normalised shutter times; knots[0] = 0; one knot: no motion
+    std::vector<uint32_t> firstKey;  // per patch: index into `keys` of its first knot, or kStatic
+    std::vector<BezierPatch> keys;   // camera space, knots.size() per moving patch
 
     int knotCount() const { return int(knots.size()); }
     bool blurred() const { return knots.size() > 1; }

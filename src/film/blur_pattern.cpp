@@ -26,8 +26,8 @@ namespace {
 // The shared (t, lens) set of the simple and interleaved schemes: a 3D Owen-scrambled Sobol' set of the
 // frame (time on its own dimension, the lens as a padded pair), so it is stratified however it is split.
 // `stratum` gets each sample's position in the unit square of lens coordinates (before the disk map).
-void frameSamples(uint32_t seed, int n, bool motion, bool lens, std::vector<float>& time, std::vector<Vec2>& lensPoint,
-                  std::vector<Vec2>* lensSquare = nullptr) {
+void frameSamples(uint32_t seed, int n, bool motion, bool lens, std::vector<float>& time,
+                  std::vector<Vec2>& lensPoint, std::vector<Vec2>* lensSquare = nullptr) {
     const uint32_t frameSeed = pixelSeed(0xfffe, 0xfffe, seed ^ 0xb1a5u);
     time.resize(n);
     lensPoint.resize(n);
@@ -47,12 +47,13 @@ uint32_t stepHash(uint32_t i, uint32_t k, uint32_t salt, uint32_t seed) {
 
 // Fisher-Yates with one hash per step: the same permutations on every run and thread.
 void shuffle(std::vector<int>& v, uint32_t k, uint32_t salt, uint32_t seed) {
-    for (int i = int(v.size()) - 1; i > 0; --i) std::swap(v[i], v[stepHash(uint32_t(i), k, salt, seed) % uint32_t(i + 1)]);
+    for (int i = int(v.size()) - 1; i > 0; --i)
+        std::swap(v[i], v[stepHash(uint32_t(i), k, salt, seed) % uint32_t(i + 1)]);
 }
 }  // namespace
 
-BlurPattern makeBlurPattern(BlurSampling scheme, bool motion, bool lens, int spp, int imageWidth, int tileSize,
-                            int permutations, uint32_t seed) {
+BlurPattern makeBlurPattern(BlurSampling scheme, bool motion, bool lens, int spp, int imageWidth,
+                            int tileSize, int permutations, uint32_t seed) {
     BlurPattern p;
     p.scheme = scheme;
     p.motion = motion;
@@ -81,7 +82,8 @@ BlurPattern makeBlurPattern(BlurSampling scheme, bool motion, bool lens, int spp
         std::vector<float> key(N);
         for (int n = 0; n < N; ++n)
             key[n] = motion ? p.time[n]
-                            : float(std::min(ay - 1, int(square[n].y * ay)) * ax + std::min(ax - 1, int(square[n].x * ax))) +
+                            : float(std::min(ay - 1, int(square[n].y * ay)) * ax +
+                                    std::min(ax - 1, int(square[n].x * ax))) +
                                   square[n].x * 1e-3f;
         std::vector<int> ranked(N);
         std::iota(ranked.begin(), ranked.end(), 0);

@@ -54,7 +54,7 @@ struct BlurPattern {
 };
 
 // `motion` / `lens`: whether the frame blurs in time / has a lens. Interleaved needs spp K^2 <= 65536.
-BlurPattern makeBlurPattern(BlurSampling scheme, bool motion, bool lens, int spp, int imageWidth, int tileSize,
-                            int permutations, uint32_t seed);
+BlurPattern makeBlurPattern(BlurSampling scheme, bool motion, bool lens, int spp, int imageWidth,
+                            int tileSize, int permutations, uint32_t seed);
 
 }  // namespace tessera

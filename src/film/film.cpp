@@ -1,11 +1,11 @@
 #include "film/film.h"
 
-#include "scene/camera.h"
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <utility>
+
+#include "scene/camera.h"
 
 namespace tessera {
 

@@ -30,8 +30,8 @@ inline void knotSegment(const std::vector<float>& knots, int gridKnots, float u,
     w = (u - knots[k]) / (knots[k + 1] - knots[k]);
 }
 
-// Raster coordinate to fixed point for moved vertices, after the same clamp as rasterToFixed. Every moved vertex goes through this one function, so shared
-// vertices of neighbouring micropolygons stay bit-identical.
+// Raster coordinate to fixed point for moved vertices, after the same clamp as rasterToFixed. Every moved
+// vertex goes through this one function, so shared vertices of neighbouring micropolygons stay bit-identical.
 inline int64_t blurredToFixed(float v) {
     constexpr float kLimit = float(1 << 20) * kSubpixelScale;
     const float f = std::min(kLimit, std::max(-kLimit, v * kSubpixelScale));
@@ -321,7 +321,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                         for (int py = sp.py0; py <= sp.py1; ++py)
                             for (int px = sp.px0; px <= sp.px1; ++px) {
                                 ++tests;
-                                if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, n), tile, nearZ))
+                                if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, n),
+                                                                 tile, nearZ))
                                     tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                             }
                         continue;
@@ -334,7 +335,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                             const int px = tx * K + inTile % K, py = ty * K + inTile / K;
                             if (px < sp.px0 || px > sp.px1 || py < sp.py0 || py > sp.py1) continue;
                             ++tests;
-                            if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, slot), tile, nearZ))
+                            if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, slot),
+                                                             tile, nearZ))
                                 tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                         }
                 }
@@ -358,7 +360,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
         for (int kn = 0; kn < g.knots; ++kn) {
             const size_t at = size_t(kn) * nv + v;
             allValid = allValid && g.knotValid[at];
-            if (kn > 0) path += std::abs(g.knotX[at] - g.knotX[at - nv]) + std::abs(g.knotY[at] - g.knotY[at - nv]);
+            if (kn > 0)
+                path += std::abs(g.knotX[at] - g.knotX[at - nv]) + std::abs(g.knotY[at] - g.knotY[at - nv]);
         }
         motion = std::max(motion, path);
     }
@@ -385,7 +388,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
     thread_local std::vector<int> endKnot;
     thread_local std::vector<float> endWeight;
     endKnot.resize(size_t(groups) + 1), endWeight.resize(size_t(groups) + 1);
-    for (int e = 0; e <= groups; ++e) knotSegment(knots, g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
+    for (int e = 0; e <= groups; ++e)
+        knotSegment(knots, g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
             const int a = j * stride + i;
@@ -435,17 +439,23 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                 }
                 const float x0 = box.x0, x1 = box.x1, y0 = box.y0, y1 = box.y1, c0 = box.c0, c1 = box.c1;
                 for (int lc = 0; lc < LL; ++lc) {
-                    const float lx0 = -1.f + 2.f * float(lc % L) / L, lx1 = -1.f + 2.f * float(lc % L + 1) / L;
-                    const float ly0 = -1.f + 2.f * float(lc / L) / L, ly1 = -1.f + 2.f * float(lc / L + 1) / L;
+                    const float lx0 = -1.f + 2.f * float(lc % L) / L,
+                                lx1 = -1.f + 2.f * float(lc % L + 1) / L;
+                    const float ly0 = -1.f + 2.f * float(lc / L) / L,
+                                ly1 = -1.f + 2.f * float(lc / L + 1) / L;
                     Bound2 bd;
                     bd.valid = allValid;
                     // x + l c sx >= min x + min (l c sx) over the corners (likewise for the maxima).
                     bd.x0 = x0, bd.x1 = x1, bd.y0 = y0, bd.y1 = y1;
                     if (lensOn) {
-                        const float xs[4] = {lx0 * c0 * pr.sx, lx0 * c1 * pr.sx, lx1 * c0 * pr.sx, lx1 * c1 * pr.sx};
-                        const float ys[4] = {ly0 * c0 * pr.sy, ly0 * c1 * pr.sy, ly1 * c0 * pr.sy, ly1 * c1 * pr.sy};
-                        bd.x0 += std::min({xs[0], xs[1], xs[2], xs[3]}), bd.x1 += std::max({xs[0], xs[1], xs[2], xs[3]});
-                        bd.y0 += std::min({ys[0], ys[1], ys[2], ys[3]}), bd.y1 += std::max({ys[0], ys[1], ys[2], ys[3]});
+                        const float xs[4] = {lx0 * c0 * pr.sx, lx0 * c1 * pr.sx, lx1 * c0 * pr.sx,
+                                             lx1 * c1 * pr.sx};
+                        const float ys[4] = {ly0 * c0 * pr.sy, ly0 * c1 * pr.sy, ly1 * c0 * pr.sy,
+                                             ly1 * c1 * pr.sy};
+                        bd.x0 += std::min({xs[0], xs[1], xs[2], xs[3]}),
+                            bd.x1 += std::max({xs[0], xs[1], xs[2], xs[3]});
+                        bd.y0 += std::min({ys[0], ys[1], ys[2], ys[3]}),
+                            bd.y1 += std::max({ys[0], ys[1], ys[2], ys[3]});
                     }
                     // A corner behind the near plane at some time: the moved quad of each sample decides.
                     const int64_t bx0 = bd.valid ? int64_t(bd.x0 * kSubpixelScale) - 2 : INT64_MIN / 4,
@@ -459,7 +469,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                             const size_t pix = size_t(py - reg.y0) * tw + (px - reg.x0);
                             auto visit = [&](int slot) {
                                 const size_t si = pix * spp + size_t(slot);
-                                if (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 || tile.sy[si] > by1)
+                                if (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 ||
+                                    tile.sy[si] > by1)
                                     return;
                                 ++tests;
                                 int k;
@@ -467,7 +478,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                                 knotSegment(knots, g.knots, tile.time[si], k, w);
                                 const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
                                 if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
-                                if (testSample<kAttributes>(g, vid, q, si, tile, nearZ)) tile.pixelHit[pix] = 1;
+                                if (testSample<kAttributes>(g, vid, q, si, tile, nearZ))
+                                    tile.pixelHit[pix] = 1;
                             };
                             if (!cut) {
                                 for (int sl = 0; sl < spp; ++sl) visit(sl);
@@ -481,7 +493,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                             }
                             for (int tb = j0; tb < j1; ++tb) {
                                 const size_t c0i = base + size_t(tb) * LL;
-                                for (uint32_t e = strata.start[c0i]; e < strata.start[c0i + 1]; ++e) visit(strata.slot[e]);
+                                for (uint32_t e = strata.start[c0i]; e < strata.start[c0i + 1]; ++e)
+                                    visit(strata.slot[e]);
                             }
                         }
                 }

@@ -98,7 +98,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
     blurContext.pattern = &frame.blur;
     blurContext.knots = &motion.knots;
     blurContext.strataBounds = settings.blur.strataBounds;
-    const bool useStrata = blurred && frame.blur.scheme == BlurSampling::BoundingBox && settings.blur.strataBounds;
+    const bool useStrata =
+        blurred && frame.blur.scheme == BlurSampling::BoundingBox && settings.blur.strataBounds;
     view.maxGridEdge = std::max(1, settings.maxGridEdge);
     const int rx = frame.filter.radiusX(), ry = frame.filter.radiusY();
     const Rect& region = frame.region;
@@ -201,9 +202,10 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                 tc.diceMs += msSince(td);
             });
             auto ts = EngineClock::now();
-            tc.sampleTests += slot.grid->blurred ? rasterizeBlurredGrid(*slot.grid, tc.tile, view.projector.nearClip,
-                                                                      blurContext, tc.strata)
-                                                 : rasterizeGrid(*slot.grid, tc.tile, view.projector.nearClip);
+            tc.sampleTests += slot.grid->blurred
+                                  ? rasterizeBlurredGrid(*slot.grid, tc.tile, view.projector.nearClip,
+                                                         blurContext, tc.strata)
+                                  : rasterizeGrid(*slot.grid, tc.tile, view.projector.nearClip);
             tc.sampleMs += msSince(ts);
             if (slot.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) slot.grid.reset();
         }

@@ -94,8 +94,8 @@ enum class Verdict { Cull, Split, SplitNear, Dice };
 // Raster rectangle of a control hull lying in front of the eye; with a lens, grown by the circle of
 // confusion of its depth range: a lens point a on the unit disk shifts the image of depth z by
 // a * lensRadius * (1/focaldistance - 1/z) * (sx, sy) (Projector::lensShift), largest at a depth extreme.
-void hullRaster(const Projector& pr, bool lens, const BezierPatch& hull, const Bounds3& b, float& x0, float& y0,
-                float& x1, float& y1) {
+void hullRaster(const Projector& pr, bool lens, const BezierPatch& hull, const Bounds3& b, float& x0,
+                float& y0, float& x1, float& y1) {
     x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
     for (const Vec3& c : hull.cp) {
         Vec3 r = pr.toRaster(c);
@@ -268,7 +268,8 @@ void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t i
                   std::vector<Piece>& out, SplitCounters& counters) {
     // GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis): blurred geometry is shaded
     // more coarsely, the shading rate growing with the blur: rate * max(1, factor * blur / 16 pixels).
-    const float factor = std::max(view.patchMoves(index) ? attr.motionFactor : 0.f, view.lens ? attr.focusFactor : 0.f);
+    const float factor =
+        std::max(view.patchMoves(index) ? attr.motionFactor : 0.f, view.lens ? attr.focusFactor : 0.f);
     if (factor > 0.f) {
         Piece root;
         root.patch = index;

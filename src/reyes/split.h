@@ -61,7 +61,9 @@ struct ReyesView {
     const std::vector<uint32_t>* moving = nullptr;  // FrameMotion::firstKey (kStatic: does not move)
     bool lens = false;
     int knotCount() const { return knotPatches.empty() ? 1 : int(knotPatches.size()); }
-    bool patchMoves(uint32_t patch) const { return moving && !moving->empty() && (*moving)[patch] != 0xffffffffu; }
+    bool patchMoves(uint32_t patch) const {
+        return moving && !moving->empty() && (*moving)[patch] != 0xffffffffu;
+    }
     Projector projector;
     float micropolygonSide = 1.f;          // sqrt(shading rate), pixels
     float cullX0, cullY0, cullX1, cullY1;  // raster window that can still reach a pixel (image + filter)

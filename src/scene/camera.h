@@ -5,10 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include "core/hostdevice.h"
 #include <vector>
 
+#include "core/hostdevice.h"
 #include "core/motion_transform.h"
 #include "core/transform.h"
 
@@ -41,7 +40,9 @@ struct Camera {
     bool hasShutter() const { return shutterClose > shutterOpen; }
     bool moving() const { return motion.size() > 1 && hasShutter(); }
     // The camera transform at scene time `time` (decomposed interpolation between the keys).
-    Mat4 cameraFromWorldAt(double time) const { return motion.size() > 1 ? transformAt(motion, time) : cameraFromWorld; }
+    Mat4 cameraFromWorldAt(double time) const {
+        return motion.size() > 1 ? transformAt(motion, time) : cameraFromWorld;
+    }
 
     float aspect() const { return frameAspect > 0 ? frameAspect : width * pixelAspect / height; }
     // Screen window, the default derived from the frame aspect ratio as the spec prescribes.

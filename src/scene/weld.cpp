@@ -10,10 +10,14 @@ namespace {
 // Index of control point k (0..3) along boundary curve e (same order as patchEdge()).
 int edgeIndex(int e, int k) {
     switch (e) {
-        case 0: return k;
-        case 1: return k * 4 + 3;
-        case 2: return 12 + k;
-        default: return k * 4;
+        case 0:
+            return k;
+        case 1:
+            return k * 4 + 3;
+        case 2:
+            return 12 + k;
+        default:
+            return k * 4;
     }
 }
 
@@ -50,7 +54,8 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
     if (!(tol > 0.f)) return result;
     const float cell = tol * 4.f;
     auto keyOf = [&](Vec3 p) {
-        return CellKey{int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)), int64_t(std::floor(p.z / cell))};
+        return CellKey{int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)),
+                       int64_t(std::floor(p.z / cell))};
     };
     // 1. Corners: the first corner seen in a cell (or a neighbouring cell) is the representative.
     struct Rep {
@@ -130,12 +135,14 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
                     if (!(dir == 0 ? same : reversed)) continue;
                     bool match = true;
                     for (int k = 1; k <= 2 && match; ++k)
-                        match = near(patch.cp[edgeIndex(e, k)], q.cp[edgeIndex(other.edge, dir == 0 ? k : 3 - k)], tol);
+                        match = near(patch.cp[edgeIndex(e, k)],
+                                     q.cp[edgeIndex(other.edge, dir == 0 ? k : 3 - k)], tol);
                     if (!match) continue;
                     bool changed = false;
                     for (int k = 1; k <= 2; ++k) {
                         const int srcCp = edgeIndex(other.edge, dir == 0 ? k : 3 - k);
-                        if (plan) plan->push_back({pi, other.patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
+                        if (plan)
+                            plan->push_back({pi, other.patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
                         Vec3 src = q.cp[srcCp];
                         Vec3& dst = patch.cp[edgeIndex(e, k)];
                         changed |= !(dst == src);
