@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "reyes/edge_functions.h"
+
 namespace tessera {
 namespace {
 
@@ -94,133 +96,41 @@ inline int64_t signedArea(const MovedQuad& q) {
     return (q.X[1] - q.X[0]) * (q.Y[2] - q.Y[0]) - (q.X[2] - q.X[0]) * (q.Y[1] - q.Y[0]);
 }
 
-inline int64_t fillBias(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
-    const int64_t dy = by - ay, dx = bx - ax;
-    return (dy > 0 || (dy == 0 && dx < 0)) ? 0 : 1;
+// The moved quad's triangles (0,1,2) and (0,2,3).
+constexpr int kQuadTriangles[2][3] = {{0, 1, 2}, {0, 2, 3}};
+inline TriangleEdges quadTriangle(const MovedQuad& q, int tri) {
+    const int* c = kQuadTriangles[tri];
+    return setupTriangleEdges(q.X[c[0]], q.Y[c[0]], q.X[c[1]], q.Y[c[1]], q.X[c[2]], q.Y[c[2]]);
 }
 
-// A moved quad's two triangles (0,1,2) and (0,2,3) set up once, for the passes of the simple and
-// interleaved schemes in which many samples meet the same moved quad.
+// Both triangles set up once, for the passes of the simple and interleaved schemes in which many samples
+// meet the same moved quad.
 struct QuadSetup {
-    int64_t A[2][3], B[2][3], C[2][3];
-    float invArea[2];
-    bool swapped[2], valid[2];
+    TriangleEdges tri[2];
 };
 inline QuadSetup setupQuad(const MovedQuad& q) {
-    QuadSetup t;
-    static constexpr int kTri[2][3] = {{0, 1, 2}, {0, 2, 3}};
-    for (int tri = 0; tri < 2; ++tri) {
-        const int* c = kTri[tri];
-        int64_t xs[3] = {q.X[c[0]], q.X[c[1]], q.X[c[2]]}, ys[3] = {q.Y[c[0]], q.Y[c[1]], q.Y[c[2]]};
-        int64_t area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]);
-        t.valid[tri] = area != 0;
-        t.swapped[tri] = area < 0;
-        if (area < 0) {
-            std::swap(xs[1], xs[2]);
-            std::swap(ys[1], ys[2]);
-            area = -area;
-        }
-        for (int e = 0; e < 3; ++e) {
-            const int a = (e + 1) % 3, b = (e + 2) % 3;
-            t.A[tri][e] = -(ys[b] - ys[a]);
-            t.B[tri][e] = xs[b] - xs[a];
-            t.C[tri][e] = -(t.A[tri][e] * xs[a] + t.B[tri][e] * ys[a]) -
-                          (((ys[b] - ys[a]) > 0 || ((ys[b] - ys[a]) == 0 && (xs[b] - xs[a]) < 0)) ? 0 : 1);
-        }
-        t.invArea[tri] = t.valid[tri] ? 1.f / float(area) : 0.f;
-    }
-    return t;
+    return {{quadTriangle(q, 0), quadTriangle(q, 1)}};
 }
 
-template <bool kAttributes>
-inline bool testSampleSetup(const Grid& g, const int vid[4], const MovedQuad& q, const QuadSetup& t, size_t i,
-                            SampleTile& tile, float nearZ);
-
-// Test a sample against triangle (c0, c1, c2) of a moved quad with the same exact edge functions and
-// top-left fill rule as the sharp rasterizer; on a hit returns the barycentric weights of the corners.
-inline bool insideTriangle(const MovedQuad& q, int c0, int c1, int c2, int64_t sx, int64_t sy, float& l0,
-                           float& l1, float& l2) {
-    int64_t xs[3] = {q.X[c0], q.X[c1], q.X[c2]}, ys[3] = {q.Y[c0], q.Y[c1], q.Y[c2]};
-    int64_t area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]);
-    if (area == 0) return false;
-    bool swapped = false;
-    if (area < 0) {
-        std::swap(xs[1], xs[2]);
-        std::swap(ys[1], ys[2]);
-        area = -area;
-        swapped = true;
-    }
-    int64_t wgt[3];
-    for (int e = 0; e < 3; ++e) {
-        const int a = (e + 1) % 3, b = (e + 2) % 3;
-        const int64_t A = -(ys[b] - ys[a]), B = xs[b] - xs[a];
-        const int64_t C = -(A * xs[a] + B * ys[a]) - fillBias(xs[a], ys[a], xs[b], ys[b]);
-        wgt[e] = A * sx + B * sy + C;
-        if (wgt[e] < 0) return false;
-    }
-    const float inv = 1.f / float(area);
-    float w1 = float(wgt[1]) * inv, w2 = float(wgt[2]) * inv;
-    if (swapped) std::swap(w1, w2);
-    l1 = w1, l2 = w2, l0 = 1.f - w1 - w2;
-    return true;
-}
-
-template <bool kAttributes>
-inline void writeHit(const Grid& g, const int vid[4], const int c[3], const float l[3], float z, size_t i,
-                     SampleTile& tile) {
-    const int a = vid[c[0]], b = vid[c[1]], d = vid[c[2]];
-    tile.z[i] = z;
-    tile.r[i] = l[0] * g.R[a] + l[1] * g.R[b] + l[2] * g.R[d];
-    tile.g[i] = l[0] * g.G[a] + l[1] * g.G[b] + l[2] * g.G[d];
-    tile.b[i] = l[0] * g.B[a] + l[1] * g.B[b] + l[2] * g.B[d];
-    tile.a[i] = 1.f;
-    if constexpr (kAttributes) {
-        Vec3 N;
-        if (!g.NX.empty())
-            N = normalize(Vec3{l[0] * g.NX[a] + l[1] * g.NX[b] + l[2] * g.NX[d],
-                               l[0] * g.NY[a] + l[1] * g.NY[b] + l[2] * g.NY[d],
-                               l[0] * g.NZ[a] + l[1] * g.NZ[b] + l[2] * g.NZ[d]});
-        tile.setAttributes(i, g.objectId, N, 0, false);
-    }
-}
-
-// Test sample i (at fixed-point sx, sy) against a moved quad: the two triangles (0,1,2) and (0,2,3).
-// `facing0` is the sign of the quad's raster area at shutter open for one-sided culling: a one-sided
-// micropolygon that turned its back to the camera (area sign flipped while it was back-facing) is skipped.
-template <bool kAttributes>
-inline bool testSample(const Grid& g, const int vid[4], const MovedQuad& q, size_t i, SampleTile& tile,
-                       float nearZ) {
+// Test sample i against a moved quad with the sharp rasterizer's edge functions (edge_functions.h) and the
+// depth of the moved corners. `edges(tri)` gives triangle tri's edges: precomputed (QuadSetup) or set up on
+// demand (the bbox scheme, where each sample meets its own moved quad and the second triangle is often not
+// needed).
+template <bool kAttributes, class Edges>
+inline bool testMovedSample(const Grid& g, const int vid[4], const MovedQuad& q, size_t i, SampleTile& tile,
+                            float nearZ, Edges&& edges) {
     const int64_t sx = tile.sx[i], sy = tile.sy[i];
     if (sx < q.minX || sx > q.maxX || sy < q.minY || sy > q.maxY) return false;
-    static constexpr int kTri[2][3] = {{0, 1, 2}, {0, 2, 3}};
-    for (const auto& c : kTri) {
-        float l[3];
-        if (!insideTriangle(q, c[0], c[1], c[2], sx, sy, l[0], l[1], l[2])) continue;
-        const float z = l[0] * q.Z[c[0]] + l[1] * q.Z[c[1]] + l[2] * q.Z[c[2]];
-        if (z < tile.z[i] && z >= nearZ) writeHit<kAttributes>(g, vid, c, l, z, i, tile);
-        return true;
-    }
-    return false;
-}
-
-template <bool kAttributes>
-inline bool testSampleSetup(const Grid& g, const int vid[4], const MovedQuad& q, const QuadSetup& t, size_t i,
-                            SampleTile& tile, float nearZ) {
-    const int64_t sx = tile.sx[i], sy = tile.sy[i];
-    if (sx < q.minX || sx > q.maxX || sy < q.minY || sy > q.maxY) return false;
-    static constexpr int kTri[2][3] = {{0, 1, 2}, {0, 2, 3}};
     for (int tri = 0; tri < 2; ++tri) {
-        if (!t.valid[tri]) continue;
-        const int64_t w0 = t.A[tri][0] * sx + t.B[tri][0] * sy + t.C[tri][0];
-        const int64_t w1 = t.A[tri][1] * sx + t.B[tri][1] * sy + t.C[tri][1];
-        const int64_t w2 = t.A[tri][2] * sx + t.B[tri][2] * sy + t.C[tri][2];
-        if ((w0 | w1 | w2) < 0) continue;
-        float l1 = float(w1) * t.invArea[tri], l2 = float(w2) * t.invArea[tri];
-        if (t.swapped[tri]) std::swap(l1, l2);
-        const float l[3] = {1.f - l1 - l2, l1, l2};
-        const int* c = kTri[tri];
-        const float z = l[0] * q.Z[c[0]] + l[1] * q.Z[c[1]] + l[2] * q.Z[c[2]];
-        if (z < tile.z[i] && z >= nearZ) writeHit<kAttributes>(g, vid, c, l, z, i, tile);
+        const TriangleEdges& t = edges(tri);
+        float l0, l1, l2;
+        if (!t.valid || !insideTriangle(t, sx, sy, l0, l1, l2)) continue;
+        if (t.swapped) std::swap(l1, l2);  // back to the corners' order
+        l0 = 1.f - l1 - l2;
+        const int* c = kQuadTriangles[tri];
+        const float z = l0 * q.Z[c[0]] + l1 * q.Z[c[1]] + l2 * q.Z[c[2]];
+        if (z < tile.z[i] && z >= nearZ)
+            writeSampleHit<kAttributes>(g, vid[c[0]], vid[c[1]], vid[c[2]], l0, l1, l2, z, i, tile);
         return true;
     }
     return false;
@@ -317,12 +227,13 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                     openFacing(vid, front0, sign0);
                     if (!facesCamera(g.twoSided, front0, sign0, q)) continue;
                     const QuadSetup setup = setupQuad(q);
+                    const auto setupEdges = [&setup](int t) -> const TriangleEdges& { return setup.tri[t]; };
                     if (!interleaved) {
                         for (int py = sp.py0; py <= sp.py1; ++py)
                             for (int px = sp.px0; px <= sp.px1; ++px) {
                                 ++tests;
-                                if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, n),
-                                                                 tile, nearZ))
+                                if (testMovedSample<kAttributes>(g, vid, q, sampleIndex(px, py, n), tile,
+                                                                 nearZ, setupEdges))
                                     tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                             }
                         continue;
@@ -335,8 +246,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                             const int px = tx * K + inTile % K, py = ty * K + inTile / K;
                             if (px < sp.px0 || px > sp.px1 || py < sp.py0 || py > sp.py1) continue;
                             ++tests;
-                            if (testSampleSetup<kAttributes>(g, vid, q, setup, sampleIndex(px, py, slot),
-                                                             tile, nearZ))
+                            if (testMovedSample<kAttributes>(g, vid, q, sampleIndex(px, py, slot), tile,
+                                                             nearZ, setupEdges))
                                 tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                         }
                 }
@@ -478,7 +389,11 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                                 knotSegment(knots, g.knots, tile.time[si], k, w);
                                 const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
                                 if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
-                                if (testSample<kAttributes>(g, vid, q, si, tile, nearZ))
+                                TriangleEdges onDemand;
+                                if (testMovedSample<kAttributes>(g, vid, q, si, tile, nearZ,
+                                                                 [&](int t) -> const TriangleEdges& {
+                                                                     return onDemand = quadTriangle(q, t);
+                                                                 }))
                                     tile.pixelHit[pix] = 1;
                             };
                             if (!cut) {
