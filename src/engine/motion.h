@@ -13,6 +13,28 @@
 
 namespace tessera {
 
+// Segment of the timeline knots[0 .. count) holding normalised time u: position = lerp(knot k, knot k + 1,
+// w), clamped to the first and last knot. One knot (a static timeline, or a grid that does not move) gives
+// k = 0, w = 0.
+inline void timelineSegment(const float* knots, int count, float u, int& k, float& w) {
+    const int last = count - 1;
+    if (last <= 0 || u <= 0.f) {
+        k = 0, w = 0.f;
+        return;
+    }
+    if (u >= 1.f) {
+        k = last - 1, w = 1.f;
+        return;
+    }
+    if (last == 1) {  // knots 0 and 1: w = u
+        k = 0, w = u;
+        return;
+    }
+    k = 0;
+    while (k + 1 < last && knots[k + 1] <= u) ++k;
+    w = (u - knots[k]) / (knots[k + 1] - knots[k]);
+}
+
 struct FrameMotion {
     static constexpr uint32_t kStatic = 0xffffffffu;
     std::vector<float> knots{0.f};   // increasing normalised shutter times; knots[0] = 0; one knot: no motion
@@ -24,22 +46,8 @@ struct FrameMotion {
     bool moving(size_t patch) const { return !firstKey.empty() && firstKey[patch] != kStatic; }
     // The camera-space patch at each knot (knotCount() of them); only for moving patches.
     const BezierPatch* patchKeys(size_t patch) const { return &keys[firstKey[patch]]; }
-    // Segment of the timeline holding normalised time u: position = lerp(knot k, knot k + 1, w). A static
-    // timeline gives k = 0, w = 0.
-    void segment(float u, int& k, float& w) const {
-        const int last = knotCount() - 1;
-        if (last == 0 || u <= 0.f) {
-            k = 0, w = 0.f;
-            return;
-        }
-        if (u >= 1.f) {
-            k = last - 1, w = 1.f;
-            return;
-        }
-        k = 0;
-        while (k + 1 < last && knots[k + 1] <= u) ++k;
-        w = (u - knots[k]) / (knots[k + 1] - knots[k]);
-    }
+    // Segment of the timeline holding normalised time u (timelineSegment).
+    void segment(float u, int& k, float& w) const { timelineSegment(knots.data(), knotCount(), u, k, w); }
     // Camera-space control points of a moving patch at normalised time u.
     BezierPatch patchAt(size_t patch, float u) const;
 };

@@ -3,34 +3,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "engine/motion.h"
 #include "reyes/edge_functions.h"
 
 namespace tessera {
 namespace {
-
-// Knot segment of normalised time u (FrameMotion::segment on the knot list).
-inline void knotSegment(const std::vector<float>& knots, int gridKnots, float u, int& k, float& w) {
-    const int last = gridKnots - 1;
-    if (last <= 0) {
-        k = 0, w = 0.f;
-        return;
-    }
-    if (last == 1) {  // two knots: 0 and 1
-        k = 0, w = std::min(1.f, std::max(0.f, u));
-        return;
-    }
-    if (u <= 0.f) {
-        k = 0, w = 0.f;
-        return;
-    }
-    if (u >= 1.f) {
-        k = last - 1, w = 1.f;
-        return;
-    }
-    k = 0;
-    while (k + 1 < last && knots[k + 1] <= u) ++k;
-    w = (u - knots[k]) / (knots[k + 1] - knots[k]);
-}
 
 // Raster coordinate to fixed point for moved vertices, after the same clamp as rasterToFixed. Every moved
 // vertex goes through this one function, so shared vertices of neighbouring micropolygons stay bit-identical.
@@ -198,7 +175,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
         for (int n = 0; n < passes; ++n) {
             int k;
             float w;
-            knotSegment(knots, g.knots, pat.time[n], k, w);
+            timelineSegment(knots.data(), g.knots, pat.time[n], k, w);
             const Vec2 lens = pat.lensPoint[n];
             int64_t gx0 = INT64_MAX, gx1 = INT64_MIN, gy0 = INT64_MAX, gy1 = INT64_MIN;
             for (int v = 0; v < vertices; ++v) {
@@ -300,7 +277,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
     thread_local std::vector<float> endWeight;
     endKnot.resize(size_t(groups) + 1), endWeight.resize(size_t(groups) + 1);
     for (int e = 0; e <= groups; ++e)
-        knotSegment(knots, g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
+        timelineSegment(knots.data(), g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
             const int a = j * stride + i;
@@ -386,7 +363,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                                 ++tests;
                                 int k;
                                 float w;
-                                knotSegment(knots, g.knots, tile.time[si], k, w);
+                                timelineSegment(knots.data(), g.knots, tile.time[si], k, w);
                                 const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
                                 if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
                                 TriangleEdges onDemand;
