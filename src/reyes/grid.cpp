@@ -107,9 +107,7 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
             const bool valid = !pr.perspective || P.z >= pr.nearClip;
             const Vec3 r = valid ? pr.toRaster(P) : Vec3{};
             grid.knotX[at] = r.x, grid.knotY[at] = r.y, grid.knotZ[at] = P.z;
-            grid.knotC[at] = (valid && pr.hasLens() && pr.perspective)
-                                 ? pr.lensRadius * (1.f / pr.focalDistance - 1.f / P.z)
-                                 : 0.f;
+            grid.knotC[at] = (valid && pr.hasLens() && pr.perspective) ? pr.lensCoefficient(P.z) : 0.f;
             grid.knotValid[at] = valid;
         };
         for (int v = 0; v < count; ++v) store(size_t(v), Ps[v]);

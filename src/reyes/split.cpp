@@ -91,22 +91,13 @@ void cutEdge(const PieceEdge& e, int& cutK, PieceEdge& first, PieceEdge& second)
 
 enum class Verdict { Cull, Split, SplitNear, Dice };
 
-// Raster rectangle of a control hull lying in front of the eye; with a lens, grown by the circle of
-// confusion of its depth range: a lens point a on the unit disk shifts the image of depth z by
-// a * lensRadius * (1/focaldistance - 1/z) * (sx, sy) (Projector::lensShift), largest at a depth extreme.
-void hullRaster(const Projector& pr, bool lens, const BezierPatch& hull, const Bounds3& b, float& x0,
-                float& y0, float& x1, float& y1) {
+// Raster rectangle of the projected control points of a hull lying in front of the eye.
+void hullRaster(const Projector& pr, const BezierPatch& hull, float& x0, float& y0, float& x1, float& y1) {
     x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
     for (const Vec3& c : hull.cp) {
         Vec3 r = pr.toRaster(c);
         x0 = std::min(x0, r.x), x1 = std::max(x1, r.x);
         y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
-    }
-    if (lens && pr.hasLens() && pr.perspective) {
-        const float k = pr.lensRadius * std::max(std::abs(1.f / pr.focalDistance - 1.f / b.lo.z),
-                                                 std::abs(1.f / pr.focalDistance - 1.f / b.hi.z));
-        const float gx = k * std::abs(pr.sx), gy = k * std::abs(pr.sy);
-        x0 -= gx, x1 += gx, y0 -= gy, y1 += gy;
     }
 }
 
@@ -136,11 +127,14 @@ Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) 
             continue;
         }
         float kx0, ky0, kx1, ky1;
-        if (k == 0) {
-            hullRaster(pr, false, hull, b, kx0, ky0, kx1, ky1);
-            sharpW = kx1 - kx0, sharpH = ky1 - ky0;
+        hullRaster(pr, hull, kx0, ky0, kx1, ky1);
+        if (k == 0) sharpW = kx1 - kx0, sharpH = ky1 - ky0;
+        if (view.lens) {
+            // Grown by the circle of confusion of the hull's depth range (Projector::lensShift).
+            const float c = pr.maxLensCoefficient(b.lo.z, b.hi.z);
+            const float gx = c * std::abs(pr.sx), gy = c * std::abs(pr.sy);
+            kx0 -= gx, kx1 += gx, ky0 -= gy, ky1 += gy;
         }
-        hullRaster(pr, view.lens, hull, b, kx0, ky0, kx1, ky1);
         x0 = std::min(x0, kx0), y0 = std::min(y0, ky0), x1 = std::max(x1, kx1), y1 = std::max(y1, ky1);
     }
     if (!anyInRange) return Verdict::Cull;

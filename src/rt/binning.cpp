@@ -386,8 +386,7 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
             return true;
         }
         if (lens) {
-            const float k = proj.lensRadius * std::max(std::fabs(1.f / proj.focalDistance - 1.f / b.lo.z),
-                                                       std::fabs(1.f / proj.focalDistance - 1.f / b.hi.z));
+            const float k = proj.maxLensCoefficient(b.lo.z, b.hi.z);
             const float gx = k * std::fabs(proj.sx) * 1.0001f + 1e-3f,
                         gy = k * std::fabs(proj.sy) * 1.0001f + 1e-3f;
             rect.x0 -= gx, rect.x1 += gx, rect.y0 -= gy, rect.y1 += gy;

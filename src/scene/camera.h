@@ -82,19 +82,25 @@ struct Projector {
     }
 
     bool hasLens() const { return lensRadius > 0.f; }
-    // Radius in raster pixels of the circle of confusion of a camera-space depth z (Reyes' blur bound):
-    // a lens point a shifts the screen image of a point at depth z by a * (1/focaldistance - 1/z)
-    // (thin lens, ray through the focal plane point), so the radius is lensRadius * |1/fd - 1/z| in
-    // screen units, times the raster scale.
+    // Thin lens, ray through the focal-plane point: a lens point a on the unit disk shifts the screen image
+    // of a point at camera-space depth z by a * lensCoefficient(z) * (sx, sy) raster pixels.
+    float lensCoefficient(float z) const { return lensRadius * (1.f / focalDistance - 1.f / z); }
+    // The largest |lensCoefficient| over depths [z0, z1] (0 for a pinhole): |1/fd - 1/z| is largest at an
+    // end.
+    float maxLensCoefficient(float z0, float z1) const {
+        if (!hasLens() || !perspective) return 0.f;
+        return std::max(std::abs(lensCoefficient(z0)), std::abs(lensCoefficient(z1)));
+    }
+    // Radius in raster pixels of the circle of confusion of a camera-space depth z (Reyes' blur bound).
     float circleOfConfusion(float z) const {
         if (!hasLens() || !perspective) return 0.f;
-        return lensRadius * std::abs(1.f / focalDistance - 1.f / z) * std::max(std::abs(sx), std::abs(sy));
+        return std::abs(lensCoefficient(z)) * std::max(std::abs(sx), std::abs(sy));
     }
     // Screen-space shift (raster pixels) of a point at depth z seen through lens position (lu, lv) in
     // [-1,1]^2 on the unit disk: what Reyes adds to a micropolygon's raster position for a lens sample.
     Vec2 lensShift(float z, Vec2 lens) const {
         if (!hasLens() || !perspective) return {};
-        const float k = lensRadius * (1.f / focalDistance - 1.f / z);
+        const float k = lensCoefficient(z);
         return {lens.x * k * sx, lens.y * k * sy};
     }
 };
