@@ -121,14 +121,20 @@ void BlurPattern::sampleAt(int px, int py, int slot, uint32_t sampleIndex, float
             lensOut = lensPoint[n];
             return;
         }
-        case BlurSampling::BoundingBox: {
-            const uint32_t ps = pixelSeed(px, py, seed);
-            t = motion ? sampleDimension(ps, sampleIndex, kDimTime) : 0.f;
-            lensOut = lens ? squareToDisk(sampleDimension(ps, sampleIndex, kDimLensU),
-                                          sampleDimension(ps, sampleIndex, kDimLensV))
-                           : Vec2{};
+        case BlurSampling::BoundingBox:
+            pixelSampleAt(timeLensSeeds(pixelSeed(px, py, seed)), sampleIndex, t, lensOut);
             return;
-        }
+    }
+}
+
+void BlurPattern::pixelSampleAt(const TimeLensSeeds& seeds, uint32_t sampleIndex, float& t,
+                                Vec2& lensOut) const {
+    t = motion ? bitsToUnit(timeBits(seeds, sampleIndex)) : 0.f;
+    lensOut = Vec2{};
+    if (lens) {
+        uint32_t u, v;
+        lensBits(seeds, sampleIndex, u, v);
+        lensOut = squareToDisk(bitsToUnit(u), bitsToUnit(v));
     }
 }
 

@@ -51,6 +51,9 @@ struct BlurPattern {
     }
     // Normalised time in [0,1) and lens point of a film sample (pixel, slot, its Sobol' sample index).
     void sampleAt(int px, int py, int slot, uint32_t sampleIndex, float& t, Vec2& lensOut) const;
+    // BoundingBox: the same for a sample of the pixel whose seeds are `seeds`
+    // (timeLensSeeds(pixelSeed(px, py, seed)), prepared once per pixel by the film).
+    void pixelSampleAt(const TimeLensSeeds& seeds, uint32_t sampleIndex, float& t, Vec2& lensOut) const;
 };
 
 // `motion` / `lens`: whether the frame blurs in time / has a lens. Interleaved needs spp K^2 <= 65536.

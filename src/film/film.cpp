@@ -5,8 +5,6 @@
 #include <limits>
 #include <utility>
 
-#include "scene/camera.h"
-
 namespace tessera {
 
 void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, SamplerKind sampler,
@@ -81,16 +79,8 @@ void SampleTile::setBlur(const BlurPattern* pattern) {
         for (int py = region.y0; py < region.y1; ++py)
             for (int px = region.x0; px < region.x1; ++px) {
                 const TimeLensSeeds seeds = timeLensSeeds(pixelSeed(px, py, blur->seed));
-                for (int s = 0; s < spp; ++s, ++i) {
-                    time[i] = blur->motion ? bitsToUnit(timeBits(seeds, sampleIndex[i])) : 0.f;
-                    if (blur->lens) {
-                        uint32_t u, v;
-                        lensBits(seeds, sampleIndex[i], u, v);
-                        lens[i] = squareToDisk(bitsToUnit(u), bitsToUnit(v));
-                    } else {
-                        lens[i] = Vec2{};
-                    }
-                }
+                for (int s = 0; s < spp; ++s, ++i)
+                    blur->pixelSampleAt(seeds, sampleIndex[i], time[i], lens[i]);
             }
         return;
     }
