@@ -130,6 +130,22 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
                 store(size_t(kn) * count + v, P);
             }
         }
+        // What the blurred rasterizer's bounds need of the whole grid, once per grid (not per bucket).
+        grid.motionPixels = 0.f;
+        grid.allKnotsValid = true;
+        for (int v = 0; v < count; ++v) {
+            float path = 0.f;
+            for (int kn = 0; kn < grid.knots; ++kn) {
+                const size_t at = size_t(kn) * count + v;
+                grid.allKnotsValid = grid.allKnotsValid && grid.knotValid[at];
+                if (kn > 0) {
+                    const size_t prev = at - size_t(count);
+                    path += std::abs(grid.knotX[at] - grid.knotX[prev]) +
+                            std::abs(grid.knotY[at] - grid.knotY[prev]);
+                }
+            }
+            grid.motionPixels = std::max(grid.motionPixels, path);
+        }
     }
     SurfacePoints points;
     points.count = size_t(count);

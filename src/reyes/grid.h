@@ -41,6 +41,8 @@ struct Grid {
     int knots = 1;
     std::vector<float> knotX, knotY, knotZ, knotC;
     std::vector<uint8_t> knotValid;
+    float motionPixels = 0.f;   // largest raster path of a vertex over the shutter (L1 per segment, summed)
+    bool allKnotsValid = true;  // every vertex in front of the near plane at every knot
     bool blurred = false;
     int vertexCount() const { return (nu + 1) * (nv + 1); }
 };

@@ -241,18 +241,8 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
     const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
     const int LL = L * L, cellsPerPixel = T * LL;
     const size_t nv = size_t(vertices);
-    float motion = 0.f;  // largest raster path of a vertex over the shutter (L1 per segment, summed)
-    bool allValid = true;
-    for (size_t v = 0; v < nv; ++v) {
-        float path = 0.f;
-        for (int kn = 0; kn < g.knots; ++kn) {
-            const size_t at = size_t(kn) * nv + v;
-            allValid = allValid && g.knotValid[at];
-            if (kn > 0)
-                path += std::abs(g.knotX[at] - g.knotX[at - nv]) + std::abs(g.knotY[at] - g.knotY[at - nv]);
-        }
-        motion = std::max(motion, path);
-    }
+    const float motion = g.motionPixels;
+    const bool allValid = g.allKnotsValid;
     // Cost model: a group costs a bound (about two sample tests' worth of work) and the samples in its bound
     // number about spp (1 + motion / groups) per covered pixel, so the total is least near
     // groups = sqrt(spp * motion / 2) (measured with callgrind on the moving teapot, docs/motion.md).
