@@ -45,13 +45,26 @@ Scene coverageScene(int w, int h) {
     return s;
 }
 
-RenderSettings settingsFor(const char* engine, int spp, BlurSampling scheme = BlurSampling::BoundingBox) {
+// Samples per pixel come from the scene (setSpp).
+RenderSettings settingsFor(const char* engine, BlurSampling scheme = BlurSampling::BoundingBox) {
     RenderSettings rs;
     rs.engine = engine;
     rs.threads = 2;
     rs.blur.sampling = scheme;
-    (void)spp;
     return rs;
+}
+
+// Eight patches of a sphere of radius 0.8 moving from centre `from` to `to` over the shutter [0, 1], through
+// a lens (f/4, focal length 0.5) focused at depth 3.
+Scene movingSphereThroughLens(int width, int height, Vec3 from, Vec3 to) {
+    Scene s = cameraSpaceScene(width, height, 40.f);
+    s.camera.shutterClose = 1.f;
+    s.camera.fStop = 4.f;
+    s.camera.focalLength = 0.5f;
+    s.camera.focalDistance = 3.f;
+    const auto a = octantSphere(0.8f, from), b = octantSphere(0.8f, to);
+    for (size_t i = 0; i < a.size(); ++i) addMovingPatch(s, a[i], b[i]);
+    return s;
 }
 
 void setSpp(Scene& s, int nx, int ny) {
@@ -92,7 +105,7 @@ TEST(MotionBlur, MovingSquareCoverageIsTheTimeAveragedSweep) {
     for (const char* engine : {"reyes", "rt"}) {
         for (BlurSampling scheme :
              {BlurSampling::BoundingBox, BlurSampling::Interleaved, BlurSampling::Simple}) {
-            const RenderResult r = render(s, settingsFor(engine, 256, scheme));
+            const RenderResult r = render(s, settingsFor(engine, scheme));
             dumpIfAsked(r.image, std::string("moving_square_") + engine + "_" + blurSamplingName(scheme));
             double maxErr = 0, sumErr = 0;
             for (int x = 0; x < s.camera.width; ++x) {
@@ -128,10 +141,10 @@ TEST(MotionBlur, NoBlurRendersTheShutterOpenPosition) {
     Scene sharp = coverageScene(96, 64);
     addPatch(sharp, flatSquare(1.f, 5.f, -0.3f, 0.f));
     for (const char* engine : {"reyes", "rt"}) {
-        RenderSettings rs = settingsFor(engine, 4);
+        RenderSettings rs = settingsFor(engine);
         rs.blur.enabled = false;
         const RenderResult blurOff = render(s, rs);
-        const RenderResult reference = render(sharp, settingsFor(engine, 4));
+        const RenderResult reference = render(sharp, settingsFor(engine));
         EXPECT_EQ(blurOff.image.rgba, reference.image.rgba) << engine;
     }
 }
@@ -161,7 +174,7 @@ TEST(DepthOfField, EdgeBlurIsTheThinLensCircleOfConfusion) {
     };
     for (const char* engine : {"reyes", "rt"}) {
         for (BlurSampling scheme : {BlurSampling::BoundingBox, BlurSampling::Interleaved}) {
-            const RenderResult r = render(s, settingsFor(engine, 256, scheme));
+            const RenderResult r = render(s, settingsFor(engine, scheme));
             dumpIfAsked(r.image, std::string("dof_edge_") + engine + "_" + blurSamplingName(scheme));
             double maxErr = 0;
             for (int x = int(edge - c) - 2; x <= int(edge + c) + 2; ++x) {
@@ -187,8 +200,8 @@ TEST(DepthOfField, SquareInTheFocalPlaneStaysSharp) {
     setSpp(s, 4, 4);
     setSpp(pinhole, 4, 4);
     for (const char* engine : {"reyes", "rt"}) {
-        const RenderResult lens = render(s, settingsFor(engine, 16));
-        const RenderResult sharp = render(pinhole, settingsFor(engine, 16));
+        const RenderResult lens = render(s, settingsFor(engine));
+        const RenderResult sharp = render(pinhole, settingsFor(engine));
         double maxErr = 0;
         for (size_t i = 3; i < lens.image.rgba.size(); i += 4)
             maxErr = std::max(maxErr, double(std::abs(lens.image.rgba[i] - sharp.image.rgba[i])));
@@ -200,23 +213,17 @@ TEST(DepthOfField, SquareInTheFocalPlaneStaysSharp) {
 TEST(MotionBlur, SchemesConvergeToTheSameImage) {
     // A lit sphere moving diagonally with a lens: each scheme's error against a 1024-spp bbox reference
     // falls from 16 to 64 spp and is small at 64.
-    Scene s = cameraSpaceScene(64, 48, 40.f);
-    s.camera.shutterClose = 1.f;
-    s.camera.fStop = 4.f;
-    s.camera.focalLength = 0.5f;
-    s.camera.focalDistance = 3.f;
-    const auto a = octantSphere(0.8f, {-0.4f, -0.1f, 4.f}), b = octantSphere(0.8f, {0.4f, 0.1f, 4.f});
-    for (size_t i = 0; i < a.size(); ++i) addMovingPatch(s, a[i], b[i]);
+    const Scene s = movingSphereThroughLens(64, 48, {-0.4f, -0.1f, 4.f}, {0.4f, 0.1f, 4.f});
     Scene ref = s;
     setSpp(ref, 32, 32);
-    const RenderResult reference = render(ref, settingsFor("reyes", 1024));
+    const RenderResult reference = render(ref, settingsFor("reyes"));
     dumpIfAsked(reference.image, "sphere_reference");
     for (BlurSampling scheme : {BlurSampling::BoundingBox, BlurSampling::Interleaved, BlurSampling::Simple}) {
         Scene s16 = s, s64 = s;
         setSpp(s16, 4, 4);
         setSpp(s64, 8, 8);
-        const double e16 = rmse(render(s16, settingsFor("reyes", 16, scheme)).image, reference.image);
-        const RenderResult r64 = render(s64, settingsFor("reyes", 64, scheme));
+        const double e16 = rmse(render(s16, settingsFor("reyes", scheme)).image, reference.image);
+        const RenderResult r64 = render(s64, settingsFor("reyes", scheme));
         dumpIfAsked(r64.image, std::string("sphere_64_") + blurSamplingName(scheme));
         const double e64 = rmse(r64.image, reference.image);
         RecordProperty(std::string("rmse16_") + blurSamplingName(scheme), std::to_string(e16));
@@ -227,16 +234,10 @@ TEST(MotionBlur, SchemesConvergeToTheSameImage) {
 }
 
 TEST(MotionBlur, ImagesAreTheSameForAnyThreadCount) {
-    Scene s = cameraSpaceScene(64, 48, 40.f);
-    s.camera.shutterClose = 1.f;
-    s.camera.fStop = 4.f;
-    s.camera.focalLength = 0.5f;
-    s.camera.focalDistance = 3.f;
+    Scene s = movingSphereThroughLens(64, 48, {-0.4f, 0.f, 4.f}, {0.4f, 0.f, 4.f});
     setSpp(s, 4, 4);
-    const auto a = octantSphere(0.8f, {-0.4f, 0.f, 4.f}), b = octantSphere(0.8f, {0.4f, 0.f, 4.f});
-    for (size_t i = 0; i < a.size(); ++i) addMovingPatch(s, a[i], b[i]);
     for (BlurSampling scheme : {BlurSampling::BoundingBox, BlurSampling::Interleaved, BlurSampling::Simple}) {
-        RenderSettings one = settingsFor("reyes", 16, scheme), two = one;
+        RenderSettings one = settingsFor("reyes", scheme), two = one;
         one.threads = 1;
         two.threads = 2;
         two.bucketSize = 8;
@@ -254,7 +255,7 @@ TEST(MotionBlur, BlurredSphereHasNoPinholes) {
     for (size_t i = 0; i < a.size(); ++i) addMovingPatch(s, a[i], b[i]);
     const Projector pr(s.camera);
     for (BlurSampling scheme : {BlurSampling::BoundingBox, BlurSampling::Interleaved, BlurSampling::Simple}) {
-        const RenderResult r = render(s, settingsFor("reyes", 16, scheme));
+        const RenderResult r = render(s, settingsFor("reyes", scheme));
         int inside = 0, holes = 0;
         for (int y = 0; y < s.camera.height; ++y)
             for (int x = 0; x < s.camera.width; ++x) {
@@ -307,18 +308,12 @@ TEST(BlurPattern, InterleavedPermutationFollowsThePaperRule) {
 TEST(MotionBlur, StrataBoundsChangeNoSampleOnlyTheTestCount) {
     // The bbox scheme's cut bounds are an exact optimisation: the same image as the paper's single
     // extended bound, with fewer sample tests.
-    Scene s = cameraSpaceScene(64, 48, 40.f);
-    s.camera.shutterClose = 1.f;
-    s.camera.fStop = 4.f;
-    s.camera.focalLength = 0.5f;
-    s.camera.focalDistance = 3.f;
+    Scene s = movingSphereThroughLens(64, 48, {-0.4f, 0.f, 4.f}, {0.4f, 0.f, 4.f});
     setSpp(s, 4, 4);
-    const auto a = octantSphere(0.8f, {-0.4f, 0.f, 4.f}), b = octantSphere(0.8f, {0.4f, 0.f, 4.f});
-    for (size_t i = 0; i < a.size(); ++i) addMovingPatch(s, a[i], b[i]);
     for (int lensOn = 0; lensOn < 2; ++lensOn) {
         Scene sc = s;
         if (!lensOn) sc.camera.fStop = INFINITY;
-        RenderSettings cut = settingsFor("reyes", 16), whole = cut;
+        RenderSettings cut = settingsFor("reyes"), whole = cut;
         whole.blur.strataBounds = false;
         const RenderResult rc = render(sc, cut), rw = render(sc, whole);
         EXPECT_EQ(rc.image.rgba, rw.image.rgba) << "lens " << lensOn;
@@ -337,7 +332,7 @@ Scene crossEngineScene() {
     return s;
 }
 void expectEnginesAgree(const Scene& s, BlurSampling scheme, const char* what) {
-    RenderSettings reyes = settingsFor("reyes", 0, scheme), rt = settingsFor("rt", 0, scheme);
+    RenderSettings reyes = settingsFor("reyes", scheme), rt = settingsFor("rt", scheme);
     const RenderResult a = render(s, reyes), b = render(s, rt);
     dumpIfAsked(a.image, std::string("cross_reyes_") + what);
     dumpIfAsked(b.image, std::string("cross_rt_") + what);
@@ -401,13 +396,7 @@ TEST(MotionBlurCrossEngine, ShippedMotionScenesAgree) {
         s.camera.width = 160;
         s.camera.height = 120;
         setSpp(s, 8, 8);
-        const Vec3 eye = s.camera.cameraFromWorld.inverse().point({0, 0, 0});
-        std::vector<Light> lights;
-        for (const Light& l : s.lights)
-            if (l.type == LightType::Ambient) lights.push_back(l);
-        const float d = length(eye - s.worldBounds().center());
-        lights.push_back({LightType::Point, Color{1.f, 0.9f, 0.8f} * (d * d), eye, eye});
-        s.lights = lights;
+        lightFromEye(s);
         expectEnginesAgree(s, BlurSampling::BoundingBox, name);
     }
 }
@@ -482,16 +471,16 @@ TEST(MotionBlur, MotionFactorCoarsensOnlyBlurredGeometry) {
     addMovingPatch(s, flatSquare(1.f, 5.f, -0.6f, 0.f), flatSquare(1.f, 5.f, 0.6f, 0.f));
     addPatch(s, flatSquare(0.6f, 5.f, 0.f, 0.5f));
     setSpp(s, 4, 4);
-    const RenderResult plain = render(s, settingsFor("reyes", 16));
+    const RenderResult plain = render(s, settingsFor("reyes"));
     Scene coarse = s;
     for (PatchAttributes& a : coarse.attributes) a.motionFactor = 4.f;
-    const RenderResult r = render(coarse, settingsFor("reyes", 16));
+    const RenderResult r = render(coarse, settingsFor("reyes"));
     EXPECT_LT(r.stats["micropolygons"].get<uint64_t>(), plain.stats["micropolygons"].get<uint64_t>() / 2);
     // In the same blurred frame a still patch is not coarsened: the factor on the still square alone changes
     // nothing.
     Scene stillFactor = s;
     stillFactor.attributes[1].motionFactor = 4.f;
-    const RenderResult st = render(stillFactor, settingsFor("reyes", 16));
+    const RenderResult st = render(stillFactor, settingsFor("reyes"));
     EXPECT_EQ(st.stats["micropolygons"], plain.stats["micropolygons"]);
     EXPECT_EQ(st.image.rgba, plain.image.rgba);
     // Coarser shading of a flat constant square changes its coverage by little.

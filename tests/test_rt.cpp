@@ -329,13 +329,7 @@ TEST(RtCrossEngine, TeapotAgreesWithReyes) {
     s.camera.width = 320;
     s.camera.height = 240;
     Scene orig = s;
-    const Vec3 eye = s.camera.cameraFromWorld.inverse().point({0, 0, 0});
-    std::vector<Light> lights;
-    for (const Light& l : s.lights)
-        if (l.type == LightType::Ambient) lights.push_back(l);
-    const float d = length(eye - s.worldBounds().center());
-    lights.push_back({LightType::Point, Color{1.f, 0.9f, 0.8f} * (d * d), eye, eye});
-    s.lights = lights;
+    lightFromEye(s);
     RenderResult reyes = renderEngine(s, "reyes"), rt = renderEngine(s, "rt");
     // Coverage counts as different beyond 0.1 alpha.
     ImageDiff ag = compareImages(reyes.image, rt.image, 0.1f);

@@ -26,6 +26,19 @@ inline Scene cameraSpaceScene(int width, int height, float fovDegrees) {
     return s;
 }
 
+// Keeps the scene's ambient lights and lights it from the eye: a point light at the camera position, warm,
+// of intensity 1 at the centre of the scene. It casts no visible shadow, so Reyes (no shadows yet) and the
+// ray tracer see the same lighting.
+inline void lightFromEye(Scene& s) {
+    const Vec3 eye = s.camera.cameraFromWorld.inverse().point({0, 0, 0});
+    std::vector<Light> lights;
+    for (const Light& l : s.lights)
+        if (l.type == LightType::Ambient) lights.push_back(l);
+    const float d = length(eye - s.worldBounds().center());
+    lights.push_back({LightType::Point, Color{1.f, 0.9f, 0.8f} * (d * d), eye, eye});
+    s.lights = lights;
+}
+
 inline void addPatch(Scene& s, const BezierPatch& p, uint32_t object = 0) {
     s.patches.push_back(p);
     PatchAttributes a;
