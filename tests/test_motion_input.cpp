@@ -16,56 +16,16 @@
 #include "io/rib_reader.h"
 #include "io/rib_writer.h"
 #include "io/scene_loader.h"
+#include "rib_test_util.h"
 #include "test_support.h"
 
 using namespace tessera;
+using namespace tessera::test;
 namespace fs = std::filesystem;
 
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-std::string writeRib(const std::string& text) {
-    fs::path p = tessera::test::testScratchDir() / "motion.rib";
-    fs::create_directories(p.parent_path());
-    std::ofstream(p, std::ios::binary) << text;
-    return p.string();
-}
-
-struct Loaded {
-    Scene scene;
-    std::vector<std::string> warnings;
-};
-
-Loaded load(const std::string& text) {
-    Loaded l;
-    l.scene = loadScene(writeRib(text), [&](const std::string& w) { l.warnings.push_back(w); });
-    return l;
-}
-
-// Loading `text` must fail at `line`; returns the message.
-std::string expectError(const std::string& text, int line) {
-    const std::string path = writeRib(text);
-    std::string msg;
-    try {
-        loadScene(path, [](const std::string&) {});
-    } catch (const InputError& e) {
-        msg = e.what();
-    }
-    const std::string prefix = path + ":" + std::to_string(line) + ": error:";
-    EXPECT_EQ(msg.rfind(prefix, 0), 0u) << "expected prefix '" << prefix << "', got '" << msg << "'";
-    return msg;
-}
-
-bool contains(const std::string& s, const std::string& part) {
-    return s.find(part) != std::string::npos;
-}
-
-void expectVec(Vec3 a, Vec3 b, float eps = 1e-5f) {
-    EXPECT_NEAR(a.x, b.x, eps);
-    EXPECT_NEAR(a.y, b.y, eps);
-    EXPECT_NEAR(a.z, b.z, eps);
-}
 
 const char* kSquare = "Patch \"bilinear\" \"P\" [0 0 0  1 0 0  0 1 0  1 1 0]\n";
 

@@ -15,27 +15,18 @@
 #include "io/rib_writer.h"
 #include "io/rib_shaders.h"
 #include "io/scene_loader.h"
+#include "rib_test_util.h"
 #include "test_support.h"
 #include "shading/registry.h"
 
 using namespace tessera;
+using namespace tessera::test;
 namespace fs = std::filesystem;
 
 namespace {
 
-// A fresh directory per test so parallel test processes never share files.
 fs::path testDir() {
     return tessera::test::testScratchDir();
-}
-
-std::string writeFile(const fs::path& path, const std::string& text) {
-    fs::create_directories(path.parent_path());
-    std::ofstream(path, std::ios::binary) << text;
-    return path.string();
-}
-
-std::string writeRib(const std::string& text, const std::string& name = "scene.rib") {
-    return writeFile(testDir() / name, text);
 }
 
 const char* kUnitSquare = "Patch \"bilinear\" \"P\" [0 0 0  1 0 0  0 1 0  1 1 0]\n";
@@ -43,47 +34,6 @@ const char* kUnitSquare = "Patch \"bilinear\" \"P\" [0 0 0  1 0 0  0 1 0  1 1 0]
 // Options, then a world holding `body` and one unit square patch.
 std::string scene(const std::string& options, const std::string& body) {
     return options + "\nWorldBegin\n" + body + "\n" + kUnitSquare + "WorldEnd\n";
-}
-
-struct Loaded {
-    Scene scene;
-    std::vector<std::string> warnings;
-};
-
-Loaded load(const std::string& text) {
-    Loaded l;
-    std::string path = writeRib(text);
-    l.scene = loadScene(path, [&](const std::string& w) { l.warnings.push_back(w); });
-    return l;
-}
-
-// The error text of loading `path`, or "" if it loads.
-std::string errorOfFile(const std::string& path) {
-    try {
-        loadScene(path, [](const std::string&) {});
-    } catch (const InputError& e) {
-        return e.what();
-    }
-    return "";
-}
-
-// Asserts that loading `text` fails with "<file>:<line>: error:" and returns the message.
-std::string expectError(const std::string& text, int line) {
-    std::string path = writeRib(text);
-    std::string msg = errorOfFile(path);
-    std::string prefix = path + ":" + std::to_string(line) + ": error:";
-    EXPECT_EQ(msg.rfind(prefix, 0), 0u) << "expected prefix '" << prefix << "', got '" << msg << "'";
-    return msg;
-}
-
-bool contains(const std::string& s, const std::string& part) {
-    return s.find(part) != std::string::npos;
-}
-
-void expectVec(Vec3 a, Vec3 b, float eps = 1e-5f) {
-    EXPECT_NEAR(a.x, b.x, eps);
-    EXPECT_NEAR(a.y, b.y, eps);
-    EXPECT_NEAR(a.z, b.z, eps);
 }
 
 int countWarnings(const std::vector<std::string>& ws, const std::string& part) {
