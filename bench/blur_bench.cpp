@@ -107,13 +107,8 @@ void addMotion(Scene& s, const std::vector<double>& translate, const std::vector
     s.camera.shutterClose = 1.f;
 }
 
-void setSpp(Scene& s, int spp) {
-    // As the CLI's --spp: as square a grid as spp allows.
-    int nx = 1;
-    for (int d = 1; d * d <= spp; ++d)
-        if (spp % d == 0) nx = d;
-    s.image.pixelSamplesX = nx;
-    s.image.pixelSamplesY = spp / nx;
+void setSpp(Scene& s, int spp) {  // as the CLI's --spp does
+    splitSamplesPerPixel(spp, s.image.pixelSamplesX, s.image.pixelSamplesY);
 }
 
 BlurSampling schemeByName(const std::string& n) {
