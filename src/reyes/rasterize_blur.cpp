@@ -136,10 +136,315 @@ inline Span pixelSpan(const Rect& reg, int64_t minX, int64_t maxX, int64_t minY,
     return s;
 }
 
-struct Bound2 {
-    float x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
-    bool valid = true;
+// Facing at shutter open of a micropolygon (one-sided culling, see facesCamera).
+inline void openFacing(const Grid& g, const int vid[4], bool& front0, int64_t& sign0) {
+    front0 = g.front[vid[0]] | g.front[vid[1]] | g.front[vid[2]] | g.front[vid[3]];
+    sign0 = 1;
+    if (!g.twoSided) {
+        const int64_t X0 = g.X[vid[0]], Y0 = g.Y[vid[0]];
+        sign0 = (g.X[vid[1]] - X0) * (g.Y[vid[2]] - Y0) - (g.X[vid[2]] - X0) * (g.Y[vid[1]] - Y0);
+        if (sign0 == 0) sign0 = 1;
+    }
+}
+
+// A micropolygon's raster box and lens-coefficient range at one knot. Between two knots every corner
+// moves linearly, and the minimum of linear functions is concave (the maximum convex), so the box at
+// time t lies inside the linear interpolation of the two knot boxes: bounds at any time need no
+// per-corner work.
+struct KnotBox {
+    float x0, x1, y0, y1, c0, c1;
 };
+inline KnotBox lerpBox(const KnotBox& p, const KnotBox& q, float w) {
+    return KnotBox{p.x0 + w * (q.x0 - p.x0), p.x1 + w * (q.x1 - p.x1), p.y0 + w * (q.y0 - p.y0),
+                   p.y1 + w * (q.y1 - p.y1), p.c0 + w * (q.c0 - p.c0), p.c1 + w * (q.c1 - p.c1)};
+}
+inline KnotBox unionBox(const KnotBox& a, const KnotBox& b) {
+    return KnotBox{std::min(a.x0, b.x0), std::max(a.x1, b.x1), std::min(a.y0, b.y0),
+                   std::max(a.y1, b.y1), std::min(a.c0, b.c0), std::max(a.c1, b.c1)};
+}
+constexpr KnotBox kEmptyBox{INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY, -INFINITY};
+
+// Slack of the float bounds, in pixels: the moved corners are rounded to 1/256 pixel, and the
+// interpolated box and the interpolated corners round differently (about 1e-4 pixel at 1e3 pixels).
+constexpr float kBoundSlack = 3.f / kSubpixelScale;
+
+// floor() for the bounds' pixel spans, without the libm call that std::floor is on baseline x86-64
+// (no SSE4.1 round instruction). Bounds lie within the 2^20-pixel clamp of blurredToFixed.
+inline int floorToInt(float v) {
+    const int i = int(v);
+    return i - (float(i) > v);
+}
+
+// Whether sample point (fx, fy) (pixels) can be inside the micropolygon at the sample's time (segment k,
+// weight w) and lens point: the box at that time, grown by the lens point times the corners'
+// lens-coefficient range (x + l c sx >= min x + min over c of l c sx). A dozen flops, against moving
+// four corners and setting up the edges: most samples a bound meets fail here.
+inline bool inBoundAt(const KnotBox* knotBox, int knots, int k, float w, Vec2 lens, const Projector& pr,
+                      bool lensOn, float fx, float fy) {
+    const KnotBox b = knots == 1 ? knotBox[0] : lerpBox(knotBox[k], knotBox[k + 1], w);
+    float x0 = b.x0 - kBoundSlack, x1 = b.x1 + kBoundSlack, y0 = b.y0 - kBoundSlack, y1 = b.y1 + kBoundSlack;
+    if (lensOn) {
+        const float ax = lens.x * pr.sx, ay = lens.y * pr.sy;
+        const float xa = ax * b.c0, xb = ax * b.c1, ya = ay * b.c0, yb = ay * b.c1;
+        x0 += std::min(xa, xb), x1 += std::max(xa, xb), y0 += std::min(ya, yb), y1 += std::max(ya, yb);
+    }
+    return fx >= x0 && fx <= x1 && fy >= y0 && fy <= y1;
+}
+
+// A side of a micropolygon's box moving linearly over a knot segment: a + d w, w in [0, 1], with 1 / d
+// kept for the per-pixel intervals of the sweep.
+struct SweptSide {
+    float a, d, inv;
+    SweptSide(float a_, float d_) : a(a_), d(d_), inv(d_ != 0.f ? 1.f / d_ : 0.f) {}
+    float at(float w) const { return a + d * w; }
+    // Restrict [w0, w1] to the w where the side is at most c (keepAtMost) or at least c (keepAtLeast).
+    void keepAtMost(float c, float& w0, float& w1) const {
+        if (d > 0.f)
+            w1 = std::min(w1, (c - a) * inv);
+        else if (d < 0.f)
+            w0 = std::max(w0, (c - a) * inv);
+        else if (a > c)
+            w1 = -1.f;  // never
+    }
+    void keepAtLeast(float c, float& w0, float& w1) const {
+        if (d > 0.f)
+            w0 = std::max(w0, (c - a) * inv);
+        else if (d < 0.f)
+            w1 = std::min(w1, (c - a) * inv);
+        else if (a < c)
+            w1 = -1.f;
+    }
+};
+
+// The bounding-box scheme (paper 000, sec. 3.3): each micropolygon meets every sample whose (x, y) its
+// bound over the shutter and lens covers, each at the sample's own (t, lens). With strata bounds the
+// bound is cut into one per (time group, lens cell), which meets only the samples of its cell
+// (BlurStrata: per row, one contiguous run under the bound's columns), and every sample of a run is first
+// checked against the bound at its own (t, lens) (inBoundAt) before it is tested exactly
+// (testMovedSample): the same hits as the paper's single bound, with far fewer tests.
+template <bool kAttributes>
+uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,
+                              const BlurStrata& strata) {
+    const Projector& pr = *ctx.projector;
+    const std::vector<float>& knots = *ctx.knots;
+    const Rect& reg = tile.region;
+    const int stride = g.nu + 1, spp = tile.spp;
+    uint64_t tests = 0;
+    const bool cut = ctx.strataBounds && !strata.start.empty();
+    const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
+    const int LL = L * L;
+    const size_t nv = size_t(g.vertexCount());
+    const bool allValid = g.allKnotsValid;
+    const bool lensOn = pr.hasLens() && pr.perspective;
+    // Cost model: a group costs a bound and a run lookup per row and fine stratum, and the samples in its
+    // bound number about spp (1 + motion / groups) per covered pixel, so the total is least near
+    // groups = sqrt(spp * motion / 2).
+    const int wanted = std::clamp(int(std::ceil(std::sqrt(0.5f * float(spp) * g.motionPixels))), 1, T);
+    const int group = std::max(1, T / wanted), groups = (T + group - 1) / group;
+    thread_local std::vector<KnotBox> knotBox;
+    knotBox.resize(size_t(g.knots));
+    // The groups' ends on the knot timeline.
+    thread_local std::vector<int> endKnot;
+    thread_local std::vector<float> endWeight;
+    endKnot.resize(size_t(groups) + 1), endWeight.resize(size_t(groups) + 1);
+    for (int e = 0; e <= groups; ++e)
+        timelineSegment(knots.data(), g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
+
+    for (int j = 0; j < g.nv; ++j) {
+        for (int i = 0; i < g.nu; ++i) {
+            const int a = j * stride + i;
+            const int vid[4] = {a, a + 1, a + stride + 1, a + stride};
+            KnotBox all = kEmptyBox;
+            for (int kn = 0; kn < g.knots; ++kn) {
+                KnotBox kb = kEmptyBox;
+                for (int c = 0; c < 4; ++c) {
+                    const size_t at = size_t(kn) * nv + vid[c];
+                    kb.x0 = std::min(kb.x0, g.knotX[at]), kb.x1 = std::max(kb.x1, g.knotX[at]);
+                    kb.y0 = std::min(kb.y0, g.knotY[at]), kb.y1 = std::max(kb.y1, g.knotY[at]);
+                    kb.c0 = std::min(kb.c0, g.knotC[at]), kb.c1 = std::max(kb.c1, g.knotC[at]);
+                }
+                knotBox[kn] = kb;
+                all = unionBox(all, kb);
+            }
+            // The bound over the whole shutter and lens; a quick reject when it misses this tile (most
+            // visits of a blurred grid's buckets end here).
+            const float cmax = lensOn ? std::max(std::abs(all.c0), std::abs(all.c1)) : 0.f;
+            const float gx = cmax * std::abs(pr.sx), gy = cmax * std::abs(pr.sy);
+            if (allValid && (all.x1 + gx < float(reg.x0) - 1.f || all.x0 - gx > float(reg.x1) + 1.f ||
+                             all.y1 + gy < float(reg.y0) - 1.f || all.y0 - gy > float(reg.y1) + 1.f))
+                continue;
+            bool front0;
+            int64_t sign0;
+            openFacing(g, vid, front0, sign0);
+            // Sample si at its time and lens point: moved corners, then the exact test.
+            auto testAt = [&](size_t si, int k, float w, Vec2 lens) {
+                ++tests;
+                const MovedQuad q = moveQuad(g, vid, k, w, lens, pr);
+                if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
+                TriangleEdges onDemand;
+                if (testMovedSample<kAttributes>(
+                        g, vid, q, si, tile, nearZ,
+                        [&](int tri) -> const TriangleEdges& { return onDemand = quadTriangle(q, tri); }))
+                    tile.pixelHit[si / size_t(spp)] = 1;
+            };
+
+            if (cut && strata.sweep && allValid) {
+                // The sweep: between two knots the micropolygon's box moves linearly, so for each pixel it
+                // sweeps over, the part of the segment in which the box overlaps the pixel follows from four
+                // linear inequalities, and only the pixel's samples (sorted by time) inside it are looked at.
+                const int segments = std::max(1, g.knots - 1);
+                for (int s = 0; s < segments; ++s) {
+                    const bool still = g.knots == 1;
+                    const float t0 = still ? 0.f : knots[s], t1 = still ? 1.f : knots[s + 1], dt = t1 - t0;
+                    // Samples of this segment (timelineSegment): [t0, t1), the first one open below, the last
+                    // one closed above.
+                    const float own1 = s + 1 < segments ? t1 : INFINITY;
+                    const KnotBox& p = knotBox[s];
+                    const KnotBox& q = still ? p : knotBox[s + 1];
+                    const SweptSide left(p.x0 - kBoundSlack, q.x0 - p.x0),
+                        right(p.x1 + kBoundSlack, q.x1 - p.x1);
+                    const SweptSide top(p.y0 - kBoundSlack, q.y0 - p.y0),
+                        bottom(p.y1 + kBoundSlack, q.y1 - p.y1);
+                    const int py0 = std::max(reg.y0, floorToInt((std::min(top.a, top.a + top.d)))),
+                              py1 =
+                                  std::min(reg.y1 - 1, floorToInt((std::max(bottom.a, bottom.a + bottom.d))));
+                    for (int py = py0; py <= py1; ++py) {
+                        float r0 = 0.f, r1 = 1.f;  // where the box overlaps row py
+                        top.keepAtMost(float(py + 1), r0, r1);
+                        bottom.keepAtLeast(float(py), r0, r1);
+                        if (r0 > r1) continue;
+                        const int px0 = std::max(reg.x0, floorToInt((std::min(left.at(r0), left.at(r1))))),
+                                  px1 = std::min(reg.x1 - 1,
+                                                 floorToInt((std::max(right.at(r0), right.at(r1)))));
+                        const size_t rowPixel = size_t(py - reg.y0) * reg.width();
+                        for (int px = px0; px <= px1; ++px) {
+                            float w0 = r0, w1 = r1;  // where it overlaps pixel (px, py)
+                            left.keepAtMost(float(px + 1), w0, w1);
+                            right.keepAtLeast(float(px), w0, w1);
+                            if (w0 > w1) continue;
+                            // In shutter time, with slack for the rounding of w (inBoundAt decides).
+                            const float ta = t0 + w0 * dt - 1e-5f, tb = t0 + w1 * dt + 1e-5f;
+                            const size_t first = (rowPixel + size_t(px - reg.x0)) * spp;
+                            const float* times = &strata.pixelTime[first];
+                            // The first of the pixel's samples at or after ta: start where it would be if the
+                            // times were stratified (the film's Sobol' times are), then step to it.
+                            int r = std::clamp(int(ta * float(spp)), 0, spp);
+                            while (r > 0 && times[r - 1] >= ta) --r;
+                            while (r < spp && times[r] < ta) ++r;
+                            for (; r < spp && times[r] <= tb; ++r) {
+                                const float t = times[r];
+                                if (t >= own1) break;
+                                const size_t si = strata.pixelSample[first + r];
+                                const float w = still ? 0.f : (g.knots == 2 ? t : (t - t0) / dt);
+                                if (!inBoundAt(knotBox.data(), g.knots, s, w, Vec2{}, pr, false,
+                                               float(tile.sx[si]) * (1.f / kSubpixelScale),
+                                               float(tile.sy[si]) * (1.f / kSubpixelScale)))
+                                    continue;
+                                testAt(si, s, w, Vec2{});
+                            }
+                        }
+                    }
+                }
+                continue;
+            }
+
+            if (!cut || strata.sweep) {  // the paper's one bound over the whole shutter and lens
+                const int64_t bx0 = int64_t((all.x0 - gx - kBoundSlack) * kSubpixelScale),
+                              bx1 = int64_t((all.x1 + gx + kBoundSlack) * kSubpixelScale),
+                              by0 = int64_t((all.y0 - gy - kBoundSlack) * kSubpixelScale),
+                              by1 = int64_t((all.y1 + gy + kBoundSlack) * kSubpixelScale);
+                const Span sp = allValid ? pixelSpan(reg, bx0, bx1, by0, by1)
+                                         : Span{reg.x0, reg.x1 - 1, reg.y0, reg.y1 - 1};
+                for (int py = sp.py0; py <= sp.py1; ++py)
+                    for (int px = sp.px0; px <= sp.px1; ++px)
+                        for (int sl = 0; sl < spp; ++sl) {
+                            const size_t si = (size_t(py - reg.y0) * reg.width() + (px - reg.x0)) * spp + sl;
+                            if (allValid && (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 ||
+                                             tile.sy[si] > by1))
+                                continue;
+                            int k;
+                            float w;
+                            timelineSegment(knots.data(), g.knots, tile.time[si], k, w);
+                            testAt(si, k, w, tile.lens[si]);
+                        }
+                continue;
+            }
+
+            for (int gi = 0; gi < groups; ++gi) {
+                const int j0 = gi * group, j1 = std::min(T, j0 + group);
+                KnotBox box;
+                if (g.knots == 1) {
+                    box = knotBox[0];
+                } else {
+                    const int ka = endKnot[gi], kb = endKnot[gi + 1];
+                    box = unionBox(lerpBox(knotBox[ka], knotBox[ka + 1], endWeight[gi]),
+                                   lerpBox(knotBox[kb], knotBox[kb + 1], endWeight[gi + 1]));
+                    for (int kn = ka + 1; kn <= kb; ++kn) box = unionBox(box, knotBox[kn]);
+                }
+                for (int lc = 0; lc < LL; ++lc) {
+                    float bx0 = box.x0, bx1 = box.x1, by0 = box.y0, by1 = box.y1;
+                    if (lensOn) {  // x + l c sx >= min x + min (l c sx) over the cell and the corners
+                        const float lx0 = -1.f + 2.f * float(lc % L) / L,
+                                    lx1 = -1.f + 2.f * float(lc % L + 1) / L;
+                        const float ly0 = -1.f + 2.f * float(lc / L) / L,
+                                    ly1 = -1.f + 2.f * float(lc / L + 1) / L;
+                        const float xs[4] = {lx0 * box.c0 * pr.sx, lx0 * box.c1 * pr.sx, lx1 * box.c0 * pr.sx,
+                                             lx1 * box.c1 * pr.sx};
+                        const float ys[4] = {ly0 * box.c0 * pr.sy, ly0 * box.c1 * pr.sy, ly1 * box.c0 * pr.sy,
+                                             ly1 * box.c1 * pr.sy};
+                        bx0 += std::min({xs[0], xs[1], xs[2], xs[3]}),
+                            bx1 += std::max({xs[0], xs[1], xs[2], xs[3]});
+                        by0 += std::min({ys[0], ys[1], ys[2], ys[3]}),
+                            by1 += std::max({ys[0], ys[1], ys[2], ys[3]});
+                    }
+                    // A corner behind the near plane at some time: every sample of the tile is a candidate.
+                    const Span sp =
+                        allValid ? pixelSpan(reg, int64_t(floorToInt(bx0 - kBoundSlack)) << kSubpixelBits,
+                                             int64_t(floorToInt(bx1 + kBoundSlack)) << kSubpixelBits,
+                                             int64_t(floorToInt(by0 - kBoundSlack)) << kSubpixelBits,
+                                             int64_t(floorToInt(by1 + kBoundSlack)) << kSubpixelBits)
+                                 : Span{reg.x0, reg.x1 - 1, reg.y0, reg.y1 - 1};
+                    if (sp.empty()) continue;
+                    const int c0 = sp.px0 - reg.x0, c1 = sp.px1 - reg.x0 + 1;
+                    // A still micropolygon (depth of field only): the bound at a lens point is its box grown
+                    // by lens.x * [c0, c1] sx, lens.y * [c0, c1] sy.
+                    const bool still = g.knots == 1;
+                    const KnotBox& b0 = knotBox[0];
+                    const float sx0 = b0.c0 * pr.sx, sx1 = b0.c1 * pr.sx, sy0 = b0.c0 * pr.sy,
+                                sy1 = b0.c1 * pr.sy;
+                    const float stillX0 = b0.x0 - kBoundSlack, stillX1 = b0.x1 + kBoundSlack,
+                                stillY0 = b0.y0 - kBoundSlack, stillY1 = b0.y1 + kBoundSlack;
+                    for (int py = sp.py0; py <= sp.py1; ++py)
+                        for (int tb = j0; tb < j1; ++tb) {
+                            const size_t base = strata.runBase(py, tb * LL + lc);
+                            for (uint32_t e = strata.start[base + c0], end = strata.start[base + c1]; e < end;
+                                 ++e) {
+                                const Vec2 lens = strata.lens[e];
+                                if (still && allValid) {
+                                    const float xa = lens.x * sx0, xb = lens.x * sx1, ya = lens.y * sy0,
+                                                yb = lens.y * sy1;
+                                    const float fx = strata.fx[e], fy = strata.fy[e];
+                                    if (fx < stillX0 + std::min(xa, xb) || fx > stillX1 + std::max(xa, xb) ||
+                                        fy < stillY0 + std::min(ya, yb) || fy > stillY1 + std::max(ya, yb))
+                                        continue;
+                                    testAt(strata.sample[e], 0, 0.f, lens);
+                                    continue;
+                                }
+                                int k;
+                                float w;
+                                timelineSegment(knots.data(), g.knots, strata.time[e], k, w);
+                                if (allValid && !inBoundAt(knotBox.data(), g.knots, k, w, lens, pr, lensOn,
+                                                           strata.fx[e], strata.fy[e]))
+                                    continue;
+                                testAt(strata.sample[e], k, w, lens);
+                            }
+                        }
+                }
+            }
+        }
+    }
+    return tests;
+}
 
 template <bool kAttributes>
 uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,
@@ -153,16 +458,6 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
     uint64_t tests = 0;
     auto sampleIndex = [&](int px, int py, int slot) {
         return (size_t(py - reg.y0) * tw + size_t(px - reg.x0)) * spp + size_t(slot);
-    };
-    // Facing at shutter open of each micropolygon (one-sided culling, see facesCamera).
-    auto openFacing = [&](const int vid[4], bool& front0, int64_t& sign0) {
-        front0 = g.front[vid[0]] | g.front[vid[1]] | g.front[vid[2]] | g.front[vid[3]];
-        sign0 = 1;
-        if (!g.twoSided) {
-            const int64_t X0 = g.X[vid[0]], Y0 = g.Y[vid[0]];
-            sign0 = (g.X[vid[1]] - X0) * (g.Y[vid[2]] - Y0) - (g.X[vid[2]] - X0) * (g.Y[vid[1]] - Y0);
-            if (sign0 == 0) sign0 = 1;
-        }
     };
 
     if (pat.scheme != BlurSampling::BoundingBox) {
@@ -201,7 +496,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                     if (sp.empty()) continue;
                     bool front0;
                     int64_t sign0;
-                    openFacing(vid, front0, sign0);
+                    openFacing(g, vid, front0, sign0);
                     if (!facesCamera(g.twoSided, front0, sign0, q)) continue;
                     const QuadSetup setup = setupQuad(q);
                     const auto setupEdges = [&setup](int t) -> const TriangleEdges& { return setup.tri[t]; };
@@ -232,191 +527,78 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
         return tests;
     }
 
-    // Bounding box: per micropolygon, one bound per (time group, lens cell) (one for the whole shutter
-    // and lens without strata bounds), then each sample in it at its own (t, lens). The tile's samples are
-    // sorted into fine time strata (BlurStrata); the grid groups them so that its fastest vertex moves
-    // about one pixel per group: a slow grid takes few groups (few bounds), a fast one many (few samples per
-    // bound).
-    const bool cut = ctx.strataBounds && !strata.start.empty();
-    const int T = cut ? strata.timeStrata : 1, L = cut ? strata.lensCells : 1;
-    const int LL = L * L, cellsPerPixel = T * LL;
-    const size_t nv = size_t(vertices);
-    const float motion = g.motionPixels;
-    const bool allValid = g.allKnotsValid;
-    // Cost model: a group costs a bound (about two sample tests' worth of work) and the samples in its bound
-    // number about spp (1 + motion / groups) per covered pixel, so the total is least near
-    // groups = sqrt(spp * motion / 2) (measured with callgrind on the moving teapot, docs/motion.md).
-    const int wanted = std::clamp(int(std::ceil(std::sqrt(0.5f * float(spp) * motion))), 1, T);
-    const int group = std::max(1, T / wanted), groups = (T + group - 1) / group;
-    const bool lensOn = pr.hasLens() && pr.perspective;
-    // A micropolygon's box and lens-coefficient range at each knot. Between two knots every corner moves
-    // linearly, and the minimum of linear functions is concave (the maximum convex), so the box at time t
-    // lies inside the linear interpolation of the two knot boxes: a group's bound is the union of the
-    // interpolated boxes at its ends and of the knot boxes inside it, with no per-corner work.
-    struct KnotBox {
-        float x0, x1, y0, y1, c0, c1;
-    };
-    auto lerpBox = [](const KnotBox& p, const KnotBox& q, float w) {
-        return KnotBox{p.x0 + w * (q.x0 - p.x0), p.x1 + w * (q.x1 - p.x1), p.y0 + w * (q.y0 - p.y0),
-                       p.y1 + w * (q.y1 - p.y1), p.c0 + w * (q.c0 - p.c0), p.c1 + w * (q.c1 - p.c1)};
-    };
-    thread_local std::vector<KnotBox> knotBox;
-    knotBox.resize(size_t(g.knots));
-    // The groups' ends on the knot timeline.
-    thread_local std::vector<int> endKnot;
-    thread_local std::vector<float> endWeight;
-    endKnot.resize(size_t(groups) + 1), endWeight.resize(size_t(groups) + 1);
-    for (int e = 0; e <= groups; ++e)
-        timelineSegment(knots.data(), g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
-    for (int j = 0; j < g.nv; ++j) {
-        for (int i = 0; i < g.nu; ++i) {
-            const int a = j * stride + i;
-            const int vid[4] = {a, a + 1, a + stride + 1, a + stride};
-            KnotBox all{INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY, -INFINITY};
-            for (int kn = 0; kn < g.knots; ++kn) {
-                KnotBox kb{INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY, -INFINITY};
-                for (int c = 0; c < 4; ++c) {
-                    const size_t at = size_t(kn) * nv + vid[c];
-                    kb.x0 = std::min(kb.x0, g.knotX[at]), kb.x1 = std::max(kb.x1, g.knotX[at]);
-                    kb.y0 = std::min(kb.y0, g.knotY[at]), kb.y1 = std::max(kb.y1, g.knotY[at]);
-                    kb.c0 = std::min(kb.c0, g.knotC[at]), kb.c1 = std::max(kb.c1, g.knotC[at]);
-                }
-                knotBox[kn] = kb;
-                all.x0 = std::min(all.x0, kb.x0), all.x1 = std::max(all.x1, kb.x1);
-                all.y0 = std::min(all.y0, kb.y0), all.y1 = std::max(all.y1, kb.y1);
-                all.c0 = std::min(all.c0, kb.c0), all.c1 = std::max(all.c1, kb.c1);
-            }
-            // Quick reject: the bound over the whole shutter and lens misses this tile; most visits of a
-            // blurred grid's buckets end here.
-            {
-                const float cmax = std::max(std::abs(all.c0), std::abs(all.c1));
-                const float gx = cmax * std::abs(pr.sx), gy = cmax * std::abs(pr.sy);
-                if (allValid && (all.x1 + gx < float(reg.x0) - 1.f || all.x0 - gx > float(reg.x1) + 1.f ||
-                                 all.y1 + gy < float(reg.y0) - 1.f || all.y0 - gy > float(reg.y1) + 1.f))
-                    continue;
-            }
-            bool front0;
-            int64_t sign0;
-            openFacing(vid, front0, sign0);
-            for (int gi = 0; gi < groups; ++gi) {
-                const int j0 = gi * group, j1 = std::min(T, j0 + group);
-                KnotBox box;
-                if (g.knots == 1) {
-                    box = knotBox[0];
-                } else {
-                    const int ka = endKnot[gi], kb = endKnot[gi + 1];
-                    const KnotBox p = lerpBox(knotBox[ka], knotBox[ka + 1], endWeight[gi]);
-                    const KnotBox q = lerpBox(knotBox[kb], knotBox[kb + 1], endWeight[gi + 1]);
-                    box = KnotBox{std::min(p.x0, q.x0), std::max(p.x1, q.x1), std::min(p.y0, q.y0),
-                                  std::max(p.y1, q.y1), std::min(p.c0, q.c0), std::max(p.c1, q.c1)};
-                    for (int kn = ka + 1; kn <= kb; ++kn) {
-                        const KnotBox& m = knotBox[kn];
-                        box = KnotBox{std::min(box.x0, m.x0), std::max(box.x1, m.x1), std::min(box.y0, m.y0),
-                                      std::max(box.y1, m.y1), std::min(box.c0, m.c0), std::max(box.c1, m.c1)};
-                    }
-                }
-                const float x0 = box.x0, x1 = box.x1, y0 = box.y0, y1 = box.y1, c0 = box.c0, c1 = box.c1;
-                for (int lc = 0; lc < LL; ++lc) {
-                    const float lx0 = -1.f + 2.f * float(lc % L) / L,
-                                lx1 = -1.f + 2.f * float(lc % L + 1) / L;
-                    const float ly0 = -1.f + 2.f * float(lc / L) / L,
-                                ly1 = -1.f + 2.f * float(lc / L + 1) / L;
-                    Bound2 bd;
-                    bd.valid = allValid;
-                    // x + l c sx >= min x + min (l c sx) over the corners (likewise for the maxima).
-                    bd.x0 = x0, bd.x1 = x1, bd.y0 = y0, bd.y1 = y1;
-                    if (lensOn) {
-                        const float xs[4] = {lx0 * c0 * pr.sx, lx0 * c1 * pr.sx, lx1 * c0 * pr.sx,
-                                             lx1 * c1 * pr.sx};
-                        const float ys[4] = {ly0 * c0 * pr.sy, ly0 * c1 * pr.sy, ly1 * c0 * pr.sy,
-                                             ly1 * c1 * pr.sy};
-                        bd.x0 += std::min({xs[0], xs[1], xs[2], xs[3]}),
-                            bd.x1 += std::max({xs[0], xs[1], xs[2], xs[3]});
-                        bd.y0 += std::min({ys[0], ys[1], ys[2], ys[3]}),
-                            bd.y1 += std::max({ys[0], ys[1], ys[2], ys[3]});
-                    }
-                    // A corner behind the near plane at some time: the moved quad of each sample decides.
-                    const int64_t bx0 = bd.valid ? int64_t(bd.x0 * kSubpixelScale) - 2 : INT64_MIN / 4,
-                                  bx1 = bd.valid ? int64_t(bd.x1 * kSubpixelScale) + 2 : INT64_MAX / 4,
-                                  by0 = bd.valid ? int64_t(bd.y0 * kSubpixelScale) - 2 : INT64_MIN / 4,
-                                  by1 = bd.valid ? int64_t(bd.y1 * kSubpixelScale) + 2 : INT64_MAX / 4;
-                    const Span sp = pixelSpan(reg, bx0, bx1, by0, by1);
-                    if (sp.empty()) continue;
-                    for (int py = sp.py0; py <= sp.py1; ++py)
-                        for (int px = sp.px0; px <= sp.px1; ++px) {
-                            const size_t pix = size_t(py - reg.y0) * tw + (px - reg.x0);
-                            auto visit = [&](int slot) {
-                                const size_t si = pix * spp + size_t(slot);
-                                if (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 ||
-                                    tile.sy[si] > by1)
-                                    return;
-                                ++tests;
-                                int k;
-                                float w;
-                                timelineSegment(knots.data(), g.knots, tile.time[si], k, w);
-                                const MovedQuad q = moveQuad(g, vid, k, w, tile.lens[si], pr);
-                                if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
-                                TriangleEdges onDemand;
-                                if (testMovedSample<kAttributes>(g, vid, q, si, tile, nearZ,
-                                                                 [&](int t) -> const TriangleEdges& {
-                                                                     return onDemand = quadTriangle(q, t);
-                                                                 }))
-                                    tile.pixelHit[pix] = 1;
-                            };
-                            if (!cut) {
-                                for (int sl = 0; sl < spp; ++sl) visit(sl);
-                                continue;
-                            }
-                            const size_t base = pix * cellsPerPixel + lc;
-                            if (LL == 1) {  // the group's fine strata are one run of the pixel's list
-                                for (uint32_t e = strata.start[base + j0]; e < strata.start[base + j1]; ++e)
-                                    visit(strata.slot[e]);
-                                continue;
-                            }
-                            for (int tb = j0; tb < j1; ++tb) {
-                                const size_t c0i = base + size_t(tb) * LL;
-                                for (uint32_t e = strata.start[c0i]; e < strata.start[c0i + 1]; ++e)
-                                    visit(strata.slot[e]);
-                            }
-                        }
-                }
-            }
-        }
-    }
-    return tests;
+    return rasterizeBoundingBox<kAttributes>(g, tile, nearZ, ctx, strata);
 }
 
 }  // namespace
 
 void BlurStrata::configure(const BlurPattern& p) {
     timeStrata = 1, lensCells = 1;
+    sweep = p.motion && !p.lens;
     if (p.motion && p.lens) {
         timeStrata = std::min(256, p.spp);
         lensCells = p.spp >= 4 ? 2 : 1;
-    } else if (p.motion) {
-        timeStrata = std::min(256, 4 * p.spp);  // fine strata; micropolygons group them (rasterizeImpl)
     } else if (p.lens) {
-        lensCells = std::max(1, int(std::floor(std::sqrt(float(p.spp)) + 1e-4f)));
+        lensCells = std::max(1, floorToInt((std::sqrt(float(p.spp)) + 1e-4f)));
     }
 }
 
 void BlurStrata::build(const SampleTile& tile) {
     const int C = cells(), spp = tile.spp, L = lensCells;
-    const size_t pixels = size_t(tile.region.width()) * tile.region.height();
-    start.assign(pixels * C + 1, 0);
-    slot.resize(pixels * spp);
+    x0 = tile.region.x0, y0 = tile.region.y0, cols = tile.region.width();
+    const int rows = tile.region.height();
+    if (sweep) {
+        const size_t pixels = size_t(cols) * rows;
+        pixelTime.resize(pixels * spp), pixelSample.resize(pixels * spp);
+        thread_local std::vector<uint32_t> order;
+        order.resize(size_t(spp));
+        for (size_t p = 0; p < pixels; ++p) {
+            const size_t first = p * spp;
+            for (int s = 0; s < spp; ++s) order[s] = uint32_t(first + s);
+            std::sort(order.begin(), order.end(),
+                      [&](uint32_t a, uint32_t b) { return tile.time[a] < tile.time[b]; });
+            for (int r = 0; r < spp; ++r)
+                pixelSample[first + r] = order[r], pixelTime[first + r] = tile.time[order[r]];
+        }
+        start.assign(1, 0);  // built (rasterizeBoundingBox reads start.empty() as "no strata")
+        return;
+    }
+    const size_t samples = size_t(cols) * rows * spp;
+    // Counting sort by (row, cell, column): count into start[base + col + 1], then a running sum over the
+    // whole array makes every block's first entry the previous block's end.
+    start.assign(size_t(rows) * C * (cols + 1), 0);
     auto cellOf = [&](size_t si) {
         const int tb = std::min(timeStrata - 1, int(tile.time[si] * timeStrata));
         const int lx = std::clamp(int((tile.lens[si].x + 1.f) * 0.5f * L), 0, L - 1);
         const int ly = std::clamp(int((tile.lens[si].y + 1.f) * 0.5f * L), 0, L - 1);
         return (tb * L + ly) * L + lx;
     };
-    for (size_t p = 0; p < pixels; ++p)
-        for (int s = 0; s < spp; ++s) ++start[p * C + cellOf(p * spp + s) + 1];
-    for (size_t c = 0; c < pixels * C; ++c) start[c + 1] += start[c];
-    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
-    for (size_t p = 0; p < pixels; ++p)
-        for (int s = 0; s < spp; ++s) slot[fill[p * C + cellOf(p * spp + s)]++] = uint16_t(s);
+    auto slotOf = [&](size_t si, int py, int px) { return runBase(y0 + py, cellOf(si)) + size_t(px); };
+    for (int py = 0; py < rows; ++py)
+        for (int px = 0; px < cols; ++px)
+            for (int s = 0; s < spp; ++s) {
+                const size_t si = (size_t(py) * cols + px) * spp + s;
+                ++start[slotOf(si, py, px) + 1];
+            }
+    uint32_t running = 0;
+    for (size_t b = 0; b < start.size(); b += size_t(cols + 1)) {
+        start[b] = running;  // the block's first entry
+        for (int c = 1; c <= cols; ++c) running = start[b + c] += running;
+    }
+    fx.resize(samples), fy.resize(samples), time.resize(samples), lens.resize(samples),
+        sample.resize(samples);
+    std::vector<uint32_t> fill(start);
+    for (int py = 0; py < rows; ++py)
+        for (int px = 0; px < cols; ++px)
+            for (int s = 0; s < spp; ++s) {
+                const size_t si = (size_t(py) * cols + px) * spp + s;
+                const uint32_t e = fill[slotOf(si, py, px)]++;
+                fx[e] = float(tile.sx[si]) * (1.f / kSubpixelScale);
+                fy[e] = float(tile.sy[si]) * (1.f / kSubpixelScale);
+                time[e] = tile.time[si];
+                lens[e] = tile.lens[si];
+                sample[e] = uint32_t(si);
+            }
 }
 
 uint64_t rasterizeBlurredGrid(const Grid& grid, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,

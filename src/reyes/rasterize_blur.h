@@ -21,14 +21,30 @@
 
 namespace tessera {
 
-// The samples of a tile grouped by (time stratum, lens cell), per pixel (for the bbox scheme's strata).
+// The samples of a tile sorted for the bbox scheme's strata bounds: by pixel row, then by cell (time
+// stratum, lens cell), then by column, so that the samples of one row and cell under a bound's column
+// range are one contiguous run. Each entry carries what the bound test at the sample's own (t, lens)
+// reads (position, time, lens point), so a run is read in order with no indirection.
 struct BlurStrata {
     int timeStrata = 1, lensCells = 1;  // time strata x lensCells x lensCells cells
-    std::vector<uint32_t> start;        // per pixel and cell: first entry in `slot` (CSR, one extra end)
-    std::vector<uint16_t> slot;
+    int x0 = 0, y0 = 0, cols = 0;       // the tile region's corner and width
+    // Per (row, cell): cols + 1 entry indices; the samples of the row and cell in columns [a, b] are the
+    // entries [start[base + a], start[base + b + 1]), base = (row * cells() + cell) * (cols + 1).
+    std::vector<uint32_t> start;
+    std::vector<float> fx, fy, time;  // raster position in pixels, normalised shutter time
+    std::vector<Vec2> lens;
+    std::vector<uint32_t> sample;  // index in the tile
+    // Motion without a lens (the sweep, rasterize_blur.cpp): instead, each pixel's samples sorted by time,
+    // spp per pixel: their times and their indices in the tile.
+    bool sweep = false;
+    std::vector<float> pixelTime;
+    std::vector<uint32_t> pixelSample;
     int cells() const { return timeStrata * lensCells * lensCells; }
-    // Choose the strata for a pattern: time only (4 spp fine strata, which each micropolygon groups by its
-    // motion), lens only (about sqrt(spp) cells per axis), or both (spp time strata, 2 x 2 lens cells).
+    size_t runBase(int py, int cell) const {
+        return (size_t(py - y0) * cells() + size_t(cell)) * size_t(cols + 1);
+    }
+    // Choose the strata for a pattern: time only (the sweep), lens only (about sqrt(spp) cells per axis),
+    // or both (spp time strata, 2 x 2 lens cells).
     void configure(const BlurPattern& pattern);
     void build(const SampleTile& tile);
 };
