@@ -23,22 +23,29 @@ struct MovedVertex {
     float Z;
     bool valid;
 };
+// kLens false: the lens point is (0, 0) and the shift is skipped (x + 0 c sx is x: the same result).
+template <bool kLens = true>
 inline MovedVertex moveVertex(const Grid& g, size_t v, int k, float w, Vec2 lens, float sx, float sy) {
     MovedVertex m;
-    float x, y, z, c;
+    float x, y, z, c = 0.f;
     if (g.knots == 1) {
         m.valid = g.knotValid[v];
-        x = g.knotX[v], y = g.knotY[v], z = g.knotZ[v], c = g.knotC[v];
+        x = g.knotX[v], y = g.knotY[v], z = g.knotZ[v];
+        if constexpr (kLens) c = g.knotC[v];
     } else {
         const size_t n = size_t(g.vertexCount()), a = size_t(k) * n + v, b = a + n;
         m.valid = g.knotValid[a] & g.knotValid[b];
         x = g.knotX[a] + w * (g.knotX[b] - g.knotX[a]);
         y = g.knotY[a] + w * (g.knotY[b] - g.knotY[a]);
         z = g.knotZ[a] + w * (g.knotZ[b] - g.knotZ[a]);
-        c = g.knotC[a] + w * (g.knotC[b] - g.knotC[a]);
+        if constexpr (kLens) c = g.knotC[a] + w * (g.knotC[b] - g.knotC[a]);
     }
-    m.X = blurredToFixed(x + lens.x * c * sx);
-    m.Y = blurredToFixed(y + lens.y * c * sy);
+    if constexpr (kLens) {
+        m.X = blurredToFixed(x + lens.x * c * sx);
+        m.Y = blurredToFixed(y + lens.y * c * sy);
+    } else {
+        m.X = blurredToFixed(x), m.Y = blurredToFixed(y);
+    }
     m.Z = z;
     return m;
 }
@@ -56,11 +63,12 @@ inline void finishQuad(MovedQuad& q) {
     q.minY = std::min({q.Y[0], q.Y[1], q.Y[2], q.Y[3]}), q.maxY = std::max({q.Y[0], q.Y[1], q.Y[2], q.Y[3]});
 }
 
+template <bool kLens = true>
 inline MovedQuad moveQuad(const Grid& g, const int vid[4], int k, float w, Vec2 lens, const Projector& pr) {
     MovedQuad q;
     q.valid = true;
     for (int c = 0; c < 4; ++c) {
-        const MovedVertex m = moveVertex(g, size_t(vid[c]), k, w, lens, pr.sx, pr.sy);
+        const MovedVertex m = moveVertex<kLens>(g, size_t(vid[c]), k, w, lens, pr.sx, pr.sy);
         q.valid &= m.valid;
         q.X[c] = m.X, q.Y[c] = m.Y, q.Z[c] = m.Z;
     }
@@ -105,6 +113,46 @@ inline bool testMovedSample(const Grid& g, const int vid[4], const MovedQuad& q,
         if (t.swapped) std::swap(l1, l2);  // back to the corners' order
         l0 = 1.f - l1 - l2;
         const int* c = kQuadTriangles[tri];
+        const float z = l0 * q.Z[c[0]] + l1 * q.Z[c[1]] + l2 * q.Z[c[2]];
+        if (z < tile.z[i] && z >= nearZ)
+            writeSampleHit<kAttributes>(g, vid[c[0]], vid[c[1]], vid[c[2]], l0, l1, l2, z, i, tile);
+        return true;
+    }
+    return false;
+}
+
+// testMovedSample for a quad met by one sample (the bbox scheme): the same integer edge functions,
+// fill rule and weights as setupTriangleEdges + insideTriangle (so the same hits, bit for bit), evaluated
+// directly at the sample, edge by edge, with the weights' division only for a hit.
+template <bool kAttributes>
+inline bool testMovedSampleOnce(const Grid& g, const int vid[4], const MovedQuad& q, size_t i,
+                                SampleTile& tile, float nearZ) {
+    const int64_t sx = tile.sx[i], sy = tile.sy[i];
+    if (sx < q.minX || sx > q.maxX || sy < q.minY || sy > q.maxY) return false;
+    auto edge = [sx, sy](int64_t xa, int64_t ya, int64_t xb, int64_t yb) {
+        return (xb - xa) * (sy - ya) - (yb - ya) * (sx - xa) - fillBias(xa, ya, xb, yb);
+    };
+    for (int tri = 0; tri < 2; ++tri) {
+        const int* c = kQuadTriangles[tri];
+        const int64_t x0 = q.X[c[0]], y0 = q.Y[c[0]];
+        int64_t x1 = q.X[c[1]], y1 = q.Y[c[1]], x2 = q.X[c[2]], y2 = q.Y[c[2]];
+        int64_t area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+        if (area == 0) continue;
+        const bool swapped = area < 0;
+        if (swapped) {  // counter-clockwise, as setupTriangleEdges orients it
+            std::swap(x1, x2), std::swap(y1, y2);
+            area = -area;
+        }
+        const int64_t w0 = edge(x1, y1, x2, y2);
+        if (w0 < 0) continue;
+        const int64_t w1 = edge(x2, y2, x0, y0);
+        if (w1 < 0) continue;
+        const int64_t w2 = edge(x0, y0, x1, y1);
+        if (w2 < 0) continue;
+        const float invArea = 1.f / float(area);
+        float l1 = float(w1) * invArea, l2 = float(w2) * invArea;
+        if (swapped) std::swap(l1, l2);  // back to the corners' order
+        const float l0 = 1.f - l1 - l2;
         const float z = l0 * q.Z[c[0]] + l1 * q.Z[c[1]] + l2 * q.Z[c[2]];
         if (z < tile.z[i] && z >= nearZ)
             writeSampleHit<kAttributes>(g, vid[c[0]], vid[c[1]], vid[c[2]], l0, l1, l2, z, i, tile);
@@ -279,12 +327,10 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
             // Sample si at its time and lens point: moved corners, then the exact test.
             auto testAt = [&](size_t si, int k, float w, Vec2 lens) {
                 ++tests;
-                const MovedQuad q = moveQuad(g, vid, k, w, lens, pr);
+                const MovedQuad q =
+                    lensOn ? moveQuad<true>(g, vid, k, w, lens, pr) : moveQuad<false>(g, vid, k, w, lens, pr);
                 if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
-                TriangleEdges onDemand;
-                if (testMovedSample<kAttributes>(
-                        g, vid, q, si, tile, nearZ,
-                        [&](int tri) -> const TriangleEdges& { return onDemand = quadTriangle(q, tri); }))
+                if (testMovedSampleOnce<kAttributes>(g, vid, q, si, tile, nearZ))
                     tile.pixelHit[si / size_t(spp)] = 1;
             };
 
@@ -336,9 +382,11 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                                 if (t >= own1) break;
                                 const size_t si = strata.pixelSample[first + r];
                                 const float w = still ? 0.f : (g.knots == 2 ? t : (t - t0) / dt);
-                                if (!inBoundAt(knotBox.data(), g.knots, s, w, Vec2{}, pr, false,
-                                               float(tile.sx[si]) * (1.f / kSubpixelScale),
-                                               float(tile.sy[si]) * (1.f / kSubpixelScale)))
+                                // In the box at time t (the sides already carry the slack).
+                                const float fx = float(tile.sx[si]) * (1.f / kSubpixelScale),
+                                            fy = float(tile.sy[si]) * (1.f / kSubpixelScale);
+                                if (fx < left.at(w) || fx > right.at(w) || fy < top.at(w) ||
+                                    fy > bottom.at(w))
                                     continue;
                                 testAt(si, s, w, Vec2{});
                             }
