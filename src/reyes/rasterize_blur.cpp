@@ -223,6 +223,24 @@ inline int floorToInt(float v) {
     return i - (float(i) > v);
 }
 
+// Lens cell `cell` of `cells` along one axis spans l in [-1 + 2 cell / cells, -1 + 2 (cell + 1) / cells].
+// When l keeps one sign there, min over c in [a, b] of l c is l * lo and the max is l * hi for every l of
+// the cell; returns false for a cell that straddles l = 0. (Samples lie in their cell up to float rounding
+// of about 1e-7, far inside kBoundSlack.)
+inline bool shiftFactors(int cell, int cells, float a, float b, float& lo, float& hi) {
+    const float l0 = -1.f + 2.f * float(cell) / float(cells),
+                l1 = -1.f + 2.f * float(cell + 1) / float(cells);
+    if (l0 >= 0.f) {
+        lo = std::min(a, b), hi = std::max(a, b);
+        return true;
+    }
+    if (l1 <= 0.f) {
+        lo = std::max(a, b), hi = std::min(a, b);
+        return true;
+    }
+    return false;
+}
+
 // Whether sample point (fx, fy) (pixels) can be inside the micropolygon at the sample's time (segment k,
 // weight w) and lens point: the box at that time, grown by the lens point times the corners'
 // lens-coefficient range (x + l c sx >= min x + min over c of l c sx). A dozen flops, against moving
@@ -454,30 +472,35 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                                  : Span{reg.x0, reg.x1 - 1, reg.y0, reg.y1 - 1};
                     if (sp.empty()) continue;
                     const int c0 = sp.px0 - reg.x0, c1 = sp.px1 - reg.x0 + 1;
-                    // A still micropolygon (depth of field only): the bound at a lens point is its box grown
-                    // by lens.x * [c0, c1] sx, lens.y * [c0, c1] sy.
-                    const bool still = g.knots == 1;
+                    // A still micropolygon (depth of field only): the bound at lens point l is its box
+                    // grown by l.x [c0, c1] sx and l.y [c0, c1] sy. Where the cell's l.x keeps one sign,
+                    // the least shift is l.x times one end of that range, known per cell (likewise for y):
+                    // two multiply-adds per side and sample.
+                    const bool still = g.knots == 1 && allValid;
                     const KnotBox& b0 = knotBox[0];
-                    const float sx0 = b0.c0 * pr.sx, sx1 = b0.c1 * pr.sx, sy0 = b0.c0 * pr.sy,
-                                sy1 = b0.c1 * pr.sy;
+                    float loX, hiX, loY, hiY;
+                    const bool oneSigned = still && lensOn &&
+                                           shiftFactors(lc % L, L, b0.c0 * pr.sx, b0.c1 * pr.sx, loX, hiX) &&
+                                           shiftFactors(lc / L, L, b0.c0 * pr.sy, b0.c1 * pr.sy, loY, hiY);
                     const float stillX0 = b0.x0 - kBoundSlack, stillX1 = b0.x1 + kBoundSlack,
                                 stillY0 = b0.y0 - kBoundSlack, stillY1 = b0.y1 + kBoundSlack;
                     for (int py = sp.py0; py <= sp.py1; ++py)
                         for (int tb = j0; tb < j1; ++tb) {
                             const size_t base = strata.runBase(py, tb * LL + lc);
-                            for (uint32_t e = strata.start[base + c0], end = strata.start[base + c1]; e < end;
-                                 ++e) {
-                                const Vec2 lens = strata.lens[e];
-                                if (still && allValid) {
-                                    const float xa = lens.x * sx0, xb = lens.x * sx1, ya = lens.y * sy0,
-                                                yb = lens.y * sy1;
+                            const uint32_t first = strata.start[base + c0], end = strata.start[base + c1];
+                            if (oneSigned) {
+                                for (uint32_t e = first; e < end; ++e) {
+                                    const Vec2 lens = strata.lens[e];
                                     const float fx = strata.fx[e], fy = strata.fy[e];
-                                    if (fx < stillX0 + std::min(xa, xb) || fx > stillX1 + std::max(xa, xb) ||
-                                        fy < stillY0 + std::min(ya, yb) || fy > stillY1 + std::max(ya, yb))
+                                    if (fx < stillX0 + lens.x * loX || fx > stillX1 + lens.x * hiX ||
+                                        fy < stillY0 + lens.y * loY || fy > stillY1 + lens.y * hiY)
                                         continue;
                                     testAt(strata.sample[e], 0, 0.f, lens);
-                                    continue;
                                 }
+                                continue;
+                            }
+                            for (uint32_t e = first; e < end; ++e) {
+                                const Vec2 lens = strata.lens[e];
                                 int k;
                                 float w;
                                 timelineSegment(knots.data(), g.knots, strata.time[e], k, w);
