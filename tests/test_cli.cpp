@@ -353,3 +353,42 @@ TEST(ProgressEstimate, PercentStepsAreWholeIncreasingAndOnce) {
     EXPECT_FALSE(steps.step(total / 2, total).has_value()) << "never backwards";
     EXPECT_FALSE(steps.step(total, total).has_value()) << "100% once";
 }
+
+TEST(Cli, AmbientOcclusionRendersAGreyImageAndChecksItsOptions) {
+    fs::path dir = tempDir();
+    const std::string out = (dir / "ao.png").string(), stats = (dir / "ao.json").string();
+    CommandResult r =
+        run("render " + kTeapot +
+            " --engine rt --integrator ao --ao-samples 8 --ao-distance 2 --res 64x48 --spp 1 -q -o " + out +
+            " --stats " + stats);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const nlohmann::json s = nlohmann::json::parse(std::ifstream(stats));
+    EXPECT_EQ(s["integrator"], "ao");
+    EXPECT_EQ(s["ao"]["samples"], 8);
+    EXPECT_EQ(s["rays"]["occlusion"].get<uint64_t>(), 8 * s["hits"]["primary"].get<uint64_t>());
+    const Image img = readPng(out);
+    size_t grey = 0, covered = 0;
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) {
+            const float* p = img.pixel(x, y);
+            if (p[3] < 1.f) continue;
+            ++covered;
+            grey += p[0] == p[1] && p[1] == p[2];
+        }
+    EXPECT_GT(covered, 100u);
+    EXPECT_EQ(grey, covered) << "ambient occlusion is grey whatever the surface colour";
+    // Each mistake names its option.
+    const std::pair<const char*, const char*> mistakes[] = {
+        {"--integrator ao", "--integrator"},
+        {"--engine rt --integrator nope", "--integrator"},
+        {"--engine rt --ao-samples 0", "--ao-samples"},
+        {"--engine rt --ao-distance -1", "--ao-distance"},
+        {"--engine rt --ao-weighting nope", "--ao-weighting"}};
+    for (const auto& [bad, named] : mistakes) {
+        r = run("render " + kTeapot + " " + bad + " -o " + (dir / "never.png").string());
+        EXPECT_EQ(r.exitCode, 2) << bad << ": " << r.output;
+        EXPECT_NE(r.output.find(named), std::string::npos) << bad << ": " << r.output;
+    }
+    EXPECT_FALSE(fs::exists(dir / "never.png"));
+    fs::remove_all(dir);
+}

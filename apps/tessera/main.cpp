@@ -66,6 +66,10 @@ struct RenderArgs {
     std::string shutter, dof, blurSampling;
     int blurTile = 0, blurPermutations = 0;
     bool noBlur = false;
+    // Ray-traced light transport (docs/light_transport.md).
+    std::string integrator = "direct", aoWeighting = "cosine";
+    int aoSamples = 64;
+    double aoDistance = 0;  // 0: unlimited
 };
 
 // `n` comma-separated finite numbers ("0,1"); nullopt if the text is not that.
@@ -235,6 +239,8 @@ int runRender(const RenderArgs& a) {
     if (a.shadingRate < 0 || !std::isfinite(a.shadingRate)) fail("error: --shading-rate must be > 0");
     if (a.bucketSize < 4 || a.bucketSize > 1024) fail("error: --bucket-size must be between 4 and 1024");
     if (a.engine != "reyes" && a.engine != "rt") fail("error: --engine must be reyes or rt");
+    if (a.integrator != "direct" && a.engine != "rt")
+        fail(fmt::format("error: --integrator {} is ray traced: use it with --engine rt", a.integrator));
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
         char x = 0, extra = 0;
@@ -317,6 +323,10 @@ int runRender(const RenderArgs& a) {
     settings.cullBackfaces = a.cullBackfaces;
     settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
+    settings.integrator = a.integrator == "ao" ? Integrator::AmbientOcclusion : Integrator::Direct;
+    settings.ao.samples = a.aoSamples;
+    if (a.aoDistance > 0) settings.ao.maxDistance = float(a.aoDistance);
+    settings.ao.paperWeighting = a.aoWeighting == "paper";
     // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
     settings.blur.enabled = !a.noBlur;
     const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
@@ -584,6 +594,25 @@ int main(int argc, char** argv) {
     render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
         ->check(intRange(0, 12));
     render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(intRange(0, 64));
+    render
+        ->add_option("--integrator", ra.integrator,
+                     "rt: direct (lights, shadows, mirror, glass) or ao (ambient occlusion, a grey image)")
+        ->check(CLI::IsMember({"direct", "ao"}))
+        ->capture_default_str();
+    render->add_option("--ao-samples", ra.aoSamples, "rt, --integrator ao: hemisphere rays per camera hit")
+        ->check(intRange(1, 65536))
+        ->capture_default_str();
+    render
+        ->add_option("--ao-distance", ra.aoDistance,
+                     "rt, --integrator ao: occluders farther than this do not count; default: unlimited")
+        ->check(inRange(0, 1e30, true));
+    render
+        ->add_option(
+            "--ao-weighting", ra.aoWeighting,
+            "rt, --integrator ao: cosine (cosine-weighted rays, 0/1 visibility) or paper "
+            "(paper 002: uniform rays weighted by their cosine, shade = hit distance / --ao-distance)")
+        ->check(CLI::IsMember({"cosine", "paper"}))
+        ->capture_default_str();
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
     render->add_flag("--cull-backfaces", ra.cullBackfaces,
                      "rt: cull back-facing subpatches for primary rays");

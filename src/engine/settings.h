@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -41,14 +42,34 @@ struct BlurSettings {
     bool strataBounds = true;
 };
 
+// What the ray tracer computes for a camera sample (docs/light_transport.md): `Direct` is the
+// Whitted-style integrator (lights with shadow rays, mirror and glass lobes); `AmbientOcclusion` the
+// unoccluded fraction of the hemisphere at the first hit, as a grey image.
+enum class Integrator : uint8_t { Direct, AmbientOcclusion };
+inline const char* integratorName(Integrator i) {
+    return i == Integrator::AmbientOcclusion ? "ao" : "direct";
+}
+
+// Ambient occlusion (paper 002, sec. 5.3.1): O = (1/pi) integral of V(w) cos(theta) over the hemisphere.
+struct AmbientOcclusionSettings {
+    int samples = 64;                                            // hemisphere rays per camera hit
+    float maxDistance = std::numeric_limits<float>::infinity();  // occluders farther away do not count
+    // Paper 002's variant: uniform directions (cos theta = the second random number), each weighted by its
+    // cosine, and a ray's shade attenuated by its hit distance (t / maxDistance) instead of 0 or 1. Off:
+    // cosine-weighted directions and binary visibility (lower variance for the same integral).
+    bool paperWeighting = false;
+};
+
 struct RenderSettings {
-    std::string engine = "reyes";  // "reyes" or "rt"
-    int threads = 0;               // 0: all hardware threads
-    uint32_t seed = 0;             // sample pattern seed
-    int bucketSize = 32;           // pixels per bucket side
-    int maxGridEdge = 16;          // Reyes: micropolygons per grid edge before splitting
+    std::string engine = "reyes";              // "reyes" or "rt"
+    int threads = 0;                           // 0: all hardware threads
+    uint32_t seed = 0;                         // sample pattern seed
+    int bucketSize = 32;                       // pixels per bucket side
+    int maxGridEdge = 16;                      // Reyes: micropolygons per grid edge before splitting
     SamplerKind sampler = SamplerKind::Sobol;  // camera sample pattern (film/sampler.h)
     // Ray tracer
+    Integrator integrator = Integrator::Direct;
+    AmbientOcclusionSettings ao;
     int subpatchDepth = 6;
     int maxDepth = 4;
     bool cullBackfaces = false;
@@ -68,7 +89,7 @@ struct RenderSettings {
 };
 
 struct RenderResult {
-    Image image;  // the film region (origin at the region's corner)
+    Image image;           // the film region (origin at the region's corner)
     nlohmann::json stats;  // engine counters; the CLI adds timing and memory
     bool cancelled = false;
     std::vector<std::string> warnings;  // said once per render (e.g. effects an engine does not render)
@@ -84,8 +105,8 @@ inline Rect renderRegion(const Camera& cam, const RenderSettings& s) {
     const Rect whole{0, 0, cam.width, cam.height};
     const Rect& r = s.view.region;
     if (r.width() <= 0 || r.height() <= 0) return whole;
-    return Rect{std::clamp(r.x0, 0, cam.width), std::clamp(r.y0, 0, cam.height), std::clamp(r.x1, 0, cam.width),
-                std::clamp(r.y1, 0, cam.height)};
+    return Rect{std::clamp(r.x0, 0, cam.width), std::clamp(r.y0, 0, cam.height),
+                std::clamp(r.x1, 0, cam.width), std::clamp(r.y1, 0, cam.height)};
 }
 
 }  // namespace tessera

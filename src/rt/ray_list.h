@@ -31,8 +31,18 @@ namespace rt {
 
 // The kind of a ray decides its rules: camera rays respect one-sided patches (and --cull-backfaces),
 // shadow rays stop at any hit, secondary rays see both sides.
-enum Kind : uint8_t { kPrimary = 0, kShadow = 1, kReflection = 2, kRefraction = 3, kKinds = 4 };
-inline constexpr const char* kKindNames[kKinds] = {"primary", "shadow", "reflection", "refraction"};
+// kOcclusion: ambient-occlusion rays (both sides of every surface block them; closest hit when their
+// distance matters, any hit when traced with TraceService::occluded).
+enum Kind : uint8_t {
+    kPrimary = 0,
+    kShadow = 1,
+    kReflection = 2,
+    kRefraction = 3,
+    kOcclusion = 4,
+    kKinds = 5
+};
+inline constexpr const char* kKindNames[kKinds] = {"primary", "shadow", "reflection", "refraction",
+                                                   "occlusion"};
 inline constexpr uint32_t kNone = UINT32_MAX;
 inline constexpr size_t kChunk = 128;  // rays per parallel work item
 inline constexpr int kHistBins = 18;   // Newton iteration counts 0..17

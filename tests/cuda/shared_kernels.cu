@@ -1,6 +1,7 @@
 // Compile check (CTest DeviceKernelsCompileWithNvcc): the kernels both engines share (sampler, light
-// samples, surface shading, traced lobes, thin-lens disk map) build as CUDA device code, warning-free.
+// samples, surface shading, traced lobes, thin-lens disk map, hemisphere warps) build as CUDA device code, warning-free.
 #include "film/sampler.h"
+#include "shading/hemisphere.h"
 #include "shading/surface.h"
 #include "scene/camera.h"
 using namespace tessera;
@@ -16,4 +17,6 @@ __global__ void shadeKernel(const ShadingLight* lights, int nL, const Material* 
                                 [](size_t) { return 1.f; }) * (d.x + float(x + y));
     TracedLobe lobes[2];
     tracedLobes(*m, I[i], N[i], out[i], 1e-4f, lobes);
+    const Frame3 f = frameAbout(N[i]);
+    out[i] = out[i] * (f.toWorld(cosineHemisphere(d.x, d.y)).z + uniformHemisphere(d.y, d.x).z);
 }
