@@ -70,7 +70,70 @@ struct RenderArgs {
     std::string integrator = "direct", aoWeighting = "cosine";
     int aoSamples = 64;
     double aoDistance = 0;  // 0: unlimited
+    std::string aovs;       // --aov z,N,id,...
 };
+
+// The AOVs --aov names: film channels and engine planes (docs: README "AOVs").
+struct AovRequest {
+    uint32_t channels = 0;
+    std::vector<std::string> planes;  // written by an engine under this name (occlusion)
+    std::vector<std::string> names;   // as given
+};
+constexpr const char* kAovNames = "z, N, id, shadows, textured, occlusion";
+std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
+    AovRequest r;
+    if (list.empty()) return r;
+    size_t at = 0;
+    while (true) {
+        const size_t end = list.find(',', at);
+        const std::string name = list.substr(at, end == std::string::npos ? std::string::npos : end - at);
+        if (name == "z")
+            r.channels |= kChannelDepth;
+        else if (name == "N")
+            r.channels |= kChannelNormal;
+        else if (name == "id")
+            r.channels |= kChannelObjectId;
+        else if (name == "shadows")
+            r.channels |= kChannelShadowCount;
+        else if (name == "textured")
+            r.channels |= kChannelHasTexture;
+        else if (name == "occlusion")
+            r.planes.push_back(name);
+        else {
+            bad = name;
+            return std::nullopt;
+        }
+        r.names.push_back(name);
+        if (end == std::string::npos) break;
+        at = end + 1;
+    }
+    return r;
+}
+
+// The OpenEXR header's camera: worldToCamera, and worldToNDC with NDC x, y in [0, 1] from the top-left
+// corner of the image (RenderMan's NDC) and depth 0 at the near plane, 1 at the far plane.
+ExrMetadata exrMetadata(const Camera& cam, double renderMs) {
+    ExrMetadata m;
+    m.hasCamera = true;
+    m.software = "tessera " TESSERA_VERSION;
+    m.renderMs = renderMs;
+    m.worldToCamera = cam.cameraFromWorld;
+    const Projector pr(cam);
+    const double W = cam.width, H = cam.height, n = pr.nearClip, f = pr.farClip;
+    Mat4 p;
+    if (pr.perspective) {  // raster = (x/z sx + ox, y/z sy + oy): divide by w = z
+        p.m[0][0] = pr.sx / W, p.m[0][2] = pr.ox / W;
+        p.m[1][1] = pr.sy / H, p.m[1][2] = pr.oy / H;
+        p.m[2][2] = f / (f - n), p.m[2][3] = -f * n / (f - n);
+        p.m[3][2] = 1, p.m[3][3] = 0;
+    } else {
+        p.m[0][0] = pr.sx / W, p.m[0][3] = pr.ox / W;
+        p.m[1][1] = pr.sy / H, p.m[1][3] = pr.oy / H;
+        p.m[2][2] = 1 / (f - n), p.m[2][3] = -n / (f - n);
+    }
+    m.worldToNDC = p * cam.cameraFromWorld;
+    return m;
+}
 
 // `n` comma-separated finite numbers ("0,1"); nullopt if the text is not that.
 std::optional<std::vector<double>> parseNumberList(const std::string& text, size_t n) {
@@ -239,6 +302,12 @@ int runRender(const RenderArgs& a) {
     if (a.shadingRate < 0 || !std::isfinite(a.shadingRate)) fail("error: --shading-rate must be > 0");
     if (a.bucketSize < 4 || a.bucketSize > 1024) fail("error: --bucket-size must be between 4 and 1024");
     if (a.engine != "reyes" && a.engine != "rt") fail("error: --engine must be reyes or rt");
+    std::string badAov;
+    const std::optional<AovRequest> aovs = parseAovs(a.aovs, badAov);
+    if (!aovs) fail(fmt::format("error: --aov: unknown AOV '{}' (known: {})", badAov, kAovNames));
+    for (const std::string& p : aovs->planes)
+        if (p == "occlusion" && a.integrator != "ao")
+            fail("error: --aov occlusion is made by --integrator ao (with --engine rt)");
     if (a.integrator != "direct" && a.engine != "rt")
         fail(fmt::format("error: --integrator {} is ray traced: use it with --engine rt", a.integrator));
     int resW = 0, resH = 0;
@@ -311,6 +380,8 @@ int runRender(const RenderArgs& a) {
         output = defaultOutput(scene, a.scene);
         checkWritableOrFail(output, "image");
     }
+    if (!aovs->names.empty() && fs::path(output).extension() != ".exr")
+        fail(fmt::format("error: --aov needs an OpenEXR output (-o NAME.exr): '{}' holds RGBA only", output));
 
     RenderSettings settings;
     settings.engine = a.engine;
@@ -327,6 +398,8 @@ int runRender(const RenderArgs& a) {
     settings.ao.samples = a.aoSamples;
     if (a.aoDistance > 0) settings.ao.maxDistance = float(a.aoDistance);
     settings.ao.paperWeighting = a.aoWeighting == "paper";
+    settings.output.channels = aovs->channels;
+    settings.output.aovs = aovs->planes;
     // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
     settings.blur.enabled = !a.noBlur;
     const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
@@ -399,7 +472,9 @@ int runRender(const RenderArgs& a) {
     std::string statsTmp;
     try {
         if (!a.stats.empty()) statsTmp = writeTemporary(a.stats, s.dump(2) + "\n");
-        OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput};
+        const ExrMetadata meta = exrMetadata(scene.camera, renderMs);
+        OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput,
+                           &meta};
         writeImage(output, result.image, enc);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);
     } catch (const std::exception& e) {
@@ -613,6 +688,9 @@ int main(int argc, char** argv) {
             "(paper 002: uniform rays weighted by their cosine, shade = hit distance / --ao-distance)")
         ->check(CLI::IsMember({"cosine", "paper"}))
         ->capture_default_str();
+    render->add_option("--aov", ra.aovs,
+                       std::string("Further channels of an .exr output, comma-separated: ") + kAovNames +
+                           " (depth and id unfiltered, the rest filtered like colour)");
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
     render->add_flag("--cull-backfaces", ra.cullBackfaces,
                      "rt: cull back-facing subpatches for primary rays");

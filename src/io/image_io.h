@@ -1,22 +1,36 @@
-// Image files: PNG (8-bit RGBA, straight alpha) and OpenEXR (half RGBA, linear, premultiplied).
+// Image files: PNG (8-bit RGBA, straight alpha) and OpenEXR (half RGBA, linear, premultiplied, plus the
+// image's planes as further channels: the AOVs).
 // Files are written to a temporary name beside the target and renamed when complete, so a failed
 // render never leaves a partial file and never clobbers a good one.
 #pragma once
 #include <string>
 
+#include "core/transform.h"
 #include "film/film.h"
 
 namespace tessera {
 
+// What an OpenEXR header tells a compositor about the render (the standard attributes worldToCamera and
+// worldToNDC, as Nuke and other readers take them, and the software's name).
+struct ExrMetadata {
+    bool hasCamera = false;
+    Mat4 worldToCamera, worldToNDC;  // column vectors (our convention); written transposed for Imath
+    std::string software;
+    double renderMs = -1;  // < 0: not written
+};
+
 struct OutputEncoding {
     float gain = 1.f, gamma = 1.f;  // RI Exposure: out = (gain * c)^(1/gamma)
     bool srgb = false;              // sRGB transfer instead (scenes without a RIB)
+    const ExrMetadata* exr = nullptr;
 };
 
 // Throws std::runtime_error with a message naming the file on failure.
 void writeImage(const std::string& path, const Image& image, const OutputEncoding& enc);
 void writePng(const std::string& path, const Image& image, const OutputEncoding& enc);
-void writeExr(const std::string& path, const Image& image);
+// RGBA as half; the planes as float channels ("z" as Z, "N" as N.X, N.Y, N.Z, "id" as a uint channel, any
+// other plane under its name). PNG has no room for planes: writeImage refuses an image with planes there.
+void writeExr(const std::string& path, const Image& image, const ExrMetadata* meta = nullptr);
 
 // Readers used by the tests and the benchmark tools: PNG returns straight RGBA in [0,1];
 // EXR returns the stored (premultiplied, linear) RGBA.

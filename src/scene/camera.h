@@ -52,7 +52,7 @@ struct Camera {
 // Everything needed to project camera-space points to raster space and to generate camera rays,
 // precomputed: the one place both engines take the camera model from.
 struct Projector {
-    float sx, sy, ox, oy;  // raster = (x/z * sx + ox, -y/z * sy + oy) for perspective
+    float sx, sy, ox, oy;  // raster = (x/z * sx + ox, y/z * sy + oy) for perspective (sy < 0: y up)
     bool perspective;
     float nearClip, farClip;
     float lensRadius = 0.f, focalDistance = 0.f;  // thin lens (0: pinhole)

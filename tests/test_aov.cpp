@@ -1,0 +1,174 @@
+// AOVs end to end through the command line (--aov): the OpenEXR channels and header a compositor reads,
+// against an analytic scene: two planes facing the eye at depths 5 and 7, objects 0 and 1.
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfInputFile.h>
+#include <ImfMatrixAttribute.h>
+#include <ImfStandardAttributes.h>
+#include <ImfStringAttribute.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+int runTessera(const std::string& args, std::string* output = nullptr) {
+    const fs::path log = fs::temp_directory_path() / ("tessera_aov_" + std::to_string(getpid()) + ".log");
+    const int status =
+        std::system((std::string(TESSERA_BINARY) + " " + args + " > '" + log.string() + "' 2>&1").c_str());
+    if (output) {
+        std::ifstream f(log);
+        output->assign(std::istreambuf_iterator<char>(f), {});
+    }
+    fs::remove(log);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+constexpr int kW = 64, kH = 48;
+
+// Left half: a plane at z = 5; right half: one at z = 7 (the RIB camera looks down +z). 40-degree view of
+// the shorter (vertical) side.
+fs::path writeScene(const fs::path& dir) {
+    const fs::path rib = dir / "planes.rib";
+    std::ofstream(rib)
+        << "Format 64 48 1\nPixelSamples 2 2\nProjection \"perspective\" \"fov\" 40\n"
+           "WorldBegin\nLightSource \"ambientlight\" 1 \"intensity\" 1\n"
+           "AttributeBegin\nPatch \"bilinear\" \"P\" [-20 -20 5  0 -20 5  -20 20 5  0 20 5]\nAttributeEnd\n"
+           "AttributeBegin\nPatch \"bilinear\" \"P\" [0 -20 7  20 -20 7  0 20 7  20 20 7]\nAttributeEnd\n"
+           "WorldEnd\n";
+    return rib;
+}
+
+struct Channels {
+    std::map<std::string, std::vector<float>> f;
+    std::vector<uint32_t> id;
+    Imf::Header header;
+};
+Channels readChannels(const fs::path& exr) {
+    Imf::InputFile file(exr.c_str());
+    Channels c;
+    c.header = file.header();
+    const Imath::Box2i dw = file.header().dataWindow();
+    const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    Imf::FrameBuffer fb;
+    for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it) {
+        const std::string name = it.name();
+        if (it.channel().type == Imf::UINT) {
+            c.id.resize(size_t(w) * h);
+            fb.insert(name, Imf::Slice(Imf::UINT, reinterpret_cast<char*>(c.id.data()), 4, 4 * size_t(w)));
+        } else {
+            std::vector<float>& v = c.f[name];
+            v.resize(size_t(w) * h);
+            fb.insert(name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(v.data()), 4, 4 * size_t(w)));
+        }
+    }
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    return c;
+}
+
+TEST(Aov, DepthNormalAndIdOfTwoPlanesInBothEngines) {
+    const fs::path dir = fs::temp_directory_path() / ("tessera_aov_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    const fs::path rib = writeScene(dir);
+    for (const char* engine : {"reyes", "rt"}) {
+        const fs::path exr = dir / (std::string(engine) + ".exr");
+        std::string out;
+        ASSERT_EQ(runTessera("render " + rib.string() + " --engine " + engine + " --aov z,N,id -q -o " +
+                                 exr.string(),
+                             &out),
+                  0)
+            << out;
+        const Channels c = readChannels(exr);
+        for (const char* name : {"R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z"})
+            ASSERT_TRUE(c.f.count(name)) << engine << " lacks channel " << name;
+        ASSERT_EQ(c.id.size(), size_t(kW * kH)) << engine;
+        // Away from the seam at the centre column: depth 5 / 7 exactly (camera-space z of a plane facing the
+        // eye), the normal facing the viewer, one id per plane.
+        for (int y = 0; y < kH; ++y)
+            for (int x = 0; x < kW; ++x) {
+                if (std::abs(x + 0.5 - kW / 2.0) < 2) continue;
+                const size_t i = size_t(y) * kW + x;
+                const bool left = x < kW / 2;
+                EXPECT_NEAR(c.f.at("Z")[i], left ? 5.f : 7.f, 1e-3) << engine << " " << x << "," << y;
+                EXPECT_NEAR(c.f.at("N.Z")[i], -1.f, 1e-3) << engine << " " << x << "," << y;
+                EXPECT_NEAR(c.f.at("N.X")[i], 0.f, 1e-3);
+                EXPECT_EQ(c.id[i], left ? 0u : 1u) << engine << " " << x << "," << y;
+            }
+        // The header: software, and a worldToNDC that puts the view's centre at (0.5, 0.5), its top edge at
+        // v = 0 and its right edge at u = 1 (NDC from the image's top-left corner), depth within [0, 1].
+        const auto* sw = c.header.findTypedAttribute<Imf::StringAttribute>("software");
+        ASSERT_NE(sw, nullptr);
+        EXPECT_EQ(sw->value().rfind("tessera", 0), 0u);
+        ASSERT_TRUE(Imf::hasWorldToNDC(c.header));
+        ASSERT_TRUE(Imf::hasWorldToCamera(c.header));
+        const Imath::M44f m = Imf::worldToNDC(c.header);
+        auto ndc = [&](float x, float y, float z) {
+            Imath::V3f p;
+            m.multVecMatrix(Imath::V3f(x, y, z), p);
+            return p;
+        };
+        const float t = 5.f * std::tan(20.f * 3.14159265f / 180.f);
+        const Imath::V3f centre = ndc(0, 0, 5), top = ndc(0, t, 5), right = ndc(t * kW / kH, 0, 5);
+        EXPECT_NEAR(centre.x, 0.5f, 1e-4) << engine;
+        EXPECT_NEAR(centre.y, 0.5f, 1e-4);
+        EXPECT_NEAR(top.y, 0.f, 1e-4);
+        EXPECT_NEAR(right.x, 1.f, 1e-4);
+        EXPECT_GT(centre.z, 0.f);
+        EXPECT_LT(centre.z, 1.f);
+    }
+    fs::remove_all(dir);
+}
+
+TEST(Aov, OcclusionPlaneAndBadRequests) {
+    const fs::path dir = fs::temp_directory_path() / ("tessera_aov_bad_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    const fs::path rib = writeScene(dir);
+    const fs::path exr = dir / "ao.exr";
+    std::string out;
+    ASSERT_EQ(
+        runTessera("render " + rib.string() +
+                       " --engine rt --integrator ao --ao-samples 4 --aov occlusion -q -o " + exr.string(),
+                   &out),
+        0)
+        << out;
+    const Channels c = readChannels(exr);
+    ASSERT_TRUE(c.f.count("occlusion"));
+    // The nearer plane (left, z = 5) has nothing in front of it: 1. The farther one (right, z = 7) sees the
+    // nearer one's half-plane 2 units in front of it on its left: partly occluded, most near the seam.
+    const float* ao = c.f.at("occlusion").data();
+    const size_t row = size_t(kH / 2) * kW;
+    EXPECT_FLOAT_EQ(ao[row + 2], 1.f);
+    EXPECT_LT(ao[row + kW / 2 + 2], ao[row + kW - 3]);
+    EXPECT_LT(ao[row + kW - 3], 1.f);
+    EXPECT_GT(ao[row + kW - 3], 0.5f);
+    const std::pair<const char*, const char*> mistakes[] = {
+        {"--aov depth", "unknown AOV 'depth'"},
+        {"--aov z -o x.png", "OpenEXR"},
+        {"--aov occlusion --engine rt", "--integrator ao"},
+    };
+    for (const auto& [args, message] : mistakes) {
+        const std::string o = (dir / "never.exr").string();
+        EXPECT_EQ(runTessera("render " + rib.string() + " " + args +
+                                 (std::string(args).find("-o ") == std::string::npos ? " -o " + o : ""),
+                             &out),
+                  2)
+            << args << ": " << out;
+        EXPECT_NE(out.find(message), std::string::npos) << args << ": " << out;
+    }
+    EXPECT_FALSE(fs::exists(dir / "never.exr"));
+    EXPECT_FALSE(fs::exists("x.png"));
+    fs::remove_all(dir);
+}
+
+}  // namespace
