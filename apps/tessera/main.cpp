@@ -58,6 +58,7 @@ double peakRssMb() {
 struct RenderArgs {
     std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
     std::string sampler = "sobol";
+    std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
@@ -235,6 +236,8 @@ int runRender(const RenderArgs& a) {
     if (a.shadingRate < 0 || !std::isfinite(a.shadingRate)) fail("error: --shading-rate must be > 0");
     if (a.bucketSize < 4 || a.bucketSize > 1024) fail("error: --bucket-size must be between 4 and 1024");
     if (a.engine != "reyes" && a.engine != "rt") fail("error: --engine must be reyes or rt");
+    if (a.shadows != "on" && a.shadows != "off" && a.shadows != "scene")
+        fail(fmt::format("error: --shadows must be on, off or scene, got '{}'", a.shadows));
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
         char x = 0, extra = 0;
@@ -317,6 +320,9 @@ int runRender(const RenderArgs& a) {
     settings.cullBackfaces = a.cullBackfaces;
     settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
+    settings.shadows = a.shadows == "on"    ? ShadowOverride::On
+                       : a.shadows == "off" ? ShadowOverride::Off
+                                            : ShadowOverride::Scene;
     // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
     settings.blur.enabled = !a.noBlur;
     const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
@@ -371,6 +377,14 @@ int runRender(const RenderArgs& a) {
     s["output"] = output;
     s["render_ms"] = renderMs;
     s["peak_rss_mb"] = peakRssMb();
+    {  // which lights cast shadows (the engines may add their own counters under "shadows")
+        nlohmann::json& sh = s["shadows"];
+        if (!sh.is_object()) sh = nlohmann::json::object();
+        int casting = 0;
+        for (const Light& l : scene.lights) casting += lightCastsShadows(l, settings.shadows);
+        sh["mode"] = shadowOverrideName(settings.shadows);
+        sh["casting_lights"] = casting;
+    }
     {  // what the blur was asked for (the engines may add their own counters under "blur")
         nlohmann::json& b = s["blur"];
         if (!b.is_object()) b = nlohmann::json::object();
@@ -585,6 +599,11 @@ int main(int argc, char** argv) {
         ->check(intRange(0, 12));
     render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(intRange(0, 64));
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
+    render
+        ->add_option("--shadows", ra.shadows,
+                     "Which lights cast shadows: on (all), off (none) or scene (each light's Attribute "
+                     "\"light\" \"shadows\"; RIB default off, the default lights of other inputs on)")
+        ->check(CLI::IsMember({"on", "off", "scene"}));
     render->add_flag("--cull-backfaces", ra.cullBackfaces,
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,

@@ -41,6 +41,18 @@ struct BlurSettings {
     bool strataBounds = true;
 };
 
+// Which lights cast shadows (--shadows): each light's own choice (Light::castsShadows, from the RIB's
+// Attribute "light" "shadows"), or all of them, or none. The same rule for both engines.
+enum class ShadowOverride { Scene, On, Off };
+
+inline bool lightCastsShadows(const Light& light, ShadowOverride o) {
+    if (light.type == LightType::Ambient) return false;
+    return o == ShadowOverride::Scene ? light.castsShadows : o == ShadowOverride::On;
+}
+inline const char* shadowOverrideName(ShadowOverride o) {
+    return o == ShadowOverride::On ? "on" : o == ShadowOverride::Off ? "off" : "scene";
+}
+
 struct RenderSettings {
     std::string engine = "reyes";  // "reyes" or "rt"
     int threads = 0;               // 0: all hardware threads
@@ -56,6 +68,7 @@ struct RenderSettings {
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves
     // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
+    ShadowOverride shadows = ShadowOverride::Scene;
     RenderView view;
     OutputSpec output;
     BlurSettings blur;

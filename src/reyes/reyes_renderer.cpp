@@ -52,6 +52,14 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
             break;
         }
 
+    for (const ShadingLight& l : frame.lights)
+        if (l.castsShadows) {
+            result.warnings.push_back(
+                "Reyes renders no shadows yet: lights that cast them light everything; "
+                "use --engine rt for shadows");
+            break;
+        }
+
     // Bound: patches to camera space (affine: transform the control points).
     std::vector<BezierPatch> patches(scene.patches.size());
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t i) {
