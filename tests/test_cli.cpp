@@ -148,6 +148,9 @@ TEST(Cli, ShadowsOptionOverridesTheLightsAndRejectsOtherValues) {
     CommandResult r = run("render " + kTeapot + " --res 40x30 --shadows maybe -o " + out);
     EXPECT_EQ(r.exitCode, 2) << r.output;
     EXPECT_NE(r.output.find("--shadows"), std::string::npos) << r.output;
+    r = run("render " + kTeapot + " --res 40x30 --reyes-shadows rays -o " + out);
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("--reyes-shadows"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(out));
     // teapot.rib: its key light casts shadows, the two fill lights do not.
     for (auto [mode, casting] : {std::pair{"scene", 1}, {"on", 3}, {"off", 0}}) {

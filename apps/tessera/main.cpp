@@ -59,6 +59,7 @@ struct RenderArgs {
     std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
     std::string sampler = "sobol";
     std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
+    std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
@@ -238,6 +239,8 @@ int runRender(const RenderArgs& a) {
     if (a.engine != "reyes" && a.engine != "rt") fail("error: --engine must be reyes or rt");
     if (a.shadows != "on" && a.shadows != "off" && a.shadows != "scene")
         fail(fmt::format("error: --shadows must be on, off or scene, got '{}'", a.shadows));
+    if (a.reyesShadows != "map" && a.reyesShadows != "raytrace")
+        fail(fmt::format("error: --reyes-shadows must be map or raytrace, got '{}'", a.reyesShadows));
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
         char x = 0, extra = 0;
@@ -323,6 +326,7 @@ int runRender(const RenderArgs& a) {
     settings.shadows = a.shadows == "on"    ? ShadowOverride::On
                        : a.shadows == "off" ? ShadowOverride::Off
                                             : ShadowOverride::Scene;
+    settings.reyesShadows = a.reyesShadows == "raytrace" ? ReyesShadows::Raytrace : ReyesShadows::Map;
     // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
     settings.blur.enabled = !a.noBlur;
     const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
@@ -383,6 +387,7 @@ int runRender(const RenderArgs& a) {
         int casting = 0;
         for (const Light& l : scene.lights) casting += lightCastsShadows(l, settings.shadows);
         sh["mode"] = shadowOverrideName(settings.shadows);
+        if (a.engine == "reyes") sh["reyes_shadows"] = reyesShadowsName(settings.reyesShadows);
         sh["casting_lights"] = casting;
     }
     {  // what the blur was asked for (the engines may add their own counters under "blur")
@@ -604,6 +609,11 @@ int main(int argc, char** argv) {
                      "Which lights cast shadows: on (all), off (none) or scene (each light's Attribute "
                      "\"light\" \"shadows\"; RIB default off, the default lights of other inputs on)")
         ->check(CLI::IsMember({"on", "off", "scene"}));
+    render
+        ->add_option("--reyes-shadows", ra.reyesShadows,
+                     "Reyes: shadows from shadow maps rendered by the Reyes pipeline (map) or from the ray "
+                     "tracer's shadow rays (raytrace, to compare with --engine rt)")
+        ->check(CLI::IsMember({"map", "raytrace"}));
     render->add_flag("--cull-backfaces", ra.cullBackfaces,
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,

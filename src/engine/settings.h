@@ -53,6 +53,13 @@ inline const char* shadowOverrideName(ShadowOverride o) {
     return o == ShadowOverride::On ? "on" : o == ShadowOverride::Off ? "off" : "scene";
 }
 
+// How Reyes answers the visibility queries of lights that cast shadows (--reyes-shadows): its own shadow
+// maps, or shadow rays from the ray tracer's trace service (to check a Reyes image against the ray tracer's).
+enum class ReyesShadows { Map, Raytrace };
+inline const char* reyesShadowsName(ReyesShadows m) {
+    return m == ReyesShadows::Raytrace ? "raytrace" : "map";
+}
+
 struct RenderSettings {
     std::string engine = "reyes";  // "reyes" or "rt"
     int threads = 0;               // 0: all hardware threads
@@ -69,6 +76,7 @@ struct RenderSettings {
     // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
     ShadowOverride shadows = ShadowOverride::Scene;
+    ReyesShadows reyesShadows = ReyesShadows::Map;
     RenderView view;
     OutputSpec output;
     BlurSettings blur;
