@@ -43,7 +43,9 @@ def write(name, what, w, h, fov, eye, target, up, near, far, body):
         f.write("WorldEnd\n")
 
 LIGHTS_Y_UP = """LightSource "ambientlight" 1 "intensity" [ 0.06 ]
+Attribute "light" "shadows" [ "on" ]  # the key light casts shadows
 LightSource "distantlight" 2 "intensity" [ 0.95 ] "from" [ 8 14 12 ] "to" [ 0 0 0 ]
+Attribute "light" "shadows" [ "off" ]  # fill lights do not
 LightSource "distantlight" 3 "intensity" [ 0.3 ] "lightcolor" [ 0.8 0.88 1 ] "from" [ -14 2 6 ] "to" [ 0 0 0 ]
 """
 
@@ -63,7 +65,9 @@ def bigguy_grid(name, cols, rows):
 
 def killeroo2():
     body = """LightSource "ambientlight" 1 "intensity" [ 0.04 ]
+Attribute "light" "shadows" [ "on" ]  # the key light casts shadows
 LightSource "distantlight" 2 "intensity" [ 1.1 ] "from" [ -10 -5 8 ] "to" [ 0 0 0 ]
+Attribute "light" "shadows" [ "off" ]  # fill lights do not
 LightSource "distantlight" 3 "intensity" [ 0.2 ] "lightcolor" [ 0.85 0.9 1 ] "from" [ -8 12 -2 ] "to" [ 0 0 0 ]
 Surface "matte" "Ka" [ 1 ] "Kd" [ 1 ]
 AttributeBegin
@@ -95,6 +99,7 @@ def bigguy_box():
         ("right", [0.2, 0.6, 0.25], [[s, floor_y, -s], [s, floor_y + 2 * h, -s], [s, floor_y, s], [s, floor_y + 2 * h, s]]),
     ]
     body = """LightSource "ambientlight" 1 "intensity" [ 0.08 ]
+Attribute "light" "shadows" [ "on" ]  # the key light casts shadows
 LightSource "pointlight" 2 "intensity" [ 40 ] "from" [ 0 6 3 ]
 Surface "matte" "Ka" [ 1 ] "Kd" [ 0.9 ]
 """

@@ -141,6 +141,31 @@ TEST(Cli, BadInputExitsWithTwoAndAClearMessage) {
     fs::remove_all(dir);
 }
 
+TEST(Cli, ShadowsOptionOverridesTheLightsAndRejectsOtherValues) {
+    fs::path dir = tempDir() / "shadows";
+    fs::create_directories(dir);
+    const std::string out = (dir / "t.png").string(), stats = (dir / "t.json").string();
+    CommandResult r = run("render " + kTeapot + " --res 40x30 --shadows maybe -o " + out);
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("--shadows"), std::string::npos) << r.output;
+    r = run("render " + kTeapot + " --res 40x30 --reyes-shadows rays -o " + out);
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("--reyes-shadows"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(out));
+    // teapot.rib: its key light casts shadows, the two fill lights do not.
+    for (auto [mode, casting] : {std::pair{"scene", 1}, {"on", 3}, {"off", 0}}) {
+        r = run("render " + kTeapot + " --engine rt --res 40x30 --quiet --shadows " + mode + " -o " + out +
+                " --stats " + stats);
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        std::ifstream f(stats);
+        const nlohmann::json j = nlohmann::json::parse(f);
+        EXPECT_EQ(j["shadows"]["mode"], mode);
+        EXPECT_EQ(j["shadows"]["casting_lights"], casting) << mode;
+        EXPECT_EQ(j["rays"]["shadow"].get<uint64_t>() > 0, casting > 0) << mode;
+    }
+    fs::remove_all(dir);
+}
+
 TEST(Cli, FailedRenderKeepsThePreviousImage) {
     fs::path dir = tempDir() / "keep";
     fs::create_directories(dir);

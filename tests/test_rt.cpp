@@ -518,6 +518,7 @@ TEST(RtShadow, SquareShadowMatchesTheAnalyticProjection) {
     Scene s = cameraSpaceScene(200, 200, 40.f);
     s.lights.clear();
     s.lights.push_back({LightType::Point, {36, 36, 36}, {2, 0, 4}, {0, 0, 0}});
+    s.lights.back().castsShadows = true;
     addPatch(s, rectPatch({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}));
     addPatch(s, rectPatch({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}));
     RenderResult r = renderEngine(s, "rt");
@@ -717,6 +718,7 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
         RenderSettings rs;
         rs.engine = "rt";
         rs.threads = 2;
+        rs.shadows = ShadowOverride::On;  // every light's shadow rays, binned or traversed
         RenderResult binned = render(s, rs);
         rs.rayBinning = false;
         RenderResult traversed = render(s, rs);

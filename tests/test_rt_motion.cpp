@@ -177,6 +177,7 @@ TEST(RtMotion, ShadowOfAMovingOccluderIsTheOccludedShutterFraction) {
     s.camera.shutterOpen = 0.f, s.camera.shutterClose = 1.f;
     s.lights.clear();
     s.lights.push_back({LightType::Point, {36, 36, 36}, {0, 3, 4}, {0, 0, 0}});
+    s.lights.back().castsShadows = true;
     addPatch(s, rect({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}));
     const RenderResult bare = renderFrame(s);
     addPatch(s, rect({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}));

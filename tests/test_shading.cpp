@@ -101,26 +101,31 @@ TEST(Shading, SpotlightConeAndFalloff) {
     EXPECT_FALSE(at(0.55f, 1.f).valid);
 }
 
-TEST(Shading, OnlyFrontFacingDirectLightsAskForVisibility) {
-    const std::vector<ShadingLight> lights = {
-        prepareLight(defaultLight(LightType::Ambient), Mat4{}), distantFrom({0, 0, -1}, {1, 1, 1}),
-        distantFrom({0, 0, 1}, {1, 1, 1})};
+TEST(Shading, OnlyFrontFacingShadowCastingLightsAskForVisibility) {
+    Light ambient = defaultLight(LightType::Ambient);
+    ambient.castsShadows = true;  // ambient light is never occluded, whatever it says
+    std::vector<ShadingLight> lights = {prepareLight(ambient, Mat4{}), distantFrom({0, 0, -1}, {1, 1, 1}),
+                                        distantFrom({0, 0, 1}, {1, 1, 1}),
+                                        distantFrom({0, 0, -1}, {1, 1, 1})};
+    lights[1].castsShadows = lights[2].castsShadows = true;  // lights[3] casts none: it is never asked
+    EXPECT_FALSE(lights[0].castsShadows);
     const Material mats[2] = {defaultMaterial(MaterialType::Matte), defaultMaterial(MaterialType::Constant)};
     const Vec3 P[2] = {{0, 0, 5}, {0, 0, 5}}, N[2] = {{0, 0, -1}, {0, 0, -1}}, I[2] = {{0, 0, 1}, {0, 0, 1}};
     const uint32_t mi[2] = {0, 1};
     SurfacePoints pts{2, P, N, I, mi};
     LightSamples ls;
     sampleLights(lights, mats, pts, ls);
-    ASSERT_EQ(ls.lights, 3u);
+    ASSERT_EQ(ls.lights, 4u);
     EXPECT_EQ(ls.needsVisibility[ls.index(0, 0)], 0);  // ambient
     EXPECT_EQ(ls.needsVisibility[ls.index(0, 1)], 1);  // in front
     EXPECT_EQ(ls.needsVisibility[ls.index(0, 2)], 0);  // behind the surface
-    for (size_t l = 0; l < 3; ++l) EXPECT_EQ(ls.needsVisibility[ls.index(1, l)], 0);  // constant: unlit
-    // Occluding the one queried light leaves only the ambient term.
+    EXPECT_EQ(ls.needsVisibility[ls.index(0, 3)], 0);  // in front, casts no shadows
+    for (size_t l = 0; l < 4; ++l) EXPECT_EQ(ls.needsVisibility[ls.index(1, l)], 0);  // constant: unlit
+    // Occluding the one queried light leaves the ambient term and the light without shadows.
     ls.visibility[ls.index(0, 1)] = 0.f;
     Color Ci[2];
     shadeSurfaces(mats, pts, ls, Ci);
-    EXPECT_NEAR(Ci[0].x, 1.f, 1e-6f);  // Ka * ambient (intensity 1) * Cs (1)
+    EXPECT_NEAR(Ci[0].x, 2.f, 1e-6f);  // Ka * ambient (1) * Cs (1) + Kd * 1 * N.L (1)
 }
 
 TEST(Shading, GlassSplitsTheWeightByFresnel) {

@@ -58,6 +58,8 @@ double peakRssMb() {
 struct RenderArgs {
     std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
     std::string sampler = "sobol";
+    std::string shadows = "scene";     // which lights cast shadows: on, off, scene (each light's attribute)
+    std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
     double shadingRate = 0;
     unsigned seed = 0;
@@ -310,6 +312,10 @@ int runRender(const RenderArgs& a) {
             fail("error: --aov occlusion is made by --integrator ao (with --engine rt)");
     if (a.integrator != "direct" && a.engine != "rt")
         fail(fmt::format("error: --integrator {} is ray traced: use it with --engine rt", a.integrator));
+    if (a.shadows != "on" && a.shadows != "off" && a.shadows != "scene")
+        fail(fmt::format("error: --shadows must be on, off or scene, got '{}'", a.shadows));
+    if (a.reyesShadows != "map" && a.reyesShadows != "raytrace")
+        fail(fmt::format("error: --reyes-shadows must be map or raytrace, got '{}'", a.reyesShadows));
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
         char x = 0, extra = 0;
@@ -400,6 +406,10 @@ int runRender(const RenderArgs& a) {
     settings.ao.paperWeighting = a.aoWeighting == "paper";
     settings.output.channels = aovs->channels;
     settings.output.aovs = aovs->planes;
+    settings.shadows = a.shadows == "on"    ? ShadowOverride::On
+                       : a.shadows == "off" ? ShadowOverride::Off
+                                            : ShadowOverride::Scene;
+    settings.reyesShadows = a.reyesShadows == "raytrace" ? ReyesShadows::Raytrace : ReyesShadows::Map;
     // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
     settings.blur.enabled = !a.noBlur;
     const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
@@ -454,6 +464,15 @@ int runRender(const RenderArgs& a) {
     s["output"] = output;
     s["render_ms"] = renderMs;
     s["peak_rss_mb"] = peakRssMb();
+    {  // which lights cast shadows (the engines may add their own counters under "shadows")
+        nlohmann::json& sh = s["shadows"];
+        if (!sh.is_object()) sh = nlohmann::json::object();
+        int casting = 0;
+        for (const Light& l : scene.lights) casting += lightCastsShadows(l, settings.shadows);
+        sh["mode"] = shadowOverrideName(settings.shadows);
+        if (a.engine == "reyes") sh["reyes_shadows"] = reyesShadowsName(settings.reyesShadows);
+        sh["casting_lights"] = casting;
+    }
     {  // what the blur was asked for (the engines may add their own counters under "blur")
         nlohmann::json& b = s["blur"];
         if (!b.is_object()) b = nlohmann::json::object();
@@ -692,6 +711,16 @@ int main(int argc, char** argv) {
                        std::string("Further channels of an .exr output, comma-separated: ") + kAovNames +
                            " (depth and id unfiltered, the rest filtered like colour)");
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
+    render
+        ->add_option("--shadows", ra.shadows,
+                     "Which lights cast shadows: on (all), off (none) or scene (each light's Attribute "
+                     "\"light\" \"shadows\"; RIB default off, the default lights of other inputs on)")
+        ->check(CLI::IsMember({"on", "off", "scene"}));
+    render
+        ->add_option("--reyes-shadows", ra.reyesShadows,
+                     "Reyes: shadows from shadow maps rendered by the Reyes pipeline (map) or from the ray "
+                     "tracer's shadow rays (raytrace, to compare with --engine rt)")
+        ->check(CLI::IsMember({"map", "raytrace"}));
     render->add_flag("--cull-backfaces", ra.cullBackfaces,
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,

@@ -12,7 +12,10 @@ FrameSetup::FrameSetup(const Scene& scene, const RenderSettings& settings)
       ny(std::max(1, scene.image.pixelSamplesY)),
       region(renderRegion(camera, settings)),
       projector(camera) {
-    for (const Light& l : scene.lights) lights.push_back(prepareLight(l, camera.cameraFromWorld));
+    for (const Light& l : scene.lights) {
+        lights.push_back(prepareLight(l, camera.cameraFromWorld));
+        lights.back().castsShadows = lightCastsShadows(l, settings.shadows);
+    }
     if (!settings.blur.enabled) projector.lensRadius = 0.f;  // --no-blur: pinhole
     motion = prepareFrameMotion(scene, camera, settings.blur.enabled);
     blur = makeBlurPattern(settings.blur.sampling, motion.blurred(), projector.hasLens() && projector.perspective,

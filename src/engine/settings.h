@@ -59,6 +59,24 @@ struct AmbientOcclusionSettings {
     // cosine-weighted directions and binary visibility (lower variance for the same integral).
     bool paperWeighting = false;
 };
+// Which lights cast shadows (--shadows): each light's own choice (Light::castsShadows, from the RIB's
+// Attribute "light" "shadows"), or all of them, or none. The same rule for both engines.
+enum class ShadowOverride { Scene, On, Off };
+
+inline bool lightCastsShadows(const Light& light, ShadowOverride o) {
+    if (light.type == LightType::Ambient) return false;
+    return o == ShadowOverride::Scene ? light.castsShadows : o == ShadowOverride::On;
+}
+inline const char* shadowOverrideName(ShadowOverride o) {
+    return o == ShadowOverride::On ? "on" : o == ShadowOverride::Off ? "off" : "scene";
+}
+
+// How Reyes answers the visibility queries of lights that cast shadows (--reyes-shadows): its own shadow
+// maps, or shadow rays from the ray tracer's trace service (to check a Reyes image against the ray tracer's).
+enum class ReyesShadows { Map, Raytrace };
+inline const char* reyesShadowsName(ReyesShadows m) {
+    return m == ReyesShadows::Raytrace ? "raytrace" : "map";
+}
 
 struct RenderSettings {
     std::string engine = "reyes";              // "reyes" or "rt"
@@ -77,6 +95,8 @@ struct RenderSettings {
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves
     // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
+    ShadowOverride shadows = ShadowOverride::Scene;
+    ReyesShadows reyesShadows = ReyesShadows::Map;
     RenderView view;
     OutputSpec output;
     BlurSettings blur;

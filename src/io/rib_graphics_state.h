@@ -74,6 +74,9 @@ struct Attributes {
     std::string identifier;
     // GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis; scene.h PatchAttributes).
     float motionFactor = 0.f, focusFactor = 0.f;
+    // Attribute "light" "shadows" "on"|"off" (BMRT, Aqsis): whether the lights declared from here on cast
+    // shadows; each LightSource takes the value current when it is declared. Default off.
+    bool lightShadows = false;
 };
 
 enum class Block { Frame, World, Attribute, Transform };

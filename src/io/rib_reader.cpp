@@ -398,6 +398,8 @@ class RibReader {
     }
 
     // ---- attributes (RI spec 3.2, sec. 4.2) -----------------------------------------------------
+    // Known: "identifier" "name"; "light" "shadows" "on"|"off" (BMRT, Aqsis: whether lights declared
+    // afterwards cast shadows).
     void attribute(const Request& r, const Arguments& args) {
         args.atLeast(1, "name ...parameterlist...");
         const std::string& name = args.string(0);
@@ -408,6 +410,21 @@ class RibReader {
                     state_.attributes().identifier = paramString(r, p, diag_);
                 else
                     warnIgnoredParam(p, "Attribute \"identifier\"", diag_);
+            }
+            return;
+        }
+        if (name == "light") {
+            for (const Param& p : ps) {
+                if (p.name != "shadows") {
+                    warnIgnoredParam(p, "Attribute \"light\"", diag_);
+                    continue;
+                }
+                const std::string v = paramString(r, p, diag_);
+                if (v != "on" && v != "off")
+                    diag_.fail(p.value->line,
+                               "Attribute \"light\": \"shadows\" must be \"on\" or \"off\", found \"" +
+                                   printable(v) + "\"");
+                state_.attributes().lightShadows = v == "on";
             }
             return;
         }
@@ -517,6 +534,7 @@ class RibReader {
         light.coneAngle = params.coneangle;
         light.coneDeltaAngle = params.conedeltaangle;
         light.beamDistribution = params.beamdistribution;
+        light.castsShadows = state_.attributes().lightShadows && light.type != LightType::Ambient;
         if (!isFinite(light.color) || !isFinite(light.from) || !isFinite(light.to))
             diag_.fail(
                 r.line,

@@ -156,7 +156,12 @@ void writeRib(const Scene& scene, std::ostream& o) {
     }
     o << "WorldBegin\n";
     int handle = 1;
+    bool shadows = false;  // the RIB default: lights cast no shadows
     for (const Light& l : scene.lights) {
+        if (l.type != LightType::Ambient && l.castsShadows != shadows) {
+            shadows = l.castsShadows;
+            o << "Attribute \"light\" \"shadows\" [\"" << (shadows ? "on" : "off") << "\"]\n";
+        }
         switch (l.type) {
             case LightType::Ambient:
                 o << "LightSource \"ambientlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["

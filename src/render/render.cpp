@@ -5,10 +5,36 @@
 
 #include <stdexcept>
 
+#include "engine/clock.h"
 #include "reyes/reyes_renderer.h"
+#include "rt/ray_visibility.h"
 #include "rt/rt_renderer.h"
 
 namespace tessera {
+namespace {
+
+// Reyes with --reyes-shadows raytrace: the ray tracer's accel over the scene in the camera space Reyes
+// shades in (at shutter open, where Reyes shades moving geometry), and its shadow rays as Reyes' answers
+// to the visibility queries of the lights that cast shadows.
+RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSettings& settings) {
+    const auto t0 = EngineClock::now();
+    RtAccel acc;
+    buildRtAccel(scene, viewCamera(scene, settings).cameraFromWorld, settings.subpatchDepth, false, acc);
+    const double buildMs = msSince(t0);
+    // Per-ray traversal: a grid's lists of shadow rays are too short for the shadow binning to pay.
+    const RayTracedVisibility visibility(acc, rt::TraceServiceOptions{false, false});
+    RenderResult result = renderReyes(scene, settings, &visibility);
+    result.stats["shadows"]["accel_build_ms"] = buildMs;
+    return result;
+}
+
+bool anyLightCastsShadows(const Scene& scene, const RenderSettings& settings) {
+    for (const Light& l : scene.lights)
+        if (lightCastsShadows(l, settings.shadows)) return true;
+    return false;
+}
+
+}  // namespace
 
 RenderResult render(const Scene& scene, const RenderSettings& settings) {
     int threads = settings.threads > 0 ? settings.threads : tbb::info::default_concurrency();
@@ -16,7 +42,10 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
     RenderResult result;
     arena.execute([&] {
         if (settings.engine == "reyes") {
-            result = renderReyes(scene, settings);
+            if (settings.reyesShadows == ReyesShadows::Raytrace && anyLightCastsShadows(scene, settings))
+                result = renderReyesWithRayTracedShadows(scene, settings);
+            else
+                result = renderReyes(scene, settings);
         } else if (settings.engine == "rt") {
             result = renderRt(scene, settings);
         } else {

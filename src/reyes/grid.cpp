@@ -35,12 +35,13 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     Ns.resize(count);
     Is.resize(count);
     Ci.resize(count);
-    // Where each vertex came from, to evaluate it again at the other knots of a moving patch.
+    // Where each vertex came from: its (u,v) (for shadow rays' self-intersection guard), and its edge and
+    // lattice point, to evaluate it again at the other knots of a moving patch.
     const bool moves = view.patchMoves(piece.patch) && view.knotCount() > 1;
     thread_local std::vector<Vec2> UVs;
     thread_local std::vector<int> owners, lattice;
+    UVs.resize(count);
     if (moves) {
-        UVs.resize(count);
         owners.resize(count);
         lattice.resize(count);
     }
@@ -80,8 +81,8 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
             if (shade.flipNormal) N = -N;
 
             const int v = j * (nu + 1) + i;
+            UVs[v] = uv;
             if (moves) {
-                UVs[v] = uv;
                 owners[v] = owner ? int(owner - e) : -1;
                 lattice[v] = k;
             }
@@ -153,9 +154,24 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     points.N = Ns.data();
     points.I = Is.data();
     const std::span<const Material> material(shade.material, 1);
-    // Visibility: Reyes has no shadows yet (shadow maps come later), so every query answers "visible":
-    // the fused form of sampleLights + shadeSurfaces.
-    shadeSurfacesUnoccluded(shade.lights, material, points, Ci.data());
+    bool queries = false;
+    if (shade.visibility)
+        for (const ShadingLight& l : shade.lights) queries = queries || l.castsShadows;
+    if (queries) {
+        // The shading module's three steps, the visibility queries answered by shadow maps or rays.
+        thread_local LightSamples samples;
+        sampleLights(shade.lights, material, points, samples);
+        const uint32_t patch = piece.patch;
+        thread_local std::vector<uint32_t> patchOf;
+        patchOf.assign(count, patch);
+        shade.visibility->answer(VisibilityQuery{points, shade.lights, patchOf.data(), UVs.data(), 0.f},
+                                 samples);
+        shadeSurfaces(material, points, samples, Ci.data());
+    } else {
+        // No light casts shadows: every query would answer "visible"; the fused form of sampleLights +
+        // shadeSurfaces.
+        shadeSurfacesUnoccluded(shade.lights, material, points, Ci.data());
+    }
     grid.objectId = shade.objectId;
     if (shade.wantNormals) {
         grid.NX.resize(count);

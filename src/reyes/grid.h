@@ -5,6 +5,7 @@
 #include <span>
 #include <vector>
 
+#include "engine/visibility.h"
 #include "film/film.h"
 #include "reyes/split.h"
 #include "shading/surface.h"
@@ -55,6 +56,9 @@ struct ShadeInputs {
     std::span<const ShadingLight> lights;  // camera space
     uint32_t objectId = 0;
     bool wantNormals = false;  // the film carries a normal channel
+    // Who answers the visibility queries of lights that cast shadows (shadow maps or shadow rays); nullptr:
+    // every query answers "visible".
+    const LightVisibility* visibility = nullptr;
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

@@ -39,7 +39,8 @@ struct ThreadCounters {
 
 }  // namespace
 
-RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
+RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
+                         const LightVisibility* visibility) {
     const FrameSetup frame(scene, settings);
     RenderResult result = frame.startResult(settings);
     const Camera& cam = frame.camera;
@@ -51,6 +52,13 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                 "reflections and refractions need --engine rt");
             break;
         }
+
+    bool shadows = false;
+    for (const ShadingLight& l : frame.lights) shadows = shadows || l.castsShadows;
+    if (shadows && !visibility)
+        result.warnings.push_back(
+            "Reyes has no shadow maps yet: lights that cast shadows light everything; "
+            "use --reyes-shadows raytrace or --engine rt for shadows");
 
     // Bound: patches to camera space (affine: transform the control points).
     std::vector<BezierPatch> patches(scene.patches.size());
@@ -194,7 +202,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                                attr.flipNormal,
                                frame.lights,
                                attr.object,
-                               (settings.output.channels & kChannelNormal) != 0};
+                               (settings.output.channels & kChannelNormal) != 0,
+                               visibility};
                 slot.grid = std::make_unique<Grid>();
                 diceAndShade(view, piece, in, *slot.grid);
                 ++tc.grids;
@@ -251,6 +260,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings) {
                      {"dice_shade_cpu", total.diceMs},
                      {"sample_cpu", total.sampleMs},
                      {"filter_cpu", total.filterMs}};
+    if (shadows && visibility) visibility->writeStats(s["shadows"]);
     s["engine_ms"] = msSince(frame.start);
     return result;
 }

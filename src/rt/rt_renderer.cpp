@@ -13,6 +13,7 @@
 #include "engine/tile_loop.h"
 #include "rt/binning.h"
 #include "rt/ray_list.h"
+#include "rt/shadow_rays.h"
 #include "shading/hemisphere.h"
 #include "shading/surface.h"
 
@@ -71,58 +72,22 @@ SurfacePoints hitBatch(const RtAccel& acc, Workspace& ws) {
     return SurfacePoints{n, ws.hitP.data(), ws.hitN.data(), ws.hitI.data(), ws.hitMaterial.data()};
 }
 
-// The visibility queries of the light samples as shadow rays, light by light (one run per light, for the
-// shadow binning), from the face-forward side of the surface.
+// The visibility queries of the light samples as shadow rays (rt/shadow_rays.h), each from its hit.
 void makeShadowRays(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
-    const RtAccel& acc = fr.acc;
-    const LightSamples& ls = ws.lightSamples;
-    const size_t n = pts.count, nL = ls.lights;
-    ws.shadowIdx.assign(n * nL, kNone);
-    ws.shadow.clear();
-    ws.shadowRuns.clear();
-    ws.shadow.reserve(n * std::max<size_t>(nL, 1));
-    for (size_t l = 0; l < nL; ++l) {
-        const size_t runBegin = ws.shadow.size();
-        for (size_t k = 0; k < n; ++k) {
-            if (!ls.needsVisibility[ls.index(k, l)]) continue;
-            const LightSample& sample = ls.sample[ls.index(k, l)];
-            const RayHit& rh = ws.hits[ws.hitRay[k]];
-            const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
-            const Vec3 o = pts.P[k] + Nf * acc.offset;
-            Vec3 L = sample.L;
-            float tmax = sample.dist;
-            if (isPositional(fr.lights[l].type)) {
-                // Aimed from the offset origin, so that the ray's line passes through the light (the
-                // shadow binning projects from the light).
-                const Vec3 toLight = fr.lights[l].position - o;
-                const float len = length(toLight);
-                if (len > 0.f && std::isfinite(len)) L = toLight / len, tmax = len;
-                if (!(dot(Nf, L) > 0.f)) continue;
-            }
-            if (std::isfinite(tmax)) tmax -= acc.offset;
-            ws.shadowIdx[k * nL + l] = uint32_t(ws.shadow.size());
-            ws.shadow.push(o, L, 0.f, tmax, ws.hitRay[k], Color{}, rh.patch, kShadow, 0, Vec2{rh.h.u, rh.h.v},
-                           Nf, ws.rays.time[ws.hitRay[k]]);  // the parent's time
-        }
-        if (ws.shadow.size() > runBegin)
-            ws.shadowRuns.push_back(
-                {runBegin, ws.shadow.size(), isPositional(fr.lights[l].type), fr.lights[l].position});
-    }
+    rt::makeShadowRays(
+        fr.acc, fr.lights, pts, ws.lightSamples,
+        [&](size_t k) {
+            const uint32_t r = ws.hitRay[k];
+            const RayHit& rh = ws.hits[r];
+            return ShadowOrigin{rh.patch, Vec2{rh.h.u, rh.h.v}, ws.rays.time[r], r};  // the parent's time
+        },
+        ws.shadow, ws.shadowRuns, ws.shadowIdx);
 }
 
 // The shadow rays' answers as the light samples' visibility, and the count of lights in shadow per hit.
 void applyVisibility(const SurfacePoints& pts, Workspace& ws) {
-    LightSamples& ls = ws.lightSamples;
-    const size_t nL = ls.lights;
-    ws.shadowedLights.assign(pts.count, 0);
-    for (size_t k = 0; k < pts.count; ++k)
-        for (size_t l = 0; l < nL; ++l) {
-            const uint32_t s = ws.shadowIdx[k * nL + l];
-            if (s != kNone && ws.shadowBlocked[s]) {
-                ls.visibility[k * nL + l] = 0.f;
-                ++ws.shadowedLights[k];
-            }
-        }
+    ws.shadowedLights.resize(pts.count);
+    applyShadowRays(ws.shadowIdx, ws.shadowBlocked, ws.lightSamples, pts.count, ws.shadowedLights.data());
 }
 
 // ---- end of shading ----------------------------------------------------------------------------------

@@ -121,6 +121,8 @@ void frameSceneDefault(Scene& scene, int width, int height, UpAxis upAxis) {
     scene.lights.push_back(
         {LightType::Distant, {0.9f, 0.88f, 0.85f}, eye + xc * dist * -0.6f + yc * dist * 0.8f, c});
     scene.lights.push_back({LightType::Distant, {0.25f, 0.27f, 0.3f}, eye + xc * dist, c});
+    // Both distant lights cast shadows: what the ray tracer always did for these inputs (docs/inputs.md).
+    for (Light& l : scene.lights) l.castsShadows = l.type != LightType::Ambient;
 }
 
 }  // namespace tessera

@@ -34,6 +34,10 @@ struct Light {
     Vec3 to{0, 0, 1};      // world space (distant and spot lights shine from -> to)
     // RI spotlight (radians; RI defaults radians(30), radians(5), 2).
     float coneAngle = 0.5235988f, coneDeltaAngle = 0.0872665f, beamDistribution = 2.f;
+    // Whether the light casts shadows (RIB: Attribute "light" "shadows" "on"|"off" when the light is
+    // declared, default off as in BMRT and Aqsis; the default lights of inputs without a RIB cast them).
+    // The renderer's --shadows on|off overrides it (engine/settings.h). Ambient lights never do.
+    bool castsShadows = false;
 };
 
 enum class MaterialType { Matte, Plastic, Metal, ShinyMetal, PaintedPlastic, Constant, Mirror, Glass };
@@ -115,7 +119,7 @@ UpAxis chooseUpAxis(const std::vector<BezierPatch>& patches);
 // and 25 degrees above, with `up` vertical, far enough that the whole bounding sphere of the control points
 // (centred on their box) lies inside the frame for any image aspect (the 30-degree field of view spans
 // the shorter axis); plus an ambient, a key and a fill light so that any patch file renders something
-// sensible. "Front" is -y for z up, +z for y up and -z for x up.
+// sensible (the key and fill lights cast shadows). "Front" is -y for z up, +z for y up and -z for x up.
 void frameSceneDefault(Scene& scene, int width, int height, UpAxis up = UpAxis::Z);
 
 // The sphere frameSceneDefault fits in view: centre of the control points' box, radius to the farthest

@@ -24,6 +24,9 @@ struct ShadingLight {
     Vec3 direction;  // distant and spot lights: unit vector the light travels along (from -> to)
     // Spotlight: cos(coneangle) and cos(coneangle - conedeltaangle) for the smoothstep, beam exponent.
     float cosOuter = -1.f, cosInner = -1.f, beamDistribution = 0.f;
+    // Whether its light samples ask the engine for visibility (shadows); engines set it from the light and
+    // RenderSettings::shadows (FrameSetup).
+    bool castsShadows = false;
 };
 
 inline ShadingLight prepareLight(const Light& l, const Mat4& toSpace) {
@@ -32,6 +35,7 @@ inline ShadingLight prepareLight(const Light& l, const Mat4& toSpace) {
     s.color = l.color;
     s.position = toSpace.point(l.from);
     s.direction = normalize(toSpace.vector(l.to - l.from));
+    s.castsShadows = l.castsShadows && l.type != LightType::Ambient;
     if (l.type == LightType::Spot) {
         s.cosOuter = std::cos(l.coneAngle);
         s.cosInner = std::cos(std::max(0.f, l.coneAngle - l.coneDeltaAngle));

@@ -46,8 +46,8 @@ TESSERA_HD bool surfaceHasTracedLobes(MaterialType t) {
     return t == MaterialType::Mirror || t == MaterialType::Glass;
 }
 
-// Step 1: light samples for every point of the batch. Lights facing the point's back side (Nf.L <= 0) and
-// ambient lights need no visibility query.
+// Step 1: light samples for every point of the batch. Only lights that cast shadows (ShadingLight::
+// castsShadows) ask for visibility, and not where they face the point's back side (Nf.L <= 0).
 void sampleLights(std::span<const ShadingLight> lights, std::span<const Material> materials,
                   const SurfacePoints& points, LightSamples& out);
 
