@@ -77,6 +77,9 @@ struct Attributes {
     // Attribute "light" "shadows" "on"|"off" (BMRT, Aqsis): whether the lights declared from here on cast
     // shadows; each LightSource takes the value current when it is declared. Default off.
     bool lightShadows = false;
+    // Attribute "shadow" "resolution" / "shadingrate" / "bias" / "filterwidth": the shadow map of the
+    // lights declared from here on (scene.h ShadowMapParams; docs/shading.md).
+    ShadowMapParams shadowMap;
 };
 
 enum class Block { Frame, World, Attribute, Transform };

@@ -399,7 +399,8 @@ class RibReader {
 
     // ---- attributes (RI spec 3.2, sec. 4.2) -----------------------------------------------------
     // Known: "identifier" "name"; "light" "shadows" "on"|"off" (BMRT, Aqsis: whether lights declared
-    // afterwards cast shadows).
+    // afterwards cast shadows); "shadow" "resolution" "shadingrate" "bias" "filterwidth" (their shadow
+    // maps' parameters, docs/shading.md).
     void attribute(const Request& r, const Arguments& args) {
         args.atLeast(1, "name ...parameterlist...");
         const std::string& name = args.string(0);
@@ -425,6 +426,41 @@ class RibReader {
                                "Attribute \"light\": \"shadows\" must be \"on\" or \"off\", found \"" +
                                    printable(v) + "\"");
                 state_.attributes().lightShadows = v == "on";
+            }
+            return;
+        }
+        if (name == "shadow") {
+            // The shadow map of the lights declared from here on: each parameter's range (docs/shading.md).
+            struct Field {
+                const char* name;
+                float lo, hi;
+                bool integer;
+            };
+            static const Field kFields[] = {{"resolution", 8, 16384, true},
+                                            {"shadingrate", 0.01f, 1e4f, false},
+                                            {"bias", 0, 1e4f, false},
+                                            {"filterwidth", 1, 64, false}};
+            ShadowMapParams& sm = state_.attributes().shadowMap;
+            for (const Param& p : ps) {
+                const Field* f = nullptr;
+                for (const Field& k : kFields)
+                    if (p.name == k.name) f = &k;
+                if (!f) {
+                    warnIgnoredParam(p, "Attribute \"shadow\"", diag_);
+                    continue;
+                }
+                const float v = paramFloat(r, p, diag_);
+                const bool automatic = p.name == "resolution" && v == 0;  // 0: the renderer's default
+                if (!automatic && (!(v >= f->lo && v <= f->hi) || (f->integer && v != std::floor(v))))
+                    diag_.fail(p.value->line, "Attribute \"shadow\": \"" + p.name + "\" must be " +
+                                                  (f->integer ? "an integer" : "a number") + " from " +
+                                                  fmtNum(f->lo) + " to " + fmtNum(f->hi) +
+                                                  (f->integer ? " (or 0: automatic)" : "") + ", found " +
+                                                  fmtNum(v));
+                if (p.name == "resolution") sm.resolution = int(v);
+                if (p.name == "shadingrate") sm.shadingRate = v;
+                if (p.name == "bias") sm.bias = v;
+                if (p.name == "filterwidth") sm.filterWidth = v;
             }
             return;
         }
@@ -535,6 +571,7 @@ class RibReader {
         light.coneDeltaAngle = params.conedeltaangle;
         light.beamDistribution = params.beamdistribution;
         light.castsShadows = state_.attributes().lightShadows && light.type != LightType::Ambient;
+        light.shadowMap = state_.attributes().shadowMap;
         if (!isFinite(light.color) || !isFinite(light.from) || !isFinite(light.to))
             diag_.fail(
                 r.line,

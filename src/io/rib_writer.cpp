@@ -156,11 +156,18 @@ void writeRib(const Scene& scene, std::ostream& o) {
     }
     o << "WorldBegin\n";
     int handle = 1;
-    bool shadows = false;  // the RIB default: lights cast no shadows
+    bool shadows = false;       // the RIB default: lights cast no shadows
+    ShadowMapParams shadowMap;  // and the default shadow map
     for (const Light& l : scene.lights) {
         if (l.type != LightType::Ambient && l.castsShadows != shadows) {
             shadows = l.castsShadows;
             o << "Attribute \"light\" \"shadows\" [\"" << (shadows ? "on" : "off") << "\"]\n";
+        }
+        if (l.type != LightType::Ambient && !(l.shadowMap == shadowMap)) {
+            shadowMap = l.shadowMap;
+            o << "Attribute \"shadow\" \"resolution\" [" << shadowMap.resolution << "] \"shadingrate\" ["
+              << num(shadowMap.shadingRate) << "] \"bias\" [" << num(shadowMap.bias) << "] \"filterwidth\" ["
+              << num(shadowMap.filterWidth) << "]\n";
         }
         switch (l.type) {
             case LightType::Ambient:

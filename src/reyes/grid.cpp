@@ -72,6 +72,15 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
                 uv.x = (1 - t) * ((1 - s) * a.x + s * b.x) + t * ((1 - s) * d.x + s * c.x);
                 uv.y = (1 - t) * ((1 - s) * a.y + s * b.y) + t * ((1 - s) * d.y + s * c.y);
             }
+            const int v = j * (nu + 1) + i;
+            if (shade.depthOnly) {  // a shadow map's pass: positions only
+                const Vec3 P = owner ? latticePosition(patch, *owner, k) : evalPatch(patch, uv.x, uv.y);
+                const Vec3 r = view.projector.toRaster(P);
+                grid.X[v] = rasterToFixed(r.x);
+                grid.Y[v] = rasterToFixed(r.y);
+                grid.Z[v] = P.z;
+                continue;
+            }
             SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
             Vec3 P = owner ? latticePosition(patch, *owner, k) : sp.p;
             Vec3 N = cross(sp.dpdu, sp.dpdv);
@@ -80,7 +89,6 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
             N = normalize(N);
             if (shade.flipNormal) N = -N;
 
-            const int v = j * (nu + 1) + i;
             UVs[v] = uv;
             if (moves) {
                 owners[v] = owner ? int(owner - e) : -1;
@@ -95,6 +103,15 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
             grid.Z[v] = P.z;
             grid.front[v] = dot(N, P) < 0.f;
         }
+    }
+    if (shade.depthOnly) {
+        // Depth maps see both sides (as shadow rays do); no colour.
+        grid.twoSided = true;
+        std::fill(grid.R.begin(), grid.R.end(), 0.f);
+        std::fill(grid.G.begin(), grid.G.end(), 0.f);
+        std::fill(grid.B.begin(), grid.B.end(), 0.f);
+        grid.objectId = shade.objectId;
+        return;
     }
     grid.blurred = moves || view.lens;
     grid.knots = 1;

@@ -59,6 +59,9 @@ struct ShadeInputs {
     // Who answers the visibility queries of lights that cast shadows (shadow maps or shadow rays); nullptr:
     // every query answers "visible".
     const LightVisibility* visibility = nullptr;
+    // A shadow map's depth pass (paper 001 sec. 3.5: "only split, dice and sample"): positions and depth,
+    // both sides, no normals or shading. Static patches only (the pass renders shutter open).
+    bool depthOnly = false;
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

@@ -18,10 +18,11 @@ bool lexLess(Vec3 p, Vec3 q) {
     return p.z < q.z;
 }
 
-// Raster position used only to measure lengths; points behind the near plane are pulled onto it.
-Vec3 rasterForLength(const Projector& proj, Vec3 p) {
-    p.z = std::max(p.z, proj.nearClip);
-    return proj.toRaster(p);
+// Raster position used only to measure lengths; points nearer than the view's length plane (the near
+// plane unless the view sets one further out) are pulled onto it.
+Vec3 rasterForLength(const ReyesView& view, Vec3 p) {
+    p.z = std::max(p.z, std::max(view.projector.nearClip, view.lengthNearZ));
+    return view.projector.toRaster(p);
 }
 
 int32_t rateFromLength(float pixels, float side) {
@@ -34,9 +35,9 @@ int32_t rateFromLength(float pixels, float side) {
 template <class PointAt>
 int32_t measureRate(const ReyesView& view, float side, PointAt&& pointAt) {
     float len = 0;
-    Vec3 prev = rasterForLength(view.projector, pointAt(0.f));
+    Vec3 prev = rasterForLength(view, pointAt(0.f));
     for (int i = 1; i <= kRateSamples; ++i) {
-        Vec3 cur = rasterForLength(view.projector, pointAt(float(i) / kRateSamples));
+        Vec3 cur = rasterForLength(view, pointAt(float(i) / kRateSamples));
         float dx = cur.x - prev.x, dy = cur.y - prev.y;
         len += std::sqrt(dx * dx + dy * dy);
         prev = cur;

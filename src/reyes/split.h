@@ -68,6 +68,11 @@ struct ReyesView {
     float micropolygonSide = 1.f;          // sqrt(shading rate), pixels
     float cullX0, cullY0, cullX1, cullY1;  // raster window that can still reach a pixel (image + filter)
     int maxGridEdge = 16;
+    // Perspective views: edge lengths are measured as if nothing were nearer than this depth (0: the near
+    // plane). A shadow map's view from a point light sets it: walls that pass beside the light would
+    // otherwise measure near-infinite edges (DiagSplit fixes an edge's rate from the whole edge) and be
+    // diced at the rate cap where they are visible too.
+    float lengthNearZ = 0.f;
     explicit ReyesView(const Camera& cam) : projector(cam) {}
 };
 

@@ -27,6 +27,19 @@ struct ImageOptions {
 
 enum class LightType { Ambient, Distant, Point, Spot };
 
+// The shadow map Reyes renders for a light that casts shadows (--reyes-shadows map, docs/shading.md).
+// RIB: Attribute "shadow" "resolution" / "shadingrate" / "bias" / "filterwidth", taken by each
+// LightSource when it is declared.
+struct ShadowMapParams {
+    // Texels per side of the map (of each face of a cube map); 0: 2048 for one-face maps (distant, spot)
+    // and 1024 per cube face (point lights: 6.3 M texels against 4.2 M; docs/shading.md measures both).
+    int resolution = 0;
+    float shadingRate = 1.f;  // texel area of a micropolygon of the depth pass
+    float bias = 1.f;         // depth bias, in texels (world size of a texel at the receiver)
+    float filterWidth = 2.f;  // percentage-closer filter box, in texels
+    bool operator==(const ShadowMapParams&) const = default;
+};
+
 struct Light {
     LightType type = LightType::Distant;
     Color color{1, 1, 1};  // intensity * lightcolor
@@ -38,6 +51,7 @@ struct Light {
     // declared, default off as in BMRT and Aqsis; the default lights of inputs without a RIB cast them).
     // The renderer's --shadows on|off overrides it (engine/settings.h). Ambient lights never do.
     bool castsShadows = false;
+    ShadowMapParams shadowMap{};
 };
 
 enum class MaterialType { Matte, Plastic, Metal, ShinyMetal, PaintedPlastic, Constant, Mirror, Glass };

@@ -1,0 +1,82 @@
+#include "reyes/pipeline.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera {
+
+std::vector<BezierPatch> patchesInCameraSpace(const Scene& scene, const Mat4& cameraFromWorld) {
+    std::vector<BezierPatch> patches(scene.patches.size());
+    tbb::parallel_for(size_t(0), patches.size(), [&](size_t i) {
+        for (int k = 0; k < 16; ++k) patches[i].cp[k] = cameraFromWorld.point(scene.patches[i].cp[k]);
+    });
+    return patches;
+}
+
+std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
+                                const std::atomic<bool>* cancel, SplitStats& stats) {
+    const size_t n = scene.patches.size();
+    std::vector<std::vector<Piece>> perPatch(n);
+    std::atomic<uint64_t> splits{0}, pieceCulls{0}, patchesCulled{0};
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        // Ctrl-C during a long split: skip the remaining patches (the bucket loop then reports it).
+        if (cancel && cancel->load(std::memory_order_relaxed)) return;
+        SplitCounters c;
+        const float rate = shadingRateOverride > 0.f ? shadingRateOverride : scene.attributes[i].shadingRate;
+        const float side = std::sqrt(std::max(rate, 1e-4f));
+        splitSurface(view, scene.attributes[i], uint32_t(i), side, perPatch[i], c);
+        splits += c.splits;
+        pieceCulls += c.culled;
+        if (c.patchCulled) ++patchesCulled;
+    });
+    std::vector<Piece> pieces;
+    for (auto& v : perPatch) pieces.insert(pieces.end(), v.begin(), v.end());
+    stats.splits = splits.load();
+    stats.pieceCulls = pieceCulls.load();
+    stats.patchesCulled = patchesCulled.load();
+    return pieces;
+}
+
+BucketedPieces binPieces(const std::vector<Piece>& pieces, const BucketLayout& layout, int marginX,
+                         int marginY, int samplesPerPixel) {
+    const int nb = layout.count();
+    auto bucketRange = [&](const Piece& p, int& bx0, int& by0, int& bx1, int& by1) {
+        layout.overlapped(p.x0 - marginX, p.y0 - marginY, p.x1 + marginX, p.y1 + marginY, bx0, by0, bx1, by1);
+    };
+    BucketedPieces out;
+    out.start.assign(nb + 1, 0);
+    for (const Piece& p : pieces) {
+        int bx0, by0, bx1, by1;
+        bucketRange(p, bx0, by0, bx1, by1);
+        for (int by = by0; by <= by1; ++by)
+            for (int bx = bx0; bx <= bx1; ++bx) ++out.start[by * layout.countX + bx + 1];
+    }
+    for (int b = 0; b < nb; ++b) out.start[b + 1] += out.start[b];
+    out.pieces.resize(out.start[nb]);
+    out.spans.resize(pieces.size());
+    out.work.assign(nb, 0);
+    std::vector<uint32_t> fill(out.start.begin(), out.start.end() - 1);
+    for (uint32_t pi = 0; pi < pieces.size(); ++pi) {
+        int bx0, by0, bx1, by1;
+        bucketRange(pieces[pi], bx0, by0, bx1, by1);
+        const int spanned = (bx1 - bx0 + 1) * (by1 - by0 + 1);
+        const uint64_t share =
+            uint64_t(pieceGridU(pieces[pi])) * uint64_t(pieceGridV(pieces[pi])) / uint64_t(spanned) + 1;
+        for (int by = by0; by <= by1; ++by)
+            for (int bx = bx0; bx <= bx1; ++bx) {
+                const int b = by * layout.countX + bx;
+                out.pieces[fill[b]++] = pi;
+                out.work[b] += share;
+            }
+        out.spans[pi] = spanned;
+    }
+    for (int b = 0; b < nb; ++b) {
+        const Rect t = layout.target(b);
+        out.work[b] += uint64_t(t.width()) * t.height() * samplesPerPixel / 16 + 1;
+    }
+    return out;
+}
+
+}  // namespace tessera

@@ -1,0 +1,133 @@
+// Shadow-map lookups: the visibility of a light at a shading point from depth maps rendered from the light
+// (Reyes renders them with its own pipeline, paper 001 sec. 3.5; reyes/shadow_maps.h). Plain data and
+// inline kernels, so that any engine (and a device backend) can read a map.
+//
+// A lookup is percentage-closer filtered (Reeves, Salesin and Cook, "Rendering antialiased shadows with
+// depth maps", SIGGRAPH 1987): the depth test is made at every texel under a box of `filterWidth` texels
+// centred on the point's projection, and the results are averaged with the texels' overlap with the box as
+// weights, so the shadow's edge is a ramp about filterWidth texels wide. Each texel's test compares the
+// texel's depth with the depth of the receiver's tangent plane seen through that texel's centre
+// (receiver-plane depth bias), not with the point's own depth: a flat or convex lit surface then never
+// shadows itself however wide the filter, and only a small constant bias (`bias` texels, for the error of
+// the map's micropolygons and rounding) is needed, so contact shadows do not detach.
+#pragma once
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "core/hostdevice.h"
+#include "core/vec.h"
+
+namespace tessera {
+
+// A rigid (or any affine) map p' = M p + t in single precision.
+struct AffineFrame {
+    float m[3][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}};
+    TESSERA_HD Vec3 point(Vec3 p) const {
+        return {m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3],
+                m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3],
+                m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3]};
+    }
+    TESSERA_HD Vec3 vector(Vec3 v) const {
+        return {m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
+                m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z};
+    }
+};
+
+// One depth image: texel (x, y) holds the nearest light-space depth z seen through its centre (x + 0.5,
+// y + 0.5), infinity where nothing was seen. Light space is the face camera's space (RenderMan camera
+// convention, +z away from the light); texel coordinates as the camera's raster: x/z sx + ox, y/z sy + oy
+// (orthographic: x sx + ox, y sy + oy).
+struct ShadowMapFace {
+    AffineFrame lightFromShading;  // the engine's shading space to this face's light space
+    bool perspective = false;
+    float sx = 1, sy = 1, ox = 0, oy = 0;
+    int size = 0;  // texels per side
+    const float* depth = nullptr;
+};
+
+// The map of one light: one face (distant: orthographic; spot: perspective), or six (a cube map around a
+// point light: +x, -x, +y, -y, +z, -z of `cubeFromShading`, each covering its 90 degrees plus a margin of
+// the filter's width, so that a lookup stays on the face of its direction's major axis).
+struct ShadowMapLookup {
+    const ShadowMapFace* faces = nullptr;
+    int faceCount = 0;
+    AffineFrame cubeFromShading;  // cube maps: shading space to light-centred axes
+    float bias = 0.5f;            // texels
+    float filterWidth = 2.f;      // texels
+};
+
+// Texel-space position and world size of a texel at light-space point p.
+TESSERA_HD void shadowMapProject(const ShadowMapFace& f, Vec3 p, float& tx, float& ty, float& texelWorld) {
+    const float iz = f.perspective ? 1.f / p.z : 1.f;
+    tx = p.x * iz * f.sx + f.ox;
+    ty = p.y * iz * f.sy + f.oy;
+    texelWorld = (f.perspective ? p.z : 1.f) / std::fabs(f.sx);
+}
+
+// Light-space depth of the receiver's tangent plane (through p, normal n) seen through texel position
+// (tx, ty). Where the plane is (nearly) parallel to the lines of sight the point's own depth is used.
+TESSERA_HD float receiverPlaneDepth(const ShadowMapFace& f, Vec3 p, Vec3 n, float tx, float ty) {
+    const float x = (tx - f.ox) / f.sx, y = (ty - f.oy) / f.sy;
+    if (!f.perspective) {  // lines of sight along +z through (x, y)
+        if (!(std::fabs(n.z) > 1e-4f * (std::fabs(n.x) + std::fabs(n.y)))) return p.z;
+        return p.z - (n.x * (x - p.x) + n.y * (y - p.y)) / n.z;
+    }
+    // The line of sight t (x, y, 1) meets the plane n.(q - p) = 0 at t = n.p / n.(x, y, 1); depth = t.
+    const float nd = n.x * x + n.y * y + n.z, np = n.x * p.x + n.y * p.y + n.z * p.z;
+    const float t = np / nd;
+    if (!(std::fabs(nd) > 1e-4f * (std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z))) || !(t > 0.f))
+        return p.z;
+    return t;
+}
+
+// Percentage-closer filtered visibility in [0, 1] of one face at light-space point p with normal n.
+// Texels outside the face and empty texels count as lit.
+TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
+                                         float filterWidth) {
+    if (f.perspective && !(p.z > 0.f)) return 1.f;  // behind the light
+    float tx, ty, texelWorld;
+    shadowMapProject(f, p, tx, ty, texelWorld);
+    if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
+    const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
+    const int x0 = int(std::floor(tx - half)), x1 = int(std::floor(tx + half));
+    const int y0 = int(std::floor(ty - half)), y1 = int(std::floor(ty + half));
+    float lit = 0.f, total = 0.f;
+    for (int y = y0; y <= y1; ++y) {
+        const float wy = std::fmin(float(y + 1), ty + half) - std::fmax(float(y), ty - half);
+        if (!(wy > 0.f)) continue;
+        for (int x = x0; x <= x1; ++x) {
+            const float wx = std::fmin(float(x + 1), tx + half) - std::fmax(float(x), tx - half);
+            if (!(wx > 0.f)) continue;
+            const float w = wx * wy;
+            total += w;
+            if (x < 0 || y < 0 || x >= f.size || y >= f.size) {
+                lit += w;
+                continue;
+            }
+            const float stored = f.depth[size_t(y) * size_t(f.size) + size_t(x)];
+            const float receiver = receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f);
+            if (receiver - biasWorld <= stored) lit += w;
+        }
+    }
+    return total > 0.f ? lit / total : 1.f;
+}
+
+// The face of a cube map that a light-centred direction d falls in: the major axis, + before -.
+TESSERA_HD int cubeFaceOf(Vec3 d) {
+    const float ax = std::fabs(d.x), ay = std::fabs(d.y), az = std::fabs(d.z);
+    if (ax >= ay && ax >= az) return d.x >= 0.f ? 0 : 1;
+    if (ay >= az) return d.y >= 0.f ? 2 : 3;
+    return d.z >= 0.f ? 4 : 5;
+}
+
+// Visibility of the map's light at shading-space point P with normal N (either side).
+TESSERA_HD float shadowMapVisibility(const ShadowMapLookup& map, Vec3 P, Vec3 N) {
+    if (map.faceCount <= 0) return 1.f;
+    const int face = map.faceCount == 6 ? cubeFaceOf(map.cubeFromShading.point(P)) : 0;
+    const ShadowMapFace& f = map.faces[face];
+    return shadowMapFaceVisibility(f, f.lightFromShading.point(P), f.lightFromShading.vector(N), map.bias,
+                                   map.filterWidth);
+}
+
+}  // namespace tessera
