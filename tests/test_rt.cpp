@@ -322,9 +322,10 @@ RenderResult renderEngine(const Scene& s, const std::string& engine, int threads
 }  // namespace
 
 TEST(RtCrossEngine, TeapotAgreesWithReyes) {
-    // scenes/teapot.rib at 320x240 with its 16 spp. Reyes has no shadows, so the guarded comparison lights
-    // the teapot from the eye (a point light at the camera position casts no visible shadow) plus the
-    // RIB's ambient light; the original lighting's agreement is printed for information.
+    // scenes/teapot.rib at 320x240 with its 16 spp. The guarded comparison is of the shading alone: the
+    // teapot lit from the eye (a point light at the camera position, casting no shadows) plus the RIB's
+    // ambient light; the original lighting's agreement (its key light casts shadows: Reyes' shadow maps
+    // against the ray tracer's shadow rays, tests/test_shadows.cpp) is printed for information.
     Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/teapot.rib", [](const std::string&) {});
     s.camera.width = 320;
     s.camera.height = 240;
@@ -338,7 +339,7 @@ TEST(RtCrossEngine, TeapotAgreesWithReyes) {
     std::printf(
         "cross-engine teapot 320x240 16 spp, eye light: alpha differs on %.3f%% of pixels, PSNR %.2f dB\n",
         100 * ag.alphaMismatch, ag.psnrColor);
-    std::printf("  original RIB lights (rt has shadows, reyes none): alpha %.3f%%, PSNR %.2f dB\n",
+    std::printf("  original RIB lights (key light's shadows): alpha %.3f%%, PSNR %.2f dB\n",
                 100 * agO.alphaMismatch, agO.psnrColor);
     EXPECT_LT(ag.alphaMismatch, 0.005);
     EXPECT_GE(ag.psnrColor, 35.0);

@@ -585,3 +585,40 @@ TEST(ReyesShadowMaps, AgreeWithTheRayTracersHardShadowsOnShippedScenes) {
         }
     }
 }
+
+TEST(ReyesShadowMaps, TheShadowCountChannelCountsTheLightsInShadowInBothEngines) {
+    // The film's shadow-count channel (--aov shadows): 1 on the floor inside the square's shadow, 0 where the
+    // light reaches it, from the ray tracer's shadow rays and from Reyes' maps or rays alike.
+    const Scene s = squareOverFloor(true);
+    const Projector pr(s.camera);
+    for (int method = 0; method < 3; ++method) {
+        RenderSettings rs;
+        rs.engine = method == 0 ? "rt" : "reyes";
+        rs.reyesShadows = method == 2 ? ReyesShadows::Raytrace : ReyesShadows::Map;
+        rs.threads = 2;
+        rs.output.channels = kChannelShadowCount;
+        const RenderResult r = render(s, rs);
+        const ImagePlane* plane = r.image.plane("shadows");
+        ASSERT_NE(plane, nullptr);
+        int inShadow = 0, lit = 0, wrong = 0;
+        for (int y = 0; y < r.image.height; ++y)
+            for (int x = 0; x < r.image.width; ++x) {
+                const float cx = (x + 0.5f - pr.ox) / pr.sx, cy = (y + 0.5f - pr.oy) / pr.sy;
+                const float fx = cx * 10, fy = cy * 10, m = 1.5f / (pr.sx / 10);
+                if (std::fabs(cx * 8) < 0.5f + m && std::fabs(cy * 8) < 0.5f + m) continue;  // the square
+                const bool shadow = fx > -1.75f + m && fx < -0.25f - m && std::fabs(fy) < 0.75f - m;
+                const bool light = fx < -1.75f - m || fx > -0.25f + m || std::fabs(fy) > 0.75f + m;
+                const float v = plane->values[r.image.index(x, y)];
+                if (shadow) ++inShadow, wrong += v != 1.f;
+                if (light) ++lit, wrong += v != 0.f;
+            }
+        std::printf("%s: %d pixels in the shadow, %d lit, %d with another count\n",
+                    method == 0   ? "rt"
+                    : method == 1 ? "reyes maps"
+                                  : "reyes rays",
+                    inShadow, lit, wrong);
+        EXPECT_GT(inShadow, 50);
+        EXPECT_GT(lit, 5000);
+        EXPECT_EQ(wrong, 0) << method;
+    }
+}

@@ -27,8 +27,8 @@ inline Scene cameraSpaceScene(int width, int height, float fovDegrees) {
 }
 
 // Keeps the scene's ambient lights and lights it from the eye: a point light at the camera position, warm,
-// of intensity 1 at the centre of the scene. It casts no visible shadow, so Reyes (no shadows yet) and the
-// ray tracer see the same lighting.
+// of intensity 1 at the centre of the scene. It casts no shadows (nor would any be visible), so both
+// engines' shading is compared without their shadows.
 inline void lightFromEye(Scene& s) {
     const Vec3 eye = s.camera.cameraFromWorld.inverse().point({0, 0, 0});
     std::vector<Light> lights;

@@ -184,6 +184,16 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
         shade.visibility->answer(VisibilityQuery{points, shade.lights, patchOf.data(), UVs.data(), 0.f},
                                  samples);
         shadeSurfaces(material, points, samples, Ci.data());
+        if (shade.wantShadowCounts) {
+            // A light counts as in shadow where more than half of it is blocked (the ray tracer's shadow
+            // rays are all or nothing).
+            grid.shadowedLights.assign(count, 0);
+            for (int v = 0; v < count; ++v)
+                for (size_t l = 0; l < samples.lights; ++l) {
+                    const size_t i = samples.index(size_t(v), l);
+                    grid.shadowedLights[v] += samples.needsVisibility[i] && samples.visibility[i] < 0.5f;
+                }
+        }
     } else {
         // No light casts shadows: every query would answer "visible"; the fused form of sampleLights +
         // shadeSurfaces.

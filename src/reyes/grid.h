@@ -33,6 +33,9 @@ struct Grid {
     // normal per vertex, facing the viewer.
     uint32_t objectId = 0;
     std::vector<float> NX, NY, NZ;
+    // When the film counts lights in shadow and lights cast shadows: per vertex, the lights more than half
+    // blocked (empty: none).
+    std::vector<uint8_t> shadowedLights;
     // Blurred frames (`blurred`: the rasterizer must move micropolygons to each sample's time and lens
     // point): per knot of the shutter timeline and vertex (knot-major, knots * vertexCount()), the raster
     // position, the depth, and the lens coefficient c = lensRadius * (1/focaldistance - 1/z), so that a lens
@@ -62,6 +65,7 @@ struct ShadeInputs {
     // A shadow map's depth pass (paper 001 sec. 3.5: "only split, dice and sample"): positions and depth,
     // both sides, no normals or shading. Static patches only (the pass renders shutter open).
     bool depthOnly = false;
+    bool wantShadowCounts = false;  // the film carries the shadow-count channel
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

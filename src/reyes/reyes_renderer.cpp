@@ -143,7 +143,9 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                                frame.lights,
                                attr.object,
                                (settings.output.channels & kChannelNormal) != 0,
-                               visibility};
+                               visibility,
+                               false,
+                               (settings.output.channels & kChannelShadowCount) != 0};
                 diceAndShade(view, piece, in, g);
                 ++tc.grids;
                 tc.micropolygons += uint64_t(g.nu) * g.nv;

@@ -2,7 +2,8 @@
 // paintedplastic, constant) and the ray tracer's mirror and glass, evaluated over batches of shading
 // points in structure-of-arrays form (a Reyes grid, or a list of ray hits). Light meets surface here and
 // nowhere else: an engine (1) asks for the light samples of a batch, (2) answers their visibility queries
-// (the ray tracer with shadow rays; Reyes has no shadows yet and answers "visible"), (3) shades.
+// (the ray tracer with shadow rays; Reyes with its shadow maps or the ray tracer's shadow rays, through
+// engine/visibility.h), (3) shades.
 #pragma once
 #include <cstdint>
 #include <span>
@@ -112,7 +113,8 @@ TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const Ligh
         [&](size_t l) { return visibility[l]; });
 }
 
-// Steps 1-3 fused for an engine whose every visibility query answers "visible" (Reyes until shadow maps):
+// Steps 1-3 fused for a batch whose every visibility query answers "visible" (Reyes when no light casts
+// shadows):
 // the same light samples and accumulation, without storing the samples.
 void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<const Material> materials,
                              const SurfacePoints& points, Color* Ci);
