@@ -59,6 +59,7 @@ struct AmbientOcclusionSettings {
     // cosine-weighted directions and binary visibility (lower variance for the same integral).
     bool paperWeighting = false;
 };
+
 // Which lights cast shadows (--shadows): each light's own choice (Light::castsShadows, from the RIB's
 // Attribute "light" "shadows"), or all of them, or none. The same rule for both engines.
 enum class ShadowOverride { Scene, On, Off };
