@@ -97,25 +97,32 @@ inline QuadSetup setupQuad(const MovedQuad& q) {
     return {{quadTriangle(q, 0), quadTriangle(q, 1)}};
 }
 
-// Test sample i against a moved quad with the sharp rasterizer's edge functions (edge_functions.h) and the
-// depth of the moved corners. `edges(tri)` gives triangle tri's edges: precomputed (QuadSetup) or set up on
-// demand (the bbox scheme, where each sample meets its own moved quad and the second triangle is often not
-// needed).
-template <bool kAttributes, class Edges>
+// A sample inside triangle tri of a moved quad, with weights l1, l2 of its corners 1 and 2 (in the
+// corners' order): the depth of the moved corners, and the write when it is nearer than the sample's.
+template <bool kAttributes>
+inline void writeMovedHit(const Grid& g, const int vid[4], const MovedQuad& q, int tri, float l1, float l2,
+                          size_t i, SampleTile& tile, float nearZ) {
+    const float l0 = 1.f - l1 - l2;
+    const int* c = kQuadTriangles[tri];
+    const float z = l0 * q.Z[c[0]] + l1 * q.Z[c[1]] + l2 * q.Z[c[2]];
+    if (z < tile.z[i] && z >= nearZ)
+        writeSampleHit<kAttributes>(g, vid[c[0]], vid[c[1]], vid[c[2]], l0, l1, l2, z, i, tile);
+}
+
+// Test sample i against a moved quad whose triangles are set up once (QuadSetup: the simple and
+// interleaved passes, where many samples meet the same moved quad) with the sharp rasterizer's edge
+// functions (edge_functions.h).
+template <bool kAttributes>
 inline bool testMovedSample(const Grid& g, const int vid[4], const MovedQuad& q, size_t i, SampleTile& tile,
-                            float nearZ, Edges&& edges) {
+                            float nearZ, const QuadSetup& setup) {
     const int64_t sx = tile.sx[i], sy = tile.sy[i];
     if (sx < q.minX || sx > q.maxX || sy < q.minY || sy > q.maxY) return false;
     for (int tri = 0; tri < 2; ++tri) {
-        const TriangleEdges& t = edges(tri);
+        const TriangleEdges& t = setup.tri[tri];
         float l0, l1, l2;
         if (!t.valid || !insideTriangle(t, sx, sy, l0, l1, l2)) continue;
         if (t.swapped) std::swap(l1, l2);  // back to the corners' order
-        l0 = 1.f - l1 - l2;
-        const int* c = kQuadTriangles[tri];
-        const float z = l0 * q.Z[c[0]] + l1 * q.Z[c[1]] + l2 * q.Z[c[2]];
-        if (z < tile.z[i] && z >= nearZ)
-            writeSampleHit<kAttributes>(g, vid[c[0]], vid[c[1]], vid[c[2]], l0, l1, l2, z, i, tile);
+        writeMovedHit<kAttributes>(g, vid, q, tri, l1, l2, i, tile, nearZ);
         return true;
     }
     return false;
@@ -152,10 +159,7 @@ inline bool testMovedSampleOnce(const Grid& g, const int vid[4], const MovedQuad
         const float invArea = 1.f / float(area);
         float l1 = float(w1) * invArea, l2 = float(w2) * invArea;
         if (swapped) std::swap(l1, l2);  // back to the corners' order
-        const float l0 = 1.f - l1 - l2;
-        const float z = l0 * q.Z[c[0]] + l1 * q.Z[c[1]] + l2 * q.Z[c[2]];
-        if (z < tile.z[i] && z >= nearZ)
-            writeSampleHit<kAttributes>(g, vid[c[0]], vid[c[1]], vid[c[2]], l0, l1, l2, z, i, tile);
+        writeMovedHit<kAttributes>(g, vid, q, tri, l1, l2, i, tile, nearZ);
         return true;
     }
     return false;
@@ -570,13 +574,12 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                     openFacing(g, vid, front0, sign0);
                     if (!facesCamera(g.twoSided, front0, sign0, q)) continue;
                     const QuadSetup setup = setupQuad(q);
-                    const auto setupEdges = [&setup](int t) -> const TriangleEdges& { return setup.tri[t]; };
                     if (!interleaved) {
                         for (int py = sp.py0; py <= sp.py1; ++py)
                             for (int px = sp.px0; px <= sp.px1; ++px) {
                                 ++tests;
                                 if (testMovedSample<kAttributes>(g, vid, q, sampleIndex(px, py, n), tile,
-                                                                 nearZ, setupEdges))
+                                                                 nearZ, setup))
                                     tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                             }
                         continue;
@@ -590,7 +593,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
                             if (px < sp.px0 || px > sp.px1 || py < sp.py0 || py > sp.py1) continue;
                             ++tests;
                             if (testMovedSample<kAttributes>(g, vid, q, sampleIndex(px, py, slot), tile,
-                                                             nearZ, setupEdges))
+                                                             nearZ, setup))
                                 tile.pixelHit[size_t(py - reg.y0) * tw + (px - reg.x0)] = 1;
                         }
                 }
