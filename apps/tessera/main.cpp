@@ -75,6 +75,18 @@ struct RenderArgs {
     std::string aovs;       // --aov z,N,id,...
 };
 
+// The comma-separated parts of a list ("a,,b" has an empty middle part).
+std::vector<std::string> splitCommas(const std::string& text) {
+    std::vector<std::string> parts;
+    size_t at = 0;
+    while (true) {
+        const size_t end = text.find(',', at);
+        parts.push_back(text.substr(at, end == std::string::npos ? std::string::npos : end - at));
+        if (end == std::string::npos) return parts;
+        at = end + 1;
+    }
+}
+
 // The AOVs --aov names: film channels and engine planes (docs: README "AOVs").
 struct AovRequest {
     uint32_t channels = 0;
@@ -85,10 +97,7 @@ constexpr const char* kAovNames = "z, N, id, shadows, textured, occlusion";
 std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
     AovRequest r;
     if (list.empty()) return r;
-    size_t at = 0;
-    while (true) {
-        const size_t end = list.find(',', at);
-        const std::string name = list.substr(at, end == std::string::npos ? std::string::npos : end - at);
+    for (const std::string& name : splitCommas(list)) {
         if (name == "z")
             r.channels |= kChannelDepth;
         else if (name == "N")
@@ -106,8 +115,6 @@ std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
             return std::nullopt;
         }
         r.names.push_back(name);
-        if (end == std::string::npos) break;
-        at = end + 1;
     }
     return r;
 }
@@ -140,17 +147,12 @@ ExrMetadata exrMetadata(const Camera& cam, double renderMs) {
 // `n` comma-separated finite numbers ("0,1"); nullopt if the text is not that.
 std::optional<std::vector<double>> parseNumberList(const std::string& text, size_t n) {
     std::vector<double> out;
-    size_t at = 0;
-    while (true) {
-        const size_t end = text.find(',', at);
-        const std::string part = text.substr(at, end == std::string::npos ? std::string::npos : end - at);
+    for (const std::string& part : splitCommas(text)) {
         char* stop = nullptr;
         errno = 0;
         const double v = std::strtod(part.c_str(), &stop);
         if (part.empty() || *stop != '\0' || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
         out.push_back(v);
-        if (end == std::string::npos) break;
-        at = end + 1;
     }
     if (out.size() != n) return std::nullopt;
     return out;
