@@ -13,8 +13,8 @@ for a in "$@"; do
   if [[ $a == -* ]]; then CMAKE_ARGS+=("$a"); else TARGETS+=(--target "$a"); fi
 done
 
-PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
-          libfmt-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev python3)
+source scripts/packages.sh
+PACKAGES=("${TESSERA_PACKAGES[@]}" libgtest-dev libgmock-dev libbenchmark-dev python3)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "${CMAKE_ARGS[@]}" >/dev/null

@@ -11,8 +11,8 @@ SECONDS_PER_TARGET=${1:-45}
 shift || true
 
 # Debian packages (only the missing ones): the build's own plus clang and its libFuzzer runtime.
-PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
-          libfmt-dev nlohmann-json3-dev clang libclang-rt-14-dev)
+source scripts/packages.sh
+PACKAGES=("${TESSERA_PACKAGES[@]}" clang libclang-rt-14-dev)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
 TARGETS=("$@")

@@ -6,8 +6,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # Debian packages (only the missing ones), as scripts/build.sh.
-PACKAGES=(g++ cmake make pkg-config libtbb-dev libopenexr-dev libpng-dev zlib1g-dev libcli11-dev
-          libfmt-dev nlohmann-json3-dev libgtest-dev libgmock-dev)
+source scripts/packages.sh
+PACKAGES=("${TESSERA_PACKAGES[@]}" libgtest-dev libgmock-dev)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
 B=build-asan
