@@ -2,12 +2,14 @@
 
 #include <tbb/task_arena.h>
 
+#include <functional>
+
 #include "rt/shadow_rays.h"
 
 namespace tessera {
 
 RayTracedVisibility::RayTracedVisibility(const RtAccel& acc, rt::TraceServiceOptions options)
-    : acc_(acc), workspaces_(acc, options) {}
+    : acc_(acc), workspaces_(std::cref(acc), options) {}  // cref: ETS would keep a copy of the accel
 
 void RayTracedVisibility::answer(const VisibilityQuery& q, LightSamples& ls) const {
     Workspace& ws = workspaces_.local();

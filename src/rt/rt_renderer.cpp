@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstddef>
+#include <functional>
 
 #include "engine/frame.h"
 #include "engine/tile_loop.h"
@@ -391,7 +392,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         tileWork(acc, proj, sr, layout, spp,
                  occlusion ? size_t(std::max(1, settings.ao.samples)) : frame.lights.size());
 
-    tbb::enumerable_thread_specific<Workspace> workspaces(acc, traceOpt);
+    // std::cref: the per-thread workspaces refer to the one accel (ETS keeps its arguments by value).
+    tbb::enumerable_thread_specific<Workspace> workspaces(std::cref(acc), traceOpt);
     auto renderTile = [&](int b, Workspace& ws) {
         const Rect target = layout.target(b);
         frame.resetTile(ws.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
