@@ -320,3 +320,117 @@ TEST(RtMotion, WavefrontAgreesWithScalarAtEachRaysTime) {
     EXPECT_GT(hitsScalar, 50);
     EXPECT_EQ(agree, total);
 }
+
+namespace {
+// Rotation by `degrees` about the vertical axis through `c`.
+Vec3 turned(Vec3 p, Vec3 c, float degrees) {
+    const float a = degrees * float(M_PI) / 180.f, cs = std::cos(a), sn = std::sin(a);
+    const Vec3 d = p - c;
+    return c + Vec3{cs * d.x + sn * d.z, d.y, -sn * d.x + cs * d.z};
+}
+
+// Five bent patches side by side, turning 60 degrees about a vertical axis over the shutter in `keys`
+// keys (deformation keys: the scene's linear motion between them).
+Scene turningScene(int keys) {
+    Scene s = cameraSpaceScene(64, 48, 40.f);
+    s.camera.shutterOpen = 0.f, s.camera.shutterClose = 1.f;
+    const Vec3 centre{0.f, 0.f, 6.f};
+    for (int q = 0; q < 5; ++q) {
+        BezierPatch p;
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i)
+                p.at(i, j) = {-2.5f + q + i / 3.f, -1.f + 2.f * j / 3.f, 6.f + 0.4f * float((i + j) % 2)};
+        addPatch(s, p);
+        PatchAttributes& a = s.attributes.back();
+        a.motion = {uint32_t(s.motionPatches.size()), uint32_t(keys)};
+        for (int k = 0; k < keys; ++k) {
+            const float t = float(k) / float(keys - 1);
+            BezierPatch m = p;
+            for (Vec3& c : m.cp) c = turned(c, centre, 60.f * t);
+            s.motionPatches.push_back(m);
+            s.motionTimes.push_back(t);
+        }
+    }
+    return s;
+}
+}  // namespace
+
+TEST(RtMotion, TimeSlabsBoundTheMovingPatchesAtEveryTime) {
+    // The time slabs' boxes (a slab's quads: the union of its knots' subpatch trees) must hold every leaf of
+    // the patch at every time of the slab: checked at 9 x 9 points of every leaf of every patch at 200
+    // times, against the leaf boxes of the slab the traversal picks for that time.
+    const Scene s = turningScene(13);
+    const FrameMotion fm = prepareFrameMotion(s, s.camera, true);
+    ASSERT_EQ(fm.knotCount(), 13);
+    RtAccel acc;
+    buildRtAccel(s, Mat4::identity(), 6, false, acc, &fm);
+    const SubpatchForest& f = acc.forest;
+    ASSERT_EQ(f.slabCount, 12);
+    const uint32_t leafQuadFirst = f.quadsPerPatch - (1u << (f.depth - 2));
+    int outside = 0, checked = 0;
+    double sweptArea = 0, slabArea = 0;  // mean leaf box size, the swept and the slab's
+    for (int ti = 0; ti < 200; ++ti) {
+        const float time = (ti + 0.37f) / 200.f;
+        const int slab = acc.timeSlab(time);
+        for (uint32_t patch = 0; patch < s.patches.size(); ++patch) {
+            const BezierPatch at = fm.patchAt(patch, time);
+            const SubpatchQuad* quads = f.quadTree(patch, slab);
+            for (uint32_t leaf = 0; leaf < (1u << f.depth); ++leaf) {
+                const SubpatchQuad& q = quads[leafQuadFirst + leaf / 4];
+                const int lane = int(leaf % 4);
+                const Bounds3& swept = f.tree(patch)[f.firstLeaf() + leaf];
+                sweptArea += swept.diagonal().x * swept.diagonal().z;
+                slabArea += (q.hi[0][lane] - q.lo[0][lane]) * (q.hi[2][lane] - q.lo[2][lane]);
+                float u0, u1, v0, v1;
+                subpatchLeafRect(f.depth, leaf, u0, u1, v0, v1);
+                for (int b = 0; b <= 8; ++b)
+                    for (int a = 0; a <= 8; ++a) {
+                        const Vec3 p = evalPatch(at, u0 + (u1 - u0) * a / 8.f, v0 + (v1 - v0) * b / 8.f);
+                        bool in = true;
+                        for (int k = 0; k < 3; ++k) in &= p[k] >= q.lo[k][lane] && p[k] <= q.hi[k][lane];
+                        outside += !in, ++checked;
+                    }
+            }
+        }
+    }
+    std::printf("%d of %d points outside their slab's leaf box; leaf boxes %.1fx smaller than swept\n",
+                outside, checked, sweptArea / slabArea);
+    EXPECT_EQ(outside, 0);
+    EXPECT_GT(sweptArea / slabArea, 4.0);  // the point of the slabs
+}
+
+TEST(RtMotion, TimeSlabsFindTheSameHitsAsTheSweptBoxesWithFewerCandidates) {
+    // Rays at many times through the turning patches: the slabbed accel finds the same hits (patch and
+    // distance) as one whose boxes are swept over the whole shutter, testing far fewer candidates.
+    const Scene s = turningScene(13);
+    const FrameMotion fm = prepareFrameMotion(s, s.camera, true);
+    RtAccel slabbed, swept;
+    buildRtAccel(s, Mat4::identity(), 6, false, slabbed, &fm);
+    buildRtAccel(s, Mat4::identity(), 6, false, swept, &fm, 1);
+    ASSERT_GT(slabbed.forest.slabCount, 1);
+    ASSERT_EQ(swept.forest.slabCount, 0);
+    rt::RayList list;
+    for (int k = 0; k < 4000; ++k) {
+        const float time = float((k * 37) % 1000) / 1000.f;
+        const Vec3 d{-0.45f + 0.9f * float(k % 80) / 79.f, -0.2f + 0.4f * float(k / 80) / 49.f, 1.f};
+        list.push({0, 0, 0}, d, 0.f, 1e30f, 0, {1, 1, 1}, 0xffffffffu, rt::kReflection, 0, {-1.f, -1.f},
+                  {0.f, 0.f, 0.f}, time);
+    }
+    std::vector<RayHit> a, b;
+    rt::TraceService sa(slabbed), sb(swept);
+    sa.trace(list, a);
+    sb.trace(list, b);
+    int hits = 0, agree = 0;
+    for (size_t r = 0; r < list.size(); ++r) {
+        hits += b[r].hit;
+        agree +=
+            a[r].hit == b[r].hit &&
+            (!a[r].hit || (a[r].patch == b[r].patch && std::fabs(a[r].h.t - b[r].h.t) < 1e-4f * b[r].h.t));
+    }
+    const double ca = double(sa.counters().candidates), cb = double(sb.counters().candidates);
+    std::printf("%d hits of %zu rays, %d agree; candidates %.0f with slabs, %.0f swept\n", hits, list.size(),
+                agree, ca, cb);
+    EXPECT_GT(hits, 1000);
+    EXPECT_EQ(agree, int(list.size()));
+    EXPECT_LT(ca * 3, cb);
+}

@@ -31,8 +31,29 @@ Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time
     return acc.flip[patch] ? -N : N;
 }
 
+namespace {
+// The 4-wide BVH over patches 0 .. n-1 with boxes patchBox(i); patches with a non-finite box (possible in
+// scenes built in code; the loaders reject them) are left out, so no ray ever reaches them. `all`, when
+// given, gets the union of the boxes.
+template <class PatchBox>
+void buildPatchBvh(size_t n, PatchBox&& patchBox, Bvh& bvh, Bounds3* all) {
+    std::vector<Bounds3> roots, boxes(n);
+    std::vector<uint32_t> ids;
+    for (size_t i = 0; i < n; ++i) {
+        const Bounds3& b = boxes[i] = patchBox(uint32_t(i));
+        if (!isFinite(b.lo) || !isFinite(b.hi)) continue;
+        roots.push_back(b);
+        ids.push_back(uint32_t(i));
+        if (all) all->extend(b);
+    }
+    buildBvh(roots, bvh);
+    for (uint32_t& p : bvh.prims) p = ids[p];
+    collapseBvh4(bvh, boxes);
+}
+}  // namespace
+
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc, const FrameMotion* motion) {
+                  RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs) {
     const size_t n = scene.patches.size();
     acc.motion = motion && motion->blurred() ? *motion : FrameMotion();
     acc.movingPatches = 0;
@@ -59,7 +80,7 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     });
     auto t0 = Clock::now();
     buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
-                        acc.movingPatches ? &acc.motion : nullptr);
+                        acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs);
     acc.subpatchMs = msSince(t0);
     acc.patchSoa.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
@@ -74,23 +95,14 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         ps.boxExtent = maxComponent(b.diagonal());
     });
     auto t1 = Clock::now();
-    // Patches with non-finite control points (possible in scenes built in code; the loaders reject them)
-    // are left out of the BVH, so no ray ever reaches them.
-    std::vector<Bounds3> roots;
-    std::vector<uint32_t> ids;
     Bounds3 all;
-    for (size_t i = 0; i < n; ++i) {
-        const Bounds3& b = acc.forest.tree(uint32_t(i))[0];
-        if (!isFinite(b.lo) || !isFinite(b.hi)) continue;
-        roots.push_back(b);
-        ids.push_back(uint32_t(i));
-        all.extend(b);
-    }
-    buildBvh(roots, acc.bvh);
-    for (uint32_t& p : acc.bvh.prims) p = ids[p];
-    std::vector<Bounds3> patchBox(n);
-    for (size_t i = 0; i < n; ++i) patchBox[i] = acc.forest.tree(uint32_t(i))[0];
-    collapseBvh4(acc.bvh, patchBox);
+    buildPatchBvh(
+        n, [&](uint32_t i) { return acc.forest.tree(i)[0]; }, acc.bvh, &all);
+    acc.slabBvh.assign(size_t(acc.forest.slabCount), Bvh());  // (their boxes lie in the swept ones)
+    tbb::parallel_for(0, acc.forest.slabCount, [&](int s) {
+        buildPatchBvh(
+            n, [&](uint32_t i) { return acc.forest.rootBox(i, s); }, acc.slabBvh[size_t(s)], nullptr);
+    });
     acc.bounds = all;
     acc.bvhMs = msSince(t1);
     float mag = 0.f;

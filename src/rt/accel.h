@@ -39,6 +39,16 @@ struct RtAccel {
     FrameMotion motion;
     size_t movingPatches = 0;
     bool moving(uint32_t patch) const { return motion.moving(patch); }
+    // Per time slab of the forest (SubpatchForest::slabCount), a BVH over the patches' boxes over that slab:
+    // a ray traverses its time's slab (timeSlab), and `bvh` (swept over the whole shutter) serves the rest.
+    std::vector<Bvh> slabBvh;
+    int timeSlab(float u) const {
+        if (forest.slabCount == 0) return 0;
+        int k;
+        float w;
+        motion.segment(u, k, w);
+        return forest.slabOfSegment[size_t(k)];
+    }
 };
 
 // The control points of a moving patch at normalised shutter time u (the lerp of the two knots around u,
@@ -66,8 +76,9 @@ inline void soaToPatch(const PatchSoa& s, BezierPatch& out) {
 // face away from the origin (the eye, in camera space) for --cull-backfaces.
 // `motion` (in the space of `toSpace`, i.e. camera space for the renderer): the moving patches' keys;
 // nullptr or a static timeline: a static accel, bit-identical to one built without it.
+// `maxTimeSlabs`: see buildSubpatchForest (1: boxes swept over the whole shutter only).
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc, const FrameMotion* motion = nullptr);
+                  RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs);
 
 // Unit shading normal at a hit (geometric, orientation flipped per the patch attributes); `time`: the
 // ray's normalised shutter time (moving patches are evaluated there).

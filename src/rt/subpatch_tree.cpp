@@ -241,8 +241,45 @@ void transposeQuad(const float* b, SubpatchQuad& q) {
 }
 }  // namespace
 
+namespace {
+// Time slabs of a blurred frame (SubpatchForest::slabCount): the timeline's segments in equal runs, as
+// many slabs as `maxSlabs` and the memory budget allow; none for a static frame or a single slab.
+void planTimeSlabs(SubpatchForest& f, std::span<const BezierPatch> patches, const FrameMotion* motion,
+                   int maxSlabs, size_t budgetBytes) {
+    f.slabCount = 0;
+    f.slabOfSegment.clear(), f.slabKnots.clear(), f.slabPatch.clear(), f.slabQuads.clear();
+    f.slabRoots.clear();
+    if (!motion || motion->knotCount() < 3 || maxSlabs < 2) return;
+    uint32_t moving = 0;
+    f.slabPatch.assign(patches.size(), SubpatchForest::kNoSlabs);
+    for (size_t i = 0; i < patches.size(); ++i)
+        if (motion->moving(i)) f.slabPatch[i] = moving++;
+    const int segments = motion->knotCount() - 1;
+    const size_t perSlab = std::max<size_t>(1, size_t(moving) * f.quadsPerPatch * sizeof(SubpatchQuad));
+    const int slabs = int(std::min<size_t>({size_t(maxSlabs), size_t(segments), budgetBytes / perSlab}));
+    if (moving == 0 || slabs < 2) {
+        f.slabPatch.clear();
+        return;
+    }
+    const int perRun = (segments + slabs - 1) / slabs;
+    f.slabCount = (segments + perRun - 1) / perRun;
+    for (int k = 0; k < segments; ++k) f.slabOfSegment.push_back(uint8_t(k / perRun));
+    for (int s = 0; s < f.slabCount; ++s) f.slabKnots.push_back(uint32_t(s * perRun));
+    f.slabKnots.push_back(uint32_t(segments));
+    f.slabQuads.resize(size_t(moving) * f.slabCount * f.quadsPerPatch);
+    f.slabRoots.resize(size_t(moving) * f.slabCount);
+}
+
+// The quads of one tree (levels 2, 4, ...: node n's grandchildren 4n+3 .. 4n+6) from its boxes.
+void writeQuads(const Bounds3* bx, int depth, SubpatchQuad* q) {
+    for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
+        for (uint32_t n = first; n <= 2 * first; ++n, ++q) transposeQuad(&bx[4 * n + 3].lo.x, *q);
+}
+}  // namespace
+
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
-                         bool backfaceFromOrigin, std::span<const uint8_t> flip, const FrameMotion* motion) {
+                         bool backfaceFromOrigin, std::span<const uint8_t> flip, const FrameMotion* motion,
+                         int maxSlabs, size_t slabBudgetBytes) {
     depth = std::clamp(depth, 0, kMaxSubpatchDepth);
     f.depth = depth;
     f.nodesPerPatch = (2u << depth) - 1u;
@@ -255,6 +292,7 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     if (backfaceFromOrigin) f.quadBack.assign(f.quads.size(), 0);
     f.knotLeaves.clear();
     if (motion) f.knotLeaves.resize(motion->keys.size() << depth);
+    planTimeSlabs(f, patches, motion, maxSlabs, slabBudgetBytes);
     const uint32_t leaves = 1u << depth;
     f.leafCentre.resize(leaves);
     f.leafBasis.resize(leaves);
@@ -291,7 +329,7 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
             TreeBuilder tb(depth);  // scratch grid, reused over the range
-            std::vector<Bounds3> knotBoxes;
+            std::vector<Bounds3> knotBoxes, slabBoxes;
             for (size_t i = r.begin(); i != r.end(); ++i) {
                 uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
                 float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
@@ -304,21 +342,38 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                     const uint32_t leaves = 1u << depth, first = f.firstLeaf();
                     Bounds3* kl = f.knotLeaves.data() + (size_t(motion->firstKey[i]) << depth);
                     std::copy(boxes + first, boxes + first + leaves, kl);
+                    // Per slab, the union of its knots' trees (knot 0 is in slab 0, a knot between two
+                    // slabs in both).
+                    const int slabs = f.slabCount;
+                    slabBoxes.assign(size_t(slabs) * f.nodesPerPatch, Bounds3());
+                    auto addToSlabs = [&](int k, const Bounds3* tree) {
+                        for (int sl = 0; sl < slabs; ++sl) {
+                            if (uint32_t(k) < f.slabKnots[sl] || uint32_t(k) > f.slabKnots[sl + 1]) continue;
+                            Bounds3* sb = slabBoxes.data() + size_t(sl) * f.nodesPerPatch;
+                            for (uint32_t nd = 0; nd < f.nodesPerPatch; ++nd) sb[nd].extend(tree[nd]);
+                        }
+                    };
+                    addToSlabs(0, boxes);
                     for (int k = 1; k < motion->knotCount(); ++k) {
                         tb.build(keys[k], knotBoxes.data(), nullptr, sign);
                         std::copy(knotBoxes.data() + first, knotBoxes.data() + first + leaves,
                                   kl + k * leaves);
+                        addToSlabs(k, knotBoxes.data());
                         for (uint32_t nd = 0; nd < f.nodesPerPatch; ++nd) boxes[nd].extend(knotBoxes[nd]);
+                    }
+                    for (int sl = 0; sl < slabs; ++sl) {
+                        const Bounds3* sb = slabBoxes.data() + size_t(sl) * f.nodesPerPatch;
+                        const size_t at = size_t(f.slabPatch[i]) * slabs + sl;
+                        writeQuads(sb, depth, f.slabQuads.data() + at * f.quadsPerPatch);
+                        f.slabRoots[at] = sb[0];
                     }
                     if (back) std::fill(back, back + f.nodesPerPatch, uint8_t(0));
                 }
-                const Bounds3* bx = boxes;
-                SubpatchQuad* q = f.quads.data() + i * f.quadsPerPatch;
-                uint8_t* qb = backfaceFromOrigin ? f.quadBack.data() + i * f.quadsPerPatch : nullptr;
+                writeQuads(boxes, depth, f.quads.data() + i * f.quadsPerPatch);
+                if (!backfaceFromOrigin) continue;
+                uint8_t* qb = f.quadBack.data() + i * f.quadsPerPatch;
                 for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
-                    for (uint32_t n = first; n <= 2 * first; ++n, ++q) {  // the 4^k nodes of level 2k
-                        transposeQuad(&bx[4 * n + 3].lo.x, *q);
-                        if (!qb) continue;
+                    for (uint32_t n = first; n <= 2 * first; ++n) {  // the 4^k nodes of level 2k
                         uint8_t bits = 0;
                         for (uint32_t c = 0; c < 4; ++c)
                             if (back[4 * n + 3 + c] || back[2 * n + 1 + (c >> 1)]) bits |= uint8_t(1u << c);

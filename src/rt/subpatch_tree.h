@@ -81,6 +81,20 @@ struct SubpatchForest {
     // between knots, so the lerp of a leaf's boxes at the two knots around a time holds the leaf then
     // (min of lerps >= lerp of mins): the Newton stage tests it per candidate (knotLeafBox).
     std::vector<Bounds3> knotLeaves;
+    // Motion blur, time slabs (a temporal split of the swept bounds, as the MSBVH of Gruenschloss et al.
+    // 2011): the timeline's segments grouped into `slabCount` runs of knots; per moving patch and slab, its
+    // quads bound it over that slab's knots only, so a ray at a time of the slab tests boxes swept over a
+    // fraction of the shutter. `slabOfSegment[k]`: the slab of timeline segment k; slab s spans knots
+    // slabKnots[s] .. slabKnots[s + 1]. Moving patch i's quads for slab s start at
+    // slabQuads[(slabPatch[i] * slabCount + s) * quadsPerPatch], its root box at slabRoots[slabPatch[i] *
+    // slabCount + s]. slabCount 0: no slabs (a static frame), quadTree(patch, slab) = quadTree(patch).
+    int slabCount = 0;
+    std::vector<uint8_t> slabOfSegment;
+    std::vector<uint32_t> slabKnots;
+    std::vector<uint32_t> slabPatch;  // per patch: its index among the moving patches, or kNoSlabs
+    std::vector<SubpatchQuad, DefaultInitAllocator<SubpatchQuad>> slabQuads;
+    std::vector<Bounds3> slabRoots;
+    static constexpr uint32_t kNoSlabs = 0xffffffffu;
 
     const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
     const uint8_t* backfaceBits(uint32_t patch) const {
@@ -90,6 +104,16 @@ struct SubpatchForest {
     const SubpatchQuad* quadTree(uint32_t patch) const {
         return quads.data() + size_t(patch) * quadsPerPatch;
     }
+    // The quads that bound `patch` over time slab `slab` (its swept quads when it does not move).
+    const SubpatchQuad* quadTree(uint32_t patch, int slab) const {
+        if (slabCount == 0 || slabPatch[patch] == kNoSlabs) return quadTree(patch);
+        return slabQuads.data() + (size_t(slabPatch[patch]) * slabCount + slab) * quadsPerPatch;
+    }
+    // The root box of `patch` over time slab `slab`.
+    const Bounds3& rootBox(uint32_t patch, int slab) const {
+        if (slabCount == 0 || slabPatch[patch] == kNoSlabs) return tree(patch)[0];
+        return slabRoots[size_t(slabPatch[patch]) * slabCount + slab];
+    }
     const uint8_t* quadBackBits(uint32_t patch) const {
         return quadBack.empty() ? nullptr : quadBack.data() + size_t(patch) * quadsPerPatch;
     }
@@ -97,7 +121,8 @@ struct SubpatchForest {
         return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
                quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
                (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis) +
-               knotLeaves.size() * sizeof(Bounds3);
+               knotLeaves.size() * sizeof(Bounds3) + slabQuads.size() * sizeof(SubpatchQuad) +
+               slabRoots.size() * sizeof(Bounds3) + slabPatch.size() * sizeof(uint32_t);
     }
 };
 
@@ -126,8 +151,13 @@ Bounds3 enlargedHull(const BezierPatch& p);
 // are fixed linear combinations of the patch's), so the union of the knots' hulls holds the subpatch at
 // every time of the shutter (paper 002, sec. 5.3.3: bounds swept over the shutter). Moving patches get no
 // back-facing marks (their orientation changes over the shutter).
+// `maxSlabs` (with `motion`): at most this many time slabs (1: none, the boxes swept over the whole
+// shutter only); fewer when the slabs' quads would pass `slabBudgetBytes`.
+constexpr int kDefaultTimeSlabs = 16;
+constexpr size_t kTimeSlabBudgetBytes = size_t(512) << 20;
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& forest,
                          bool backfaceFromOrigin = false, std::span<const uint8_t> flip = {},
-                         const FrameMotion* motion = nullptr);
+                         const FrameMotion* motion = nullptr, int maxSlabs = kDefaultTimeSlabs,
+                         size_t slabBudgetBytes = kTimeSlabBudgetBytes);
 
 }  // namespace tessera

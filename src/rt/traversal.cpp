@@ -193,7 +193,7 @@ template <bool kAvx2>
     const uint32_t nQuads = forest.quadsPerPatch;
     // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
     const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
-    const Bvh4Node* wide = bvh.wide.data();
+    const bool slabbed = forest.slabCount > 0;
     thread_local TraverseScratch scratch;
     TraverseScratch& sc = scratch;
     ch.c = StageCounters();
@@ -212,9 +212,13 @@ template <bool kAvx2>
         const Ray4& r4 = sc.ray4[rl];
         const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
         const uint32_t ignore = rays.ignore[r];
+        // A blurred frame's ray traverses the boxes of its time slab (SubpatchForest::slabCount).
+        const int slab = slabbed ? acc.timeSlab(rays.time[r]) : 0;
+        const Bvh& top = slabbed ? acc.slabBvh[size_t(slab)] : bvh;
+        const Bvh4Node* wide = top.wide.data();
         uint32_t stack[kBvh4Stack];
         int sp = 0;
-        if (!bvh.wide.empty()) stack[sp++] = 0;
+        if (!top.wide.empty()) stack[sp++] = 0;
         while (sp > 0) {
             const Bvh4Node& nd = wide[stack[--sp]];
             F4 te4, tx4;
@@ -239,7 +243,7 @@ template <bool kAvx2>
                 const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
                 const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
                 if (tx[i] < selfT || (back && back[0])) continue;
-                sc.pairs.push_back({splatF4(selfT), forest.quadTree(patch),
+                sc.pairs.push_back({splatF4(selfT), forest.quadTree(patch, slab),
                                     cullRay ? forest.quadBackBits(patch) : nullptr, back, uint32_t(r), patch,
                                     rl, te[i], selfT});
             }
