@@ -97,30 +97,51 @@ int runCli(const std::string& args, std::string* output = nullptr) {
 
 }  // namespace
 
-// Through the CLI as a user would, cheaply (64x48, 1 sample per pixel): every regular file directly in
-// scenes/ renders with both engines and covers part of the frame; the archives do not sit beside them.
-TEST(ShippedScenes, EveryFileRendersWithBothEngines) {
+namespace {
+// Every regular file directly in scenes/ (the archives live in scenes/archives/), sorted.
+std::vector<std::string> shippedSceneFiles() {
     const fs::path dir = fs::path(TESSERA_SOURCE_DIR) / "scenes";
-    std::vector<fs::path> files;
+    std::vector<std::string> files;
     for (const auto& e : fs::directory_iterator(dir))
-        if (e.is_regular_file() && e.path().filename() != "README.md") files.push_back(e.path());
+        if (e.is_regular_file() && e.path().filename() != "README.md") files.push_back(e.path().filename());
     std::sort(files.begin(), files.end());
-    ASSERT_GE(files.size(), 7u);
-    EXPECT_TRUE(fs::is_directory(dir / "archives"));
-    const fs::path out = tessera::test::testScratchDir() / "scene.exr";
-    for (const fs::path& f : files)
-        for (const char* engine : {"reyes", "rt"}) {
-            std::string output;
-            int code = runCli("render '" + f.string() + "' --engine " + engine +
-                                  " --res 64x48 --spp 1 -q -o '" + out.string() + "'",
-                              &output);
-            ASSERT_EQ(code, 0) << f.filename() << " with " << engine << ": " << output;
-            Image img = readExr(out.string());
-            double coverage = tessera::test::alphaSum(img) / (64.0 * 48.0);
-            EXPECT_GT(coverage, 0.02) << f.filename() << " with " << engine;
-            fs::remove(out);
-        }
+    return files;
 }
+}  // namespace
+
+TEST(ShippedScenes, TheFolderHoldsScenesAndTheirArchives) {
+    EXPECT_GE(shippedSceneFiles().size(), 7u);
+    EXPECT_TRUE(fs::is_directory(fs::path(TESSERA_SOURCE_DIR) / "scenes" / "archives"));
+}
+
+// Through the CLI as a user would, cheaply (64x48, 1 sample per pixel): each file of scenes/ renders with
+// both engines and covers part of the frame. One test per file (the list is read when the tests are
+// listed, so a new scene gets its test), so that CTest spreads them over its jobs.
+class ShippedSceneFile : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(ShippedSceneFile, RendersWithBothEngines) {
+    const fs::path f = fs::path(TESSERA_SOURCE_DIR) / "scenes" / GetParam();
+    const fs::path out = tessera::test::testScratchDir() / "scene.exr";
+    for (const char* engine : {"reyes", "rt"}) {
+        std::string output;
+        int code = runCli("render '" + f.string() + "' --engine " + engine + " --res 64x48 --spp 1 -q -o '" +
+                              out.string() + "'",
+                          &output);
+        ASSERT_EQ(code, 0) << f.filename() << " with " << engine << ": " << output;
+        Image img = readExr(out.string());
+        double coverage = tessera::test::alphaSum(img) / (64.0 * 48.0);
+        EXPECT_GT(coverage, 0.02) << f.filename() << " with " << engine;
+        fs::remove(out);
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(Files, ShippedSceneFile, ::testing::ValuesIn(shippedSceneFiles()),
+                         [](const ::testing::TestParamInfo<std::string>& info) {
+                             std::string name = info.param;
+                             for (char& c : name)
+                                 if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+                             return name;
+                         });
 
 // ---- default framing of inputs without a camera ----------------------------------------------------
 
