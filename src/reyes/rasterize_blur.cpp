@@ -63,14 +63,50 @@ inline void finishQuad(MovedQuad& q) {
     q.minY = std::min({q.Y[0], q.Y[1], q.Y[2], q.Y[3]}), q.maxY = std::max({q.Y[0], q.Y[1], q.Y[2], q.Y[3]});
 }
 
-template <bool kLens = true>
-inline MovedQuad moveQuad(const Grid& g, const int vid[4], int k, float w, Vec2 lens, const Projector& pr) {
-    MovedQuad q;
-    q.valid = true;
+// A micropolygon's corners over one timeline segment k, read once for all its samples of that segment:
+// position, depth and lens coefficient at knot k and their change to knot k + 1 (0 for a grid of one
+// knot). moveQuad computes from them exactly what moveVertex computes (a + w (b - a), the same float
+// operations), so corners shared with a neighbour stay bit-identical.
+struct CornerSegment {
+    float x[4], dx[4], y[4], dy[4], z[4], dz[4], c[4], dc[4];
+    bool valid;
+    int k = -1;  // the segment held (-1: none yet)
+};
+inline void loadCorners(const Grid& g, const int vid[4], int k, CornerSegment& s) {
+    s.k = k;
+    s.valid = true;
+    const size_t n = size_t(g.vertexCount());
     for (int c = 0; c < 4; ++c) {
-        const MovedVertex m = moveVertex<kLens>(g, size_t(vid[c]), k, w, lens, pr.sx, pr.sy);
-        q.valid &= m.valid;
-        q.X[c] = m.X, q.Y[c] = m.Y, q.Z[c] = m.Z;
+        if (g.knots == 1) {
+            const size_t v = size_t(vid[c]);
+            s.valid &= bool(g.knotValid[v]);
+            s.x[c] = g.knotX[v], s.y[c] = g.knotY[v], s.z[c] = g.knotZ[v], s.c[c] = g.knotC[v];
+            s.dx[c] = s.dy[c] = s.dz[c] = s.dc[c] = 0.f;
+            continue;
+        }
+        const size_t a = size_t(k) * n + size_t(vid[c]), b = a + n;
+        s.valid &= bool(g.knotValid[a] & g.knotValid[b]);
+        s.x[c] = g.knotX[a], s.dx[c] = g.knotX[b] - g.knotX[a];
+        s.y[c] = g.knotY[a], s.dy[c] = g.knotY[b] - g.knotY[a];
+        s.z[c] = g.knotZ[a], s.dz[c] = g.knotZ[b] - g.knotZ[a];
+        s.c[c] = g.knotC[a], s.dc[c] = g.knotC[b] - g.knotC[a];
+    }
+}
+
+template <bool kLens = true>
+inline MovedQuad moveQuad(const CornerSegment& s, float w, Vec2 lens, const Projector& pr) {
+    MovedQuad q;
+    q.valid = s.valid;
+    for (int c = 0; c < 4; ++c) {
+        const float x = s.x[c] + w * s.dx[c], y = s.y[c] + w * s.dy[c];
+        if constexpr (kLens) {
+            const float cc = s.c[c] + w * s.dc[c];
+            q.X[c] = blurredToFixed(x + lens.x * cc * pr.sx);
+            q.Y[c] = blurredToFixed(y + lens.y * cc * pr.sy);
+        } else {
+            q.X[c] = blurredToFixed(x), q.Y[c] = blurredToFixed(y);
+        }
+        q.Z[c] = s.z[c] + w * s.dz[c];
     }
     finishQuad(q);
     return q;
@@ -347,10 +383,12 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
             int64_t sign0;
             openFacing(g, vid, front0, sign0);
             // Sample si at its time and lens point: moved corners, then the exact test.
+            CornerSegment corners;
             auto testAt = [&](size_t si, int k, float w, Vec2 lens) {
                 ++tests;
+                if (k != corners.k) loadCorners(g, vid, k, corners);
                 const MovedQuad q =
-                    lensOn ? moveQuad<true>(g, vid, k, w, lens, pr) : moveQuad<false>(g, vid, k, w, lens, pr);
+                    lensOn ? moveQuad<true>(corners, w, lens, pr) : moveQuad<false>(corners, w, lens, pr);
                 if (!q.valid || !facesCamera(g.twoSided, front0, sign0, q)) return;
                 if (testMovedSampleOnce<kAttributes>(g, vid, q, si, tile, nearZ))
                     tile.pixelHit[si / size_t(spp)] = 1;
