@@ -12,12 +12,12 @@
 #include "core/basis.h"
 #include "io/rib_lexer.h"
 #include "io/rib_reader.h"
-#include "io/rib_writer.h"
 #include "io/rib_shaders.h"
+#include "io/rib_writer.h"
 #include "io/scene_loader.h"
 #include "rib_test_util.h"
-#include "test_support.h"
 #include "shading/registry.h"
+#include "test_support.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -44,7 +44,6 @@ int countWarnings(const std::vector<std::string>& ws, const std::string& part) {
     }
     return n;
 }
-
 
 }  // namespace
 
@@ -510,9 +509,9 @@ TEST(RibFiles, GzippedRib) {
 
 TEST(RibFiles, UnknownRequestsWarnOncePerName) {
     Loaded l = load(scene("set -x\nImager \"background\"\nImager \"background\"",
-                          "Sphere 1 -1 1 360\nSphere 2 -2 2 360"));
+                          "Points \"P\" [0 0 0]\nPoints \"P\" [1 1 1]"));
     EXPECT_EQ(countWarnings(l.warnings, "'Imager'"), 1);
-    EXPECT_EQ(countWarnings(l.warnings, "'Sphere'"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "'Points'"), 1);
     EXPECT_EQ(countWarnings(l.warnings, "'set'"), 1);
     EXPECT_EQ(l.scene.patches.size(), 1u);
 }
@@ -805,11 +804,13 @@ TEST(RibShaderTables, MatchTheShaderRegistry) {
         ASSERT_NE(t, nullptr) << s.name;
         EXPECT_EQ(t->type, s.type) << s.name;
     }
-    for (const rib::SurfaceShader& t : rib::surfaceShaders()) EXPECT_NE(tessera::findSurfaceShader(t.name), nullptr);
+    for (const rib::SurfaceShader& t : rib::surfaceShaders())
+        EXPECT_NE(tessera::findSurfaceShader(t.name), nullptr);
     for (const LightShaderInfo& l : tessera::lightShaders()) {
         const rib::LightShader* t = rib::findLightShader(l.name);
         ASSERT_NE(t, nullptr) << l.name;
         EXPECT_EQ(t->type, l.type) << l.name;
     }
-    for (const rib::LightShader& t : rib::lightShaders()) EXPECT_NE(tessera::findLightShader(t.name), nullptr);
+    for (const rib::LightShader& t : rib::lightShaders())
+        EXPECT_NE(tessera::findLightShader(t.name), nullptr);
 }

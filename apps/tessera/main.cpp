@@ -547,7 +547,8 @@ int runConvert(const std::string& in, const std::string& out, const std::string&
         fmt::print(stderr, "{}\n", e.what());
         return 1;
     }
-    fmt::print(stderr, "{}: {} patches written\n", out, scene.patches.size());
+    fmt::print(stderr, "{}: {} patches{} written\n", out, scene.patches.size() - scene.quadrics.size(),
+               scene.quadrics.empty() ? "" : fmt::format(" and {} quadrics", scene.quadrics.size()));
     return 0;
 }
 
@@ -557,7 +558,17 @@ int runInfo(const std::string& path, const std::string& formatName, const std::s
     Bounds3 b = scene.worldBounds();
     const Camera& c = scene.camera;
     fmt::print("scene:    {}\n", path);
-    fmt::print("patches:  {}\n", scene.patches.size());
+    fmt::print("patches:  {}\n", scene.patches.size() - scene.quadrics.size());
+    if (!scene.quadrics.empty()) {
+        // Per quadric kind, in SurfaceKind order: "quadrics: 7 (sphere 1, cylinder 1, ...)".
+        const auto count = surfaceKindCounts(scene);
+        std::string kinds;
+        for (int k = 1; k < kSurfaceKinds; ++k)
+            if (count[k])
+                kinds += fmt::format("{}{} {}", kinds.empty() ? "" : ", ", surfaceKindName(SurfaceKind(k)),
+                                     count[k]);
+        fmt::print("quadrics: {} ({})\n", scene.quadrics.size(), kinds);
+    }
     fmt::print("objects:  {}\n", scene.objectCount);
     fmt::print("lights:   {}\n", scene.lights.size());
     fmt::print("bounds:   ({:.6g}, {:.6g}, {:.6g}) - ({:.6g}, {:.6g}, {:.6g})\n", b.lo.x, b.lo.y, b.lo.z,

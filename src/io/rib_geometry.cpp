@@ -474,6 +474,165 @@ PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c) {
     return std::move(reader.shape());
 }
 
+bool isQuadricRequest(const std::string& name) {
+    return name == "Sphere" || name == "Cylinder" || name == "Cone" || name == "Disk" ||
+           name == "Paraboloid" || name == "Hyperboloid" || name == "Torus";
+}
+
+namespace {
+
+// The primitive's attributes from the graphics state (one object id per call); the orientation rule of
+// RI spec 4.2.4 at shutter open.
+PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& ctm) {
+    Scene& scene = c.scene;
+    PatchAttributes a;
+    a.material = materialIndex(scene, c.state.attributes().surface);
+    a.object = scene.objectCount++;
+    a.shadingRate = c.state.attributes().shadingRate;
+    a.twoSided = c.state.attributes().twoSided;
+    a.motionFactor = c.state.attributes().motionFactor;
+    a.focusFactor = c.state.attributes().focusFactor;
+    const bool mirrored = (scene.camera.cameraFromWorld * ctm.at(scene.camera.shutterOpen)).det3() < 0;
+    a.flipNormal = c.state.attributes().rightHanded != mirrored;
+    return a;
+}
+
+}  // namespace
+
+void addQuadric(const Request& r, const PrimitiveContext& c) {
+    if (!c.state.inWorld()) c.diag.fail(r.line, r.name + " outside WorldBegin/WorldEnd");
+    struct Form {
+        const char* name;
+        QuadricKind kind;
+        size_t count;
+        const char* usage;
+    };
+    static const Form kForms[] = {
+        {"Sphere", QuadricKind::Sphere, 4, "radius zmin zmax thetamax"},
+        {"Cylinder", QuadricKind::Cylinder, 4, "radius zmin zmax thetamax"},
+        {"Cone", QuadricKind::Cone, 3, "height radius thetamax"},
+        {"Disk", QuadricKind::Disk, 3, "height radius thetamax"},
+        {"Paraboloid", QuadricKind::Paraboloid, 4, "rmax zmin zmax thetamax"},
+        {"Hyperboloid", QuadricKind::Hyperboloid, 7, "x1 y1 z1 x2 y2 z2 thetamax"},
+        {"Torus", QuadricKind::Torus, 5, "majorradius minorradius phimin phimax thetamax"},
+    };
+    const Form* form = nullptr;
+    for (const Form& f : kForms)
+        if (r.name == f.name) form = &f;
+    // The leading numbers (one by one or as one array), then the parameter list.
+    std::vector<double> a;
+    size_t start = 0;
+    for (; start < r.args.size() && r.args[start].numeric(); ++start)
+        a.insert(a.end(), r.args[start].nums.begin(), r.args[start].nums.end());
+    if (a.size() != form->count)
+        c.diag.fail(r.line, r.name + " expects " + std::to_string(form->count) + " numbers (" + form->usage +
+                                "), got " + std::to_string(a.size()));
+    for (size_t i = 0; i < a.size(); ++i)
+        if (!std::isfinite(a[i]) || std::fabs(a[i]) > 1e30)
+            c.diag.fail(r.line, r.name + ": argument " + std::to_string(i + 1) + " is not a finite number");
+    // Vertex and varying values sit at the four corners of the (u,v) square (RI spec 5.4).
+    auto ps = parseParams(r, start, c.decls, c.diag, [](const std::string& cls) -> size_t {
+        return cls == "vertex" || cls == "varying" || cls == "facevarying" || cls == "facevertex" ? 4 : 1;
+    });
+    for (const Param& p : ps) warnIgnoredParam(p, r.name, c.diag);
+
+    constexpr double kDeg = 3.14159265358979323846 / 180.0;
+    auto empty = [&](const std::string& why) {
+        c.diag.warn(r.line, r.name + ": " + why + ": an empty surface (RI spec 5.4), nothing rendered");
+    };
+    Quadric q;
+    q.kind = form->kind;
+    const double thetaMax = std::clamp(a.back(), -360.0, 360.0);
+    if (thetaMax == 0.0) return empty("thetamax is 0");
+    q.thetaMax = float(thetaMax * kDeg);
+    q.closedU = std::fabs(thetaMax) >= 360.0;
+    switch (form->kind) {
+        case QuadricKind::Sphere: {
+            // zmin and zmax are clamped to the sphere (as PRMan and Aqsis do); zmin > zmax reverses v.
+            if (a[0] == 0.0) return empty("radius is 0");
+            const double rr = std::fabs(a[0]);
+            const double z0 = std::clamp(a[1], -rr, rr), z1 = std::clamp(a[2], -rr, rr);
+            if (z0 == z1) return empty("zmin equals zmax (after clamping to the radius)");
+            q.radius = float(a[0]), q.zMin = float(z0), q.zMax = float(z1);
+            q.angle0 = float(std::asin(z0 / a[0])), q.angle1 = float(std::asin(z1 / a[0]));
+            // The clamped ends at the poles are exactly +-pi/2 in single precision: quadricProfile puts
+            // those vertices on the axis.
+            break;
+        }
+        case QuadricKind::Cylinder:
+            if (a[0] == 0.0) return empty("radius is 0");
+            if (a[1] == a[2]) return empty("zmin equals zmax");
+            q.radius = float(a[0]), q.zMin = float(a[1]), q.zMax = float(a[2]);
+            break;
+        case QuadricKind::Cone:
+        case QuadricKind::Disk:
+            if (a[1] == 0.0) return empty("radius is 0");
+            q.height = float(a[0]), q.radius = float(a[1]);
+            // A cone of height 0 is the disk at z = 0, parametrised the same way.
+            if (form->kind == QuadricKind::Cone && a[0] == 0.0) q.kind = QuadricKind::Disk;
+            break;
+        case QuadricKind::Paraboloid:
+            if (a[2] == 0.0)
+                c.diag.fail(r.line, "Paraboloid: zmax must not be 0 (the radius is rmax sqrt(z / zmax))");
+            if (a[0] == 0.0) return empty("rmax is 0");
+            if (a[1] == a[2]) return empty("zmin equals zmax");
+            if (a[1] / a[2] < 0.0)
+                c.diag.fail(r.line, "Paraboloid: zmin (" + std::to_string(a[1]) + ") and zmax (" +
+                                        std::to_string(a[2]) + ") must lie on the same side of z = 0");
+            q.radius = float(a[0]), q.zMin = float(a[1]), q.zMax = float(a[2]);
+            break;
+        case QuadricKind::Hyperboloid:
+            q.point1 = {float(a[0]), float(a[1]), float(a[2])};
+            q.point2 = {float(a[3]), float(a[4]), float(a[5])};
+            if (q.point1 == q.point2) return empty("point1 equals point2");
+            if (q.point1.z == q.point2.z && q.point1.x * q.point2.y == q.point1.y * q.point2.x &&
+                q.point1.x * q.point2.x + q.point1.y * q.point2.y >= 0.f &&
+                q.point1.x * q.point1.x + q.point1.y * q.point1.y ==
+                    q.point2.x * q.point2.x + q.point2.y * q.point2.y)
+                return empty("the segment sweeps no area");
+            if (q.point1.x == 0.f && q.point1.y == 0.f && q.point2.x == 0.f && q.point2.y == 0.f)
+                return empty("the segment lies on the z axis");
+            break;
+        case QuadricKind::Torus: {
+            if (a[1] == 0.0) return empty("minorradius is 0");
+            const double p0 = std::clamp(a[2], -360.0, 360.0), p1 = std::clamp(a[3], -360.0, 360.0);
+            if (p0 == p1) return empty("phimin equals phimax");
+            q.radius = float(a[0]), q.minorRadius = float(a[1]);
+            q.angle0 = float(p0 * kDeg),
+            q.angle1 =
+                float(std::fabs(p1 - p0) >= 360.0 ? p0 * kDeg + (p1 > p0 ? 2 : -2) * 3.14159265358979323846
+                                                  : p1 * kDeg);
+            q.closedV = std::fabs(p1 - p0) >= 360.0;
+            break;
+        }
+    }
+
+    Scene& scene = c.scene;
+    const Transform& ctm = c.state.transform();
+    if (ctm.moving())
+        c.diag.warnOnce("quadricmotion", r.line,
+                        r.name +
+                            " under a moving transformation: quadrics do not move yet; rendered at "
+                            "shutter open");
+    SceneQuadric sq;
+    sq.q = q;
+    sq.worldFromObject = ctm.at(scene.camera.shutterOpen);
+    if (std::fabs(sq.worldFromObject.det3()) < 1e-30 || !std::isfinite(sq.worldFromObject.det3()))
+        c.diag.fail(r.line, r.name + ": the current transformation is singular or not finite");
+    PatchAttributes attr = primitiveAttributes(c, ctm);
+    attr.kind = surfaceKindOf(q.kind);
+    attr.shape = uint32_t(scene.quadrics.size());
+    // The surface's slot in Scene::patches: the hull of its box in world space (bounds, framing).
+    Vec3 corners[8];
+    quadricHullCorners(placeQuadric(sq, Mat4::identity()), 0.f, 1.f, 0.f, 1.f, corners);
+    BezierPatch hull;
+    for (int k = 0; k < 16; ++k) hull.cp[k] = corners[k % 8];
+    checkFinite(hull, r.line, c.diag);
+    scene.quadrics.push_back(sq);
+    scene.patches.push_back(hull);
+    scene.attributes.push_back(attr);
+}
+
 void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<double>& times,
                   const PrimitiveContext& c) {
     for (const PrimitiveShape& k : keys)
@@ -482,17 +641,9 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
     const Transform& ctm = c.state.transform();
     const double open = scene.camera.shutterOpen;
     const int line = keys.front().line;
-    PatchAttributes a;
-    a.material = materialIndex(scene, c.state.attributes().surface);
-    a.object = scene.objectCount++;
-    a.shadingRate = c.state.attributes().shadingRate;
-    a.twoSided = c.state.attributes().twoSided;
-    a.motionFactor = c.state.attributes().motionFactor;
-    a.focusFactor = c.state.attributes().focusFactor;
     // RI spec 4.2.4: the surface's outside depends on the orientation attribute and on the handedness of
     // the current (object-to-camera) transformation, here at shutter open.
-    const bool mirrored = (scene.camera.cameraFromWorld * ctm.at(open)).det3() < 0;
-    a.flipNormal = c.state.attributes().rightHanded != mirrored;
+    const PatchAttributes a = primitiveAttributes(c, ctm);
 
     // The key times: the deformation keys' and the CTM's (refined to 2 degrees per segment).
     std::optional<std::vector<double>> ctmTimes = ctm.sampleTimes();

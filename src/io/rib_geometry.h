@@ -35,6 +35,13 @@ struct PrimitiveShape {
 };
 
 bool isPrimitiveRequest(const std::string& name);
+// Sphere, Cylinder, Cone, Disk, Paraboloid, Hyperboloid, Torus (RI spec 3.2, sec. 5.4).
+bool isQuadricRequest(const std::string& name);
+// Adds one quadric (r.name) to the scene as its own surface kind, with the attributes and the CTM of the
+// graphics state. A moving CTM is taken at shutter open, with one warning (quadrics do not move).
+// Degenerate parameters that RI defines as an empty surface (radius, height range or sweep of 0) add
+// nothing and warn; malformed ones (wrong counts, non-finite values, a paraboloid crossing z = 0) fail.
+void addQuadric(const Request& r, const PrimitiveContext& c);
 // Reads Patch, PatchMesh, NuPatch or SubdivisionMesh (r.name) without adding it to the scene.
 PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c);
 // Adds one primitive to the scene with the attributes and the CTM of the graphics state. `keys` holds one

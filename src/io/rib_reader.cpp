@@ -49,9 +49,9 @@ class RibReader {
             diag_.fail(lex.eofLine(), std::string("end of file inside ") + blockName(s->block) +
                                           " block opened at " + s->file + ":" + std::to_string(s->line));
         if (scene_.patches.empty())
-            diag_.fail(
-                lex.eofLine(),
-                "no geometry: the file has no Patch, PatchMesh, NuPatch or SubdivisionMesh primitives");
+            diag_.fail(lex.eofLine(),
+                       "no geometry: the file has no Patch, PatchMesh, NuPatch, SubdivisionMesh or quadric "
+                       "primitives");
         if (scene_.lights.empty())
             diag_.warn(lex.eofLine(), "no light sources: only \"constant\" surfaces will be visible");
     }
@@ -669,6 +669,7 @@ class RibReader {
         shape.push_back(readPrimitiveShape(r, primitiveContext()));
         addPrimitive(shape, {}, primitiveContext());
     }
+    void quadric(const Request& r, const Arguments&) { addQuadric(r, primitiveContext()); }
 
     // ---- motion blocks (RI spec 3.2, sec. 6) -----------------------------------------------------
     // MotionBegin [t0 t1 ...] ... MotionEnd: every request in the block gives one key, in the order of the
@@ -680,10 +681,10 @@ class RibReader {
         int line = 0;
         std::string kind;  // the first request's name
         int kindLine = 0;
-        size_t count = 0;                    // requests so far
-        std::vector<Mat4> matrices;          // transformation keys
+        size_t count = 0;                              // requests so far
+        std::vector<Mat4> matrices;                    // transformation keys
         std::vector<std::array<double, 4>> rotations;  // Rotate keys: angle dx dy dz
-        std::vector<PrimitiveShape> shapes;  // deformation keys
+        std::vector<PrimitiveShape> shapes;            // deformation keys
     };
     void motionBegin(const Request& r, const Arguments&) {
         MotionBlock m;
@@ -749,13 +750,14 @@ class RibReader {
                                                        "Curves",         "Blobby",
                                                        "TrimCurve"};
         const bool transform = isMovingTransform(r.name), primitive = isPrimitiveRequest(r.name),
-                   shade = shading.count(r.name) > 0, unsupported = !h && riMoving.count(r.name) > 0;
+                   shade = shading.count(r.name) > 0, quadric = isQuadricRequest(r.name),
+                   unsupported = !h && riMoving.count(r.name) > 0;
         if (!h && !unsupported) {  // not a RI request we know: ignored as anywhere else
             diag_.warnOnce("request:" + r.name, r.line,
                            "unknown or unsupported request '" + r.name + "' ignored");
             return;
         }
-        if (!transform && !primitive && !shade && !unsupported)
+        if (!transform && !primitive && !shade && !quadric && !unsupported)
             diag_.fail(r.line, r.name + " is not allowed inside a motion block" + where +
                                    ": RI spec 3.2, sec. 6 allows only transformations, geometric primitives "
                                    "and shading requests there");
@@ -793,6 +795,11 @@ class RibReader {
                 diag_.warnOnce(
                     "motion:" + r.name, r.line,
                     r.name + " in a motion block: moving shading is not supported; the first key is used");
+            if (quadric)
+                diag_.warnOnce("motion:" + r.name, r.line,
+                               r.name +
+                                   " in a motion block: moving quadrics are not supported; the first key "
+                                   "is used");
             if (h)
                 (this->*h)(r, args);
             else
@@ -935,6 +942,13 @@ class RibReader {
             {"PatchMesh", &RibReader::primitive},
             {"NuPatch", &RibReader::primitive},
             {"SubdivisionMesh", &RibReader::primitive},
+            {"Sphere", &RibReader::quadric},
+            {"Cylinder", &RibReader::quadric},
+            {"Cone", &RibReader::quadric},
+            {"Disk", &RibReader::quadric},
+            {"Paraboloid", &RibReader::quadric},
+            {"Hyperboloid", &RibReader::quadric},
+            {"Torus", &RibReader::quadric},
             {"ReadArchive", &RibReader::readArchive},
         };
         auto it = handlers.find(name);

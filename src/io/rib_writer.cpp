@@ -85,11 +85,49 @@ void writeSurface(std::ostream& o, const Material& m) {
         case MaterialType::Plastic:
         case MaterialType::PaintedPlastic:
         default:
-            o << "Surface \"" << (m.type == MaterialType::PaintedPlastic ? "paintedplastic" : "plastic") << "\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" ["
-              << num(m.Ks) << "] \"roughness\" [" << num(m.roughness) << "] \"specularcolor\" ["
-              << triple(m.specularColor) << "]\n";
+            o << "Surface \"" << (m.type == MaterialType::PaintedPlastic ? "paintedplastic" : "plastic")
+              << "\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" [" << num(m.Ks)
+              << "] \"roughness\" [" << num(m.roughness) << "] \"specularcolor\" [" << triple(m.specularColor)
+              << "]\n";
             break;
     }
+}
+
+// A quadric request in its own transformation block (its object-to-world matrix, and the orientation
+// that makes the reader flip it as it was flipped: RI spec 4.2.4 with that matrix).
+void quadric(std::ostream& o, const SceneQuadric& sq, bool rightHanded) {
+    const Quadric& q = sq.q;
+    constexpr double kDeg = 180.0 / 3.14159265358979323846;
+    o << "AttributeBegin\nOrientation \"" << (rightHanded ? "rh" : "lh") << "\"\nConcatTransform [";
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) o << (i + j ? " " : "") << num(sq.worldFromObject.m[j][i]);
+    o << "]\n";
+    const std::string theta = q.closedU ? (q.thetaMax < 0 ? "-360" : "360") : num(double(q.thetaMax) * kDeg);
+    switch (q.kind) {
+        case QuadricKind::Sphere:
+            o << "Sphere " << num(q.radius) << " " << num(q.zMin) << " " << num(q.zMax) << " " << theta;
+            break;
+        case QuadricKind::Cylinder:
+            o << "Cylinder " << num(q.radius) << " " << num(q.zMin) << " " << num(q.zMax) << " " << theta;
+            break;
+        case QuadricKind::Cone:
+            o << "Cone " << num(q.height) << " " << num(q.radius) << " " << theta;
+            break;
+        case QuadricKind::Disk:
+            o << "Disk " << num(q.height) << " " << num(q.radius) << " " << theta;
+            break;
+        case QuadricKind::Paraboloid:
+            o << "Paraboloid " << num(q.radius) << " " << num(q.zMin) << " " << num(q.zMax) << " " << theta;
+            break;
+        case QuadricKind::Hyperboloid:
+            o << "Hyperboloid " << triple(q.point1) << " " << triple(q.point2) << " " << theta;
+            break;
+        case QuadricKind::Torus:
+            o << "Torus " << num(q.radius) << " " << num(q.minorRadius) << " " << num(double(q.angle0) * kDeg)
+              << " " << num(double(q.angle1) * kDeg) << " " << theta;
+            break;
+    }
+    o << "\nAttributeEnd\n";
 }
 
 }  // namespace
@@ -97,7 +135,9 @@ void writeSurface(std::ostream& o, const Material& m) {
 void writeRib(const Scene& scene, std::ostream& o) {
     const Camera& cam = scene.camera;
     o << "##RenderMan RIB\n";
-    o << "# Written by tessera: " << scene.patches.size() << " bicubic Bezier patches";
+    o << "# Written by tessera: " << scene.patches.size() - scene.quadrics.size()
+      << " bicubic Bezier patches";
+    if (!scene.quadrics.empty()) o << " and " << scene.quadrics.size() << " quadrics";
     if (!scene.sourcePath.empty()) {
         std::string src = scene.sourcePath;
         for (char& c : src)
@@ -186,8 +226,8 @@ void writeRib(const Scene& scene, std::ostream& o) {
             case LightType::Spot:
                 o << "LightSource \"spotlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
                   << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to)
-                  << "] \"coneangle\" [" << num(l.coneAngle) << "] \"conedeltaangle\" [" << num(l.coneDeltaAngle)
-                  << "] \"beamdistribution\" [" << num(l.beamDistribution) << "]\n";
+                  << "] \"coneangle\" [" << num(l.coneAngle) << "] \"conedeltaangle\" ["
+                  << num(l.coneDeltaAngle) << "] \"beamdistribution\" [" << num(l.beamDistribution) << "]\n";
                 break;
         }
     }
@@ -219,7 +259,11 @@ void writeRib(const Scene& scene, std::ostream& o) {
                 for (int k = 0; k < 16; ++k) o << (k ? " " : "") << triple(p.cp[k]);
                 o << "]\n";
             };
-            if (b.motion.moving()) {  // deformation keys, world space (RI spec 3.2, sec. 6)
+            if (isQuadric(b.kind) && b.shape < scene.quadrics.size()) {
+                const SceneQuadric& q = scene.quadrics[b.shape];
+                const bool qMirrored = (cam.cameraFromWorld * q.worldFromObject).det3() < 0;
+                quadric(o, q, b.flipNormal != qMirrored);
+            } else if (b.motion.moving()) {  // deformation keys, world space (RI spec 3.2, sec. 6)
                 o << "MotionBegin [";
                 for (uint32_t k = 0; k < b.motion.count; ++k)
                     o << (k ? " " : "") << num(scene.motionTimes[b.motion.first + k]);

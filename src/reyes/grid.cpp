@@ -12,8 +12,8 @@ int snapIndex(int i, int n, int segments) {
     return (2 * i * segments + n) / (2 * n);
 }
 
-// Dice and shade a piece of a bicubic Bezier patch.
-void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
+// Dice and shade a piece of a bicubic Bezier patch or, with shade.quadric, of a quadric.
+void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     const BezierPatch& patch = view.patches[piece.patch];
     const PieceEdge* e = piece.edge;
     const int nu = pieceGridU(piece), nv = pieceGridV(piece);
@@ -37,7 +37,8 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
     Ci.resize(count);
     // Where each vertex came from: its (u,v) (for shadow rays' self-intersection guard), and its edge and
     // lattice point, to evaluate it again at the other knots of a moving patch.
-    const bool moves = view.patchMoves(piece.patch) && view.knotCount() > 1;
+    const PlacedQuadric* quadric = shade.quadric;
+    const bool moves = !quadric && view.patchMoves(piece.patch) && view.knotCount() > 1;
     thread_local std::vector<Vec2> UVs;
     thread_local std::vector<int> owners, lattice;
     UVs.resize(count);
@@ -74,19 +75,28 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
             }
             const int v = j * (nu + 1) + i;
             if (shade.depthOnly) {  // a shadow map's pass: positions only
-                const Vec3 P = owner ? latticePosition(patch, *owner, k) : evalPatch(patch, uv.x, uv.y);
+                const Vec3 P =
+                    quadric ? quadricPoint(*quadric, uv)
+                            : (owner ? latticePosition(patch, *owner, k) : evalPatch(patch, uv.x, uv.y));
                 const Vec3 r = view.projector.toRaster(P);
                 grid.X[v] = rasterToFixed(r.x);
                 grid.Y[v] = rasterToFixed(r.y);
                 grid.Z[v] = P.z;
                 continue;
             }
-            SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
-            Vec3 P = owner ? latticePosition(patch, *owner, k) : sp.p;
-            Vec3 N = cross(sp.dpdu, sp.dpdv);
-            float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);
-            if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(patch, uv.x, uv.y);
-            N = normalize(N);
+            Vec3 P, N;
+            if (quadric) {
+                // Closed form: on an edge uv is the lattice point's own (latticeUV), so neighbours agree.
+                P = quadricPoint(*quadric, uv);
+                evalPlacedQuadric(*quadric, uv.x, uv.y, &N);
+            } else {
+                SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
+                P = owner ? latticePosition(patch, *owner, k) : sp.p;
+                N = cross(sp.dpdu, sp.dpdv);
+                float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);
+                if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(patch, uv.x, uv.y);
+                N = normalize(N);
+            }
             if (shade.flipNormal) N = -N;
 
             UVs[v] = uv;
@@ -221,7 +231,15 @@ void diceAndShadeBezier(const ReyesView& view, const Piece& piece, const ShadeIn
 void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     switch (shade.kind) {
         case SurfaceKind::BicubicBezier:
-            diceAndShadeBezier(view, piece, shade, grid);
+        case SurfaceKind::Sphere:
+        case SurfaceKind::Cylinder:
+        case SurfaceKind::Cone:
+        case SurfaceKind::Disk:
+        case SurfaceKind::Paraboloid:
+        case SurfaceKind::Hyperboloid:
+        case SurfaceKind::Torus:
+            // One dicer: the kinds differ only in how a (u,v) is evaluated (shade.quadric).
+            diceAndShadeSurface(view, piece, shade, grid);
             return;
     }
 }

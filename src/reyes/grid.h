@@ -66,6 +66,9 @@ struct ShadeInputs {
     // both sides, no normals or shading. Static patches only (the pass renders shutter open).
     bool depthOnly = false;
     bool wantShadowCounts = false;  // the film carries the shadow-count channel
+    // Quadric kinds: the quadric in camera space (ReyesView::quadrics[shape]); its closed form gives every
+    // vertex's position and normal. Quadrics do not move (the reader takes them at shutter open).
+    const PlacedQuadric* quadric = nullptr;
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

@@ -15,6 +15,13 @@ std::vector<BezierPatch> patchesInCameraSpace(const Scene& scene, const Mat4& ca
     return patches;
 }
 
+std::vector<PlacedQuadric> quadricsInSpace(const Scene& scene, const Mat4& toSpace) {
+    std::vector<PlacedQuadric> out;
+    out.reserve(scene.quadrics.size());
+    for (const SceneQuadric& q : scene.quadrics) out.push_back(placeQuadric(q, toSpace));
+    return out;
+}
+
 std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
                                 const std::atomic<bool>* cancel, SplitStats& stats) {
     const size_t n = scene.patches.size();

@@ -19,6 +19,12 @@ namespace tessera {
 
 // The scene's patches (at shutter open) in the space of `cameraFromWorld` (Bezier patches are affine
 // invariant: the control points are transformed).
+// The scene's quadrics placed in the space `toSpace` maps world space to (Scene::quadrics order).
+std::vector<PlacedQuadric> quadricsInSpace(const Scene& scene, const Mat4& toSpace);
+// The quadric a surface's dicing needs (nullptr for the Bezier kind).
+inline const PlacedQuadric* quadricOf(const ReyesView& view, const PatchAttributes& attr) {
+    return isQuadric(attr.kind) ? &view.quadrics[attr.shape] : nullptr;
+}
 std::vector<BezierPatch> patchesInCameraSpace(const Scene& scene, const Mat4& cameraFromWorld);
 
 struct SplitStats {

@@ -82,8 +82,10 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     }
     const double weldMs = msSince(tWeld);
 
+    const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, cam.cameraFromWorld);
     ReyesView view(cam);
     view.patches = patches.data();
+    view.quadrics = quadrics.data();
     view.projector = frame.projector;
     view.lens = frame.blur.lens;
     if (motion.blurred()) {
@@ -145,7 +147,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                                (settings.output.channels & kChannelNormal) != 0,
                                visibility,
                                false,
-                               (settings.output.channels & kChannelShadowCount) != 0};
+                               (settings.output.channels & kChannelShadowCount) != 0,
+                               quadricOf(view, attr)};
                 diceAndShade(view, piece, in, g);
                 ++tc.grids;
                 tc.micropolygons += uint64_t(g.nu) * g.nv;
@@ -176,7 +179,12 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     result.cancelled = loop.cancelled;
     nlohmann::json& s = result.stats;
     s["engine"] = "reyes";
-    s["patches_in"] = scene.patches.size();
+    s["patches_in"] = scene.patches.size();  // surfaces of every kind
+    nlohmann::json kinds = nlohmann::json::object();
+    const auto kindCount = surfaceKindCounts(scene);
+    for (int k = 0; k < kSurfaceKinds; ++k)
+        if (kindCount[k]) kinds[surfaceKindName(SurfaceKind(k))] = kindCount[k];
+    s["surfaces"] = kinds;
     s["patches_culled"] = splitStats.patchesCulled;
     s["pieces_culled"] = splitStats.pieceCulls;
     s["splits"] = splitStats.splits;

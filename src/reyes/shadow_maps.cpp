@@ -72,8 +72,10 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     // Bound: the patches in the light's space, shared edges welded (cracks would be light leaks).
     std::vector<BezierPatch> patches = patchesInCameraSpace(scene, lightCamera.cameraFromWorld);
     weldSharedEdges(patches, defaultWeldTolerance(patches));
+    const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, lightCamera.cameraFromWorld);
     ReyesView view(lightCamera);
     view.patches = patches.data();
+    view.quadrics = quadrics.data();
     // Geometry nearer to a light than 1% of the scene's size is diced as if it were that far: texels are
     // tiny there, and edges passing beside the light would otherwise be diced at the rate cap.
     if (lightCamera.perspective) {
@@ -117,6 +119,7 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
                 ShadeInputs in{attr.kind,  &scene.materials[attr.material], true, attr.flipNormal, {},
                                attr.object};
                 in.depthOnly = true;
+                in.quadric = quadricOf(view, attr);
                 diceAndShade(view, piece, in, g);
                 ++w.grids;
                 w.micropolygons += uint64_t(g.nu) * g.nv;

@@ -59,8 +59,34 @@ PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, f
     return edge;
 }
 
+// Boundary edge e of a quadric's (u,v) square: canonical endpoints by position as for the patches, so
+// the two sides of a closed sweep's seam (u = 0 and u = 1; a closed torus' v = 0 and v = 1) evaluate the
+// same lattice points (quadricPhi evaluates u = 1 there as u = 0).
+PieceEdge quadricBoundaryEdge(const ReyesView& view, const PlacedQuadric& pq, int e, float side) {
+    static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
+    static const Vec2 kEnd[4] = {{1, 0}, {1, 1}, {1, 1}, {0, 1}};
+    PieceEdge edge;
+    const Vec3 p0 = quadricPoint(pq, kStart[e]), p1 = quadricPoint(pq, kEnd[e]);
+    // Endpoints at one point (a closed sweep's edge): the midpoints decide, so both seam sides agree.
+    const Vec3 m = quadricPoint(pq, {0.5f * (kStart[e].x + kEnd[e].x), 0.5f * (kStart[e].y + kEnd[e].y)});
+    const Vec3 q1 =
+        quadricPoint(pq, {0.75f * kStart[e].x + 0.25f * kEnd[e].x, 0.75f * kStart[e].y + 0.25f * kEnd[e].y});
+    const bool reverse = lexLess(p1, p0) || (p1 == p0 && lexLess(m, q1));
+    edge.a = reverse ? kEnd[e] : kStart[e];
+    edge.b = reverse ? kStart[e] : kEnd[e];
+    edge.boundary = int8_t(e);
+    edge.reversed = reverse;
+    edge.total = measureRate(view, side, [&](float t) {
+        return quadricPoint(pq, {edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t});
+    });
+    edge.k0 = 0;
+    edge.k1 = edge.total;
+    return edge;
+}
+
 // A new interior source edge from (u,v) point p to q, walked p -> q by the piece that owns it.
-PieceEdge interiorEdge(const ReyesView& view, const BezierPatch& patch, Vec2 p, Vec2 q, float side) {
+template <class PointAt>
+PieceEdge interiorEdge(const ReyesView& view, PointAt&& surfaceAt, Vec2 p, Vec2 q, float side) {
     PieceEdge edge;
     bool swap = (q.x < p.x) || (q.x == p.x && q.y < p.y);
     edge.a = swap ? q : p;
@@ -69,7 +95,7 @@ PieceEdge interiorEdge(const ReyesView& view, const BezierPatch& patch, Vec2 p, 
     edge.boundary = -1;
     edge.total = measureRate(view, side, [&](float t) {
         Vec2 uv{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t};
-        return evalPatch(patch, uv.x, uv.y);
+        return surfaceAt(uv);
     });
     edge.k0 = 0;
     edge.k1 = edge.total;
@@ -93,21 +119,39 @@ void cutEdge(const PieceEdge& e, int& cutK, PieceEdge& first, PieceEdge& second)
 enum class Verdict { Cull, Split, SplitNear, Dice };
 
 // Raster rectangle of the projected control points of a hull lying in front of the eye.
-void hullRaster(const Projector& pr, const BezierPatch& hull, float& x0, float& y0, float& x1, float& y1) {
+void hullRaster(const Projector& pr, const Vec3* hull, int count, float& x0, float& y0, float& x1,
+                float& y1) {
     x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
-    for (const Vec3& c : hull.cp) {
-        Vec3 r = pr.toRaster(c);
+    for (int i = 0; i < count; ++i) {
+        Vec3 r = pr.toRaster(hull[i]);
         x0 = std::min(x0, r.x), x1 = std::max(x1, r.x);
         y0 = std::min(y0, r.y), y1 = std::max(y1, r.y);
     }
 }
 
-Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) {
+// The piece's (u,v) bounding rectangle's hull at knot k, into pts (at most 16 points); returns the count.
+struct PieceHull {
+    const ReyesView& view;
+    const BezierPatch* patch = nullptr;      // bicubic Bezier
+    const PlacedQuadric* quadric = nullptr;  // quadric kinds (camera space)
+    int operator()(int k, uint32_t index, float u0, float u1, float v0, float v1, Vec3 pts[16]) const {
+        if (quadric) {
+            quadricHullCorners(*quadric, u0, u1, v0, v1, pts);
+            return 8;
+        }
+        const bool whole = u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f;
+        const BezierPatch& source = k == 0 ? *patch : view.knotPatches[k][index];
+        const BezierPatch hull = whole ? source : subPatch(source, u0, u1, v0, v1);
+        for (int i = 0; i < 16; ++i) pts[i] = hull.cp[i];
+        return 16;
+    }
+};
+
+Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
     float u0 = std::min(std::min(piece.uv[0].x, piece.uv[1].x), std::min(piece.uv[2].x, piece.uv[3].x));
     float u1 = std::max(std::max(piece.uv[0].x, piece.uv[1].x), std::max(piece.uv[2].x, piece.uv[3].x));
     float v0 = std::min(std::min(piece.uv[0].y, piece.uv[1].y), std::min(piece.uv[2].y, piece.uv[3].y));
     float v1 = std::max(std::max(piece.uv[0].y, piece.uv[1].y), std::max(piece.uv[2].y, piece.uv[3].y));
-    const bool whole = u0 == 0.f && u1 == 1.f && v0 == 0.f && v1 == 1.f;
     const Projector& pr = view.projector;
     // The quad lies inside its (u,v) bounding rectangle, whose control hull bounds the surface. A moving
     // patch is bounded at every knot of the shutter: between knots its control points move linearly, so
@@ -118,9 +162,10 @@ Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) 
     float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
     float sharpW = 0, sharpH = 0;
     for (int k = 0; k < knots; ++k) {
-        const BezierPatch& source = k == 0 ? patch : view.knotPatches[k][piece.patch];
-        const BezierPatch hull = whole ? source : subPatch(source, u0, u1, v0, v1);
-        const Bounds3 b = hullBounds(hull);
+        Vec3 hull[16];
+        const int count = hullOf(k, piece.patch, u0, u1, v0, v1, hull);
+        Bounds3 b;
+        for (int i = 0; i < count; ++i) b.extend(hull[i]);
         if (!(b.hi.z >= pr.nearClip) || !(b.lo.z <= pr.farClip)) continue;
         anyInRange = true;
         if (b.lo.z < pr.nearClip) {
@@ -128,7 +173,7 @@ Verdict classify(const ReyesView& view, const BezierPatch& patch, Piece& piece) 
             continue;
         }
         float kx0, ky0, kx1, ky1;
-        hullRaster(pr, hull, kx0, ky0, kx1, ky1);
+        hullRaster(pr, hull, count, kx0, ky0, kx1, ky1);
         if (k == 0) sharpW = kx1 - kx0, sharpH = ky1 - ky0;
         if (view.lens) {
             // Grown by the circle of confusion of the hull's depth range (Projector::lensShift).
@@ -189,21 +234,13 @@ Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k) {
     return evalPatch(patch, uv.x, uv.y);
 }
 
-void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vector<Piece>& out,
-                SplitCounters& counters) {
-    const BezierPatch& patch = view.patches[patchIndex];
-    counters.patchCulled = false;
-    for (const Vec3& c : patch.cp)
-        if (!isFinite(c)) {
-            counters.patchCulled = true;
-            ++counters.culled;
-            return;
-        }
-    Piece root;
-    root.patch = patchIndex;
-    root.uv[0] = {0, 0}, root.uv[1] = {1, 0}, root.uv[2] = {1, 1}, root.uv[3] = {0, 1};
-    for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side);
+namespace {
 
+// Split and cull one surface's (u,v) square into pieces: `root` has its boundary edges, `hullOf` bounds
+// a rectangle of it, `surfaceAt` evaluates a point (for interior split lines).
+template <class SurfaceAt>
+void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hullOf, SurfaceAt&& surfaceAt,
+                 float side, std::vector<Piece>& out, SplitCounters& counters) {
     size_t before = out.size();
     std::vector<SplitJob> stack;
     stack.push_back({root, 0});
@@ -211,7 +248,7 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
         SplitJob job = stack.back();
         stack.pop_back();
         Piece& p = job.piece;
-        Verdict v = classify(view, patch, p);
+        Verdict v = classify(view, hullOf, p);
         if (v == Verdict::Cull) {
             ++counters.culled;
             continue;
@@ -239,7 +276,7 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
             cutEdge(p.edge[0], k0, lo.edge[0], hi.edge[0]);
             cutEdge(p.edge[2], k2, lo.edge[2], hi.edge[2]);
             Vec2 m0 = latticeUV(p.edge[0], k0), m2 = latticeUV(p.edge[2], k2);
-            PieceEdge mid = interiorEdge(view, patch, m0, m2, side);
+            PieceEdge mid = interiorEdge(view, surfaceAt, m0, m2, side);
             lo.uv[1] = m0, lo.uv[2] = m2, lo.edge[1] = mid;
             hi.uv[0] = m0, hi.uv[3] = m2, hi.edge[3] = mid;
         } else {
@@ -247,7 +284,7 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
             cutEdge(p.edge[3], k3, lo.edge[3], hi.edge[3]);
             cutEdge(p.edge[1], k1, lo.edge[1], hi.edge[1]);
             Vec2 m3 = latticeUV(p.edge[3], k3), m1 = latticeUV(p.edge[1], k1);
-            PieceEdge mid = interiorEdge(view, patch, m3, m1, side);
+            PieceEdge mid = interiorEdge(view, surfaceAt, m3, m1, side);
             lo.uv[3] = m3, lo.uv[2] = m1, lo.edge[2] = mid;
             hi.uv[0] = m3, hi.uv[1] = m1, hi.edge[0] = mid;
         }
@@ -257,6 +294,42 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
     }
     counters.pieces += out.size() - before;
     counters.patchCulled = out.size() == before;
+}
+
+Piece rootPiece(uint32_t index) {
+    Piece root;
+    root.patch = index;
+    root.uv[0] = {0, 0}, root.uv[1] = {1, 0}, root.uv[2] = {1, 1}, root.uv[3] = {0, 1};
+    return root;
+}
+
+}  // namespace
+
+void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vector<Piece>& out,
+                SplitCounters& counters) {
+    const BezierPatch& patch = view.patches[patchIndex];
+    counters.patchCulled = false;
+    for (const Vec3& c : patch.cp)
+        if (!isFinite(c)) {
+            counters.patchCulled = true;
+            ++counters.culled;
+            return;
+        }
+    Piece root = rootPiece(patchIndex);
+    for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side);
+    const PieceHull hull{view, &patch, nullptr};
+    splitPieces(
+        view, root, hull, [&](Vec2 uv) { return evalPatch(patch, uv.x, uv.y); }, side, out, counters);
+}
+
+void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index, float side,
+                  std::vector<Piece>& out, SplitCounters& counters) {
+    counters.patchCulled = false;
+    Piece root = rootPiece(index);
+    for (int e = 0; e < 4; ++e) root.edge[e] = quadricBoundaryEdge(view, pq, e, side);
+    const PieceHull hull{view, nullptr, &pq};
+    splitPieces(
+        view, root, hull, [&](Vec2 uv) { return quadricPoint(pq, uv); }, side, out, counters);
 }
 
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
@@ -269,12 +342,23 @@ void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t i
         Piece root;
         root.patch = index;
         root.uv[0] = {0, 0}, root.uv[1] = {1, 0}, root.uv[2] = {1, 1}, root.uv[3] = {0, 1};
-        if (classify(view, view.patches[index], root) != Verdict::Cull)
+        const PieceHull hull{view, &view.patches[index],
+                             isQuadric(attr.kind) ? &view.quadrics[attr.shape] : nullptr};
+        if (classify(view, hull, root) != Verdict::Cull)
             micropolygonSide *= std::sqrt(std::max(1.f, factor * root.blurPixels / 16.f));
     }
     switch (attr.kind) {
         case SurfaceKind::BicubicBezier:
             splitPatch(view, index, micropolygonSide, out, counters);
+            return;
+        case SurfaceKind::Sphere:
+        case SurfaceKind::Cylinder:
+        case SurfaceKind::Cone:
+        case SurfaceKind::Disk:
+        case SurfaceKind::Paraboloid:
+        case SurfaceKind::Hyperboloid:
+        case SurfaceKind::Torus:
+            splitQuadric(view, view.quadrics[attr.shape], index, micropolygonSide, out, counters);
             return;
     }
 }

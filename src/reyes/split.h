@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/bezier.h"
+#include "core/quadric.h"
 #include "scene/camera.h"
 
 namespace tessera {
@@ -54,6 +55,8 @@ inline int pieceGridV(const Piece& p) {
 // Everything split and dice need, read-only during a render. Patches are in camera space.
 struct ReyesView {
     const BezierPatch* patches = nullptr;
+    // The quadric surfaces in camera space (PatchAttributes::shape indexes them; Scene::quadrics order).
+    const PlacedQuadric* quadrics = nullptr;
     // Blurred frames: the patches at each knot of the shutter timeline (engine/motion.h; knot 0 is
     // `patches`), which of them move, and whether the lens blurs. Bounds then cover every knot, grown by
     // the circle of confusion, and grids carry their vertices at every knot.
@@ -95,6 +98,12 @@ inline Vec2 latticeUV(const PieceEdge& e, int k) {
 // Position of lattice point k of an edge: from the boundary curve's control points or the patch.
 Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k);
 
+// A quadric's point at (u,v) in the view's space, closed form (core/quadric.h). Every vertex of a quadric
+// piece, on an edge or inside, is evaluated through it, so equal (u,v) give identical points.
+inline Vec3 quadricPoint(const PlacedQuadric& pq, Vec2 uv) {
+    return affinePoint(pq.toSpace, evalQuadric(pq.q, uv.x, uv.y).p);
+}
+
 // The control points of a boundary edge's curve in the edge's own canonical order (the order chosen when the
 // edge was made, i.e. at shutter open), for the same patch at another time: its lattice point k is then
 // evalCurve(cp, k / total), identical for both patches sharing the edge even where the motion changes
@@ -104,6 +113,10 @@ void orientedBoundary(const BezierPatch& patch, const PieceEdge& e, Vec3 cp[4]);
 // Split and cull one surface into diceable pieces, appended to `out`: dispatches on the surface kind.
 struct PatchAttributes;
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,
+                  std::vector<Piece>& out, SplitCounters& counters);
+
+// Split and cull one quadric (camera space) in its own (u,v) square, appended to `out`.
+void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index, float micropolygonSide,
                   std::vector<Piece>& out, SplitCounters& counters);
 
 // Split and cull one bicubic patch into diceable pieces, appended to `out`.

@@ -20,7 +20,22 @@ void patchAtTime(const RtAccel& acc, uint32_t patch, float u, BezierPatch& out) 
     out = acc.motion.patchAt(patch, u);
 }
 
+Vec3 orientedGeometricNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h) {
+    Vec3 N;
+    if (const PlacedQuadric* pq = acc.quadric(patch))
+        evalPlacedQuadric(*pq, h.u, h.v, &N);
+    else
+        N = cross(h.dpdu, h.dpdv);
+    return acc.flip[patch] ? -N : N;
+}
+
 Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time) {
+    if (const PlacedQuadric* pq = acc.quadric(patch)) {
+        Vec3 N;
+        evalPlacedQuadric(*pq, h.u, h.v, &N);  // the same closed form as Reyes' dicer
+        if (!isFinite(N) || dot(N, N) == 0.f) N = Vec3{0, 0, 1};
+        return acc.flip[patch] ? -N : N;
+    }
     Vec3 N = cross(h.dpdu, h.dpdv);
     const float scale = dot(h.dpdu, h.dpdu) + dot(h.dpdv, h.dpdv);
     if (!(dot(N, N) > 1e-12f * scale * scale))
@@ -63,15 +78,38 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     acc.flip.resize(n);
     acc.twoSided.resize(n);
     acc.material.resize(n);
+    acc.quadrics.clear();
+    acc.quadricOf.assign(n, RtAccel::kNoQuadric);
+    for (const SceneQuadric& q : scene.quadrics) acc.quadrics.push_back(placeQuadric(q, toSpace));
+    std::vector<const PlacedQuadric*> quadricPtr;
+    if (!acc.quadrics.empty()) {
+        quadricPtr.assign(n, nullptr);
+        for (size_t i = 0; i < n; ++i)
+            if (isQuadric(scene.attributes[i].kind)) {
+                acc.quadricOf[i] = scene.attributes[i].shape;
+                quadricPtr[i] = &acc.quadrics[scene.attributes[i].shape];
+            }
+    }
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
-        // Surface kinds: the accel holds bicubic Bezier patches (the subpatch trees and the Newton stage are
-        // written for them); a new kind gets its case here and its own bound/intersect stage.
+        // Surface kinds: bicubic Bezier patches (subpatch trees of de Casteljau hulls, Newton) and the
+        // quadrics (subpatch trees of quadricBounds, analytic intersection in the Newton stage).
         switch (scene.attributes[i].kind) {
             case SurfaceKind::BicubicBezier:
                 if (acc.moving(uint32_t(i)))  // knot 0: shutter open, in the timeline's space
                     acc.patches[i] = acc.motion.patchKeys(i)[0];
                 else
                     for (int k = 0; k < 16; ++k) acc.patches[i].cp[k] = toSpace.point(scene.patches[i].cp[k]);
+                break;
+            case SurfaceKind::Sphere:
+            case SurfaceKind::Cylinder:
+            case SurfaceKind::Cone:
+            case SurfaceKind::Disk:
+            case SurfaceKind::Paraboloid:
+            case SurfaceKind::Hyperboloid:
+            case SurfaceKind::Torus:
+                // The place holder: the hull of the quadric's box (the subpatch boxes come from the
+                // quadric itself, and the Newton stage intersects it analytically).
+                for (int k = 0; k < 16; ++k) acc.patches[i].cp[k] = toSpace.point(scene.patches[i].cp[k]);
                 break;
         }
         acc.flip[i] = scene.attributes[i].flipNormal;
@@ -80,7 +118,8 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     });
     auto t0 = Clock::now();
     buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
-                        acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs);
+                        acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,
+                        quadricPtr);
     acc.subpatchMs = msSince(t0);
     acc.patchSoa.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {

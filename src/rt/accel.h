@@ -27,6 +27,15 @@ struct RtAccel {
     std::vector<PatchSoa> patchSoa;  // the same patches, for the wavefront's Newton stage
     std::vector<uint8_t> flip, twoSided;
     std::vector<uint32_t> material;
+    // Quadric surfaces (their kinds' closed form, core/quadric.h): per surface its index in `quadrics`
+    // (kNoQuadric for a Bezier patch, whose `patches` entry is its control points; a quadric's entry there
+    // only holds its place), and the quadrics in the accel's space. Quadrics do not move.
+    static constexpr uint32_t kNoQuadric = 0xffffffffu;
+    std::vector<uint32_t> quadricOf;
+    std::vector<PlacedQuadric> quadrics;
+    const PlacedQuadric* quadric(uint32_t patch) const {
+        return quadricOf.empty() || quadricOf[patch] == kNoQuadric ? nullptr : &quadrics[quadricOf[patch]];
+    }
     Bvh bvh;
     SubpatchForest forest;
     Bounds3 bounds;        // of all traced patches (their root boxes)
@@ -79,6 +88,39 @@ inline void soaToPatch(const PatchSoa& s, BezierPatch& out) {
 // `maxTimeSlabs`: see buildSubpatchForest (1: boxes swept over the whole shutter only).
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs);
+
+// The ray against quadric surface `patch` (analytic, core/quadric.h), restricted to the (u,v) rectangle
+// [u0,u1] x [v0,v1] (a subpatch leaf's; a hit on its border counts for both neighbours): the nearest hit
+// that `accept` takes, with P on the ray and dP/du, dP/dv from the closed form in the accel's space.
+template <class Accept>
+bool intersectQuadricSurface(const PlacedQuadric& pq, const Ray& ray, float u0, float u1, float v0, float v1,
+                             Accept&& accept, PatchHit& out) {
+    const Vec3 o = affinePoint(pq.fromSpace, ray.o), d = affineVector(pq.fromSpace, ray.d);
+    QuadricHit hits[4];
+    const int n = intersectQuadric(pq.q, o, d, ray.tmin, ray.tmax, hits);
+    constexpr float kBorder = 1e-5f;
+    for (int i = 0; i < n; ++i) {
+        const QuadricHit& qh = hits[i];
+        if (qh.u < u0 - kBorder || qh.u > u1 + kBorder || qh.v < v0 - kBorder || qh.v > v1 + kBorder)
+            continue;
+        const SurfacePoint sp = evalQuadric(pq.q, qh.u, qh.v);
+        PatchHit h;
+        h.t = qh.t, h.u = qh.u, h.v = qh.v;
+        h.p = ray.o + ray.d * qh.t;
+        h.dpdu = affineVector(pq.toSpace, sp.dpdu);
+        h.dpdv = affineVector(pq.toSpace, sp.dpdv);
+        h.hit = true;
+        if (accept(h)) {
+            out = h;
+            return true;
+        }
+    }
+    return false;
+}
+
+// The geometric normal at a hit, orientation flipped per the surface's attributes (not normalised for
+// patches: dP/du x dP/dv; unit for quadrics, whose closed form has the limit at the poles).
+Vec3 orientedGeometricNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h);
 
 // Unit shading normal at a hit (geometric, orientation flipped per the patch attributes); `time`: the
 // ray's normalised shutter time (moving patches are evaluated there).

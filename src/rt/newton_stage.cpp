@@ -57,7 +57,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         float time = 0.f;
         int segK = 0;  // the time's segment of the timeline and the weight in it
         float segW = 0.f;
-        Vec3 inv;                            // 1 / d, for the per-time leaf box test
+        Vec3 inv;                 // 1 / d, for the per-time leaf box test
         bool movedPatch = false;  // the projected patch moves: movedSoa holds it at the ray's time
         PatchSoa movedSoa;
     };
@@ -189,6 +189,28 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                         ++s.cur;
                         continue;
                     }
+                }
+                if (const PlacedQuadric* pq = acc.quadric(c.patch)) {
+                    // A quadric: the analytic hits inside this leaf's (u,v) rectangle, no Newton start.
+                    float u0, u1, v0, v1;
+                    subpatchLeafRect(acc.forest.depth, c.leaf, u0, u1, v0, v1);
+                    PatchHit h;
+                    auto accept = [&](const PatchHit& ph) {
+                        if (c.patch == s.opt.ignorePatch && ph.t < s.opt.ignoreT) return false;
+                        if (s.opt.respectSides && !acc.twoSided[c.patch] &&
+                            dot(orientedGeometricNormal(acc, c.patch, ph), s.ray.d) > 0.f)
+                            return false;  // back face of a one-sided surface
+                        return true;
+                    };
+                    if (intersectQuadricSurface(*pq, s.ray, u0, u1, v0, v1, accept, h)) {
+                        s.bestPatch = c.patch, s.bestU = h.u, s.bestV = h.v;
+                        s.bestHasDeriv = true;
+                        s.bestSp = SurfacePoint{h.p, h.dpdu, h.dpdv};
+                        s.ray.tmax = h.t;
+                        if (s.opt.anyHit) s.cur = s.end - 1;  // shadow rays stop at the first hit
+                    }
+                    ++s.cur;
+                    continue;
                 }
                 const Vec2 c0 = leafCentre[c.leaf];
                 if (c.patch == s.rootPatch && std::fabs(s.rootU - c0.x) <= du &&

@@ -432,7 +432,12 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     result.cancelled = loop.cancelled;
     nlohmann::json& s = result.stats;
     s["engine"] = "rt";
-    s["patches_in"] = scene.patches.size();
+    s["patches_in"] = scene.patches.size();  // surfaces of every kind
+    nlohmann::json kinds = nlohmann::json::object();
+    const auto kindCount = surfaceKindCounts(scene);
+    for (int k = 0; k < kSurfaceKinds; ++k)
+        if (kindCount[k]) kinds[surfaceKindName(SurfaceKind(k))] = kindCount[k];
+    s["surfaces"] = kinds;
     nlohmann::json rays, hits;
     uint64_t totalRays = 0;
     for (int k = 0; k < kKinds; ++k) {

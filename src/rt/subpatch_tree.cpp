@@ -279,7 +279,8 @@ void writeQuads(const Bounds3* bx, int depth, SubpatchQuad* q) {
 
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
                          bool backfaceFromOrigin, std::span<const uint8_t> flip, const FrameMotion* motion,
-                         int maxSlabs, size_t slabBudgetBytes) {
+                         int maxSlabs, size_t slabBudgetBytes,
+                         std::span<const PlacedQuadric* const> quadrics) {
     depth = std::clamp(depth, 0, kMaxSubpatchDepth);
     f.depth = depth;
     f.nodesPerPatch = (2u << depth) - 1u;
@@ -334,7 +335,27 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                 uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
                 float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
                 Bounds3* boxes = f.boxes.data() + i * f.nodesPerPatch;
-                tb.build(patches[i], boxes, back, sign);
+                const PlacedQuadric* quadric = quadrics.empty() ? nullptr : quadrics[i];
+                if (quadric) {
+                    // The leaves' boxes, then every inner box the union of its children's (as for patches).
+                    for (uint32_t j = 0; j < (1u << depth); ++j) {
+                        float u0, u1, v0, v1;
+                        subpatchLeafRect(depth, j, u0, u1, v0, v1);
+                        const Bounds3 ob = quadricBounds(quadric->q, u0, u1, v0, v1);
+                        BezierPatch corners;  // the box's corners in the patches' space
+                        for (int c = 0; c < 16; ++c)
+                            corners.cp[c] = affinePoint(quadric->toSpace,
+                                                        {c & 1 ? ob.hi.x : ob.lo.x, c & 2 ? ob.hi.y : ob.lo.y,
+                                                         c & 4 ? ob.hi.z : ob.lo.z});
+                        boxes[(1u << depth) - 1 + j] = enlargedHull(corners);
+                    }
+                    for (uint32_t nd = (1u << depth) - 1; nd-- > 0;) {
+                        boxes[nd] = boxes[2 * nd + 1];
+                        boxes[nd].extend(boxes[2 * nd + 2]);
+                    }
+                } else {
+                    tb.build(patches[i], boxes, back, sign);
+                }
                 if (motion && motion->moving(i)) {
                     // Swept boxes: the union over the knots (knot 0 is patches[i]); the leaves per knot.
                     knotBoxes.resize(f.nodesPerPatch);

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/bezier.h"
+#include "core/quadric.h"
 #include "engine/motion.h"
 
 namespace tessera {
@@ -151,6 +152,9 @@ Bounds3 enlargedHull(const BezierPatch& p);
 // are fixed linear combinations of the patch's), so the union of the knots' hulls holds the subpatch at
 // every time of the shutter (paper 002, sec. 5.3.3: bounds swept over the shutter). Moving patches get no
 // back-facing marks (their orientation changes over the shutter).
+// `quadrics` (empty, or one per patch): where an entry is not null, that surface is the quadric and its
+// boxes are the quadric's own boxes of each node's (u,v) rectangle (quadricBounds, in the patches' space),
+// never back-facing; its entry in `patches` only holds its place.
 // `maxSlabs` (with `motion`): at most this many time slabs (1: none, the boxes swept over the whole
 // shutter only); fewer when the slabs' quads would pass `slabBudgetBytes`.
 constexpr int kDefaultTimeSlabs = 16;
@@ -158,6 +162,7 @@ constexpr size_t kTimeSlabBudgetBytes = size_t(512) << 20;
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& forest,
                          bool backfaceFromOrigin = false, std::span<const uint8_t> flip = {},
                          const FrameMotion* motion = nullptr, int maxSlabs = kDefaultTimeSlabs,
-                         size_t slabBudgetBytes = kTimeSlabBudgetBytes);
+                         size_t slabBudgetBytes = kTimeSlabBudgetBytes,
+                         std::span<const PlacedQuadric* const> quadrics = {});
 
 }  // namespace tessera

@@ -90,9 +90,7 @@ bool acceptHit(const RtAccel& acc, const Ray& ray, const TraceOptions& opt, uint
                const PatchHit& h) {
     if (patch == opt.ignorePatch && h.t < opt.ignoreT) return false;
     if (opt.respectSides && !acc.twoSided[patch]) {
-        Vec3 N = cross(h.dpdu, h.dpdv);
-        if (acc.flip[patch]) N = -N;
-        if (dot(N, ray.d) > 0.f) return false;  // back face of a one-sided surface
+        if (dot(orientedGeometricNormal(acc, patch, h), ray.d) > 0.f) return false;  // back face, one-sided
     }
     return true;
 }
@@ -120,6 +118,16 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
             PatchHit h;
             const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(patch) : nullptr;
             auto accept = [&](const PatchHit& ph) { return acceptHit(acc, r, opt, patch, ph); };
+            if (const PlacedQuadric* pq = acc.quadric(patch)) {
+                if (intersectQuadricSurface(*pq, r, 0.f, 1.f, 0.f, 1.f, accept, h)) {
+                    out.hit = true;
+                    out.patch = patch;
+                    out.h = h;
+                    r.tmax = h.t;
+                    if (opt.anyHit) return true;
+                }
+                continue;
+            }
             BezierPatch moved;
             if (acc.moving(patch)) patchAtTime(acc, patch, opt.time, moved);  // at the ray's time
             if (intersectPatch<float>(acc.moving(patch) ? moved : acc.patches[patch], acc.forest, patch, r, h,

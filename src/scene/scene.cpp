@@ -153,3 +153,58 @@ BezierPatch patchAtTime(const Scene& scene, size_t i, float time) {
 }
 
 }  // namespace tessera
+
+namespace tessera {
+
+const char* surfaceKindName(SurfaceKind k) {
+    static const char* const kNames[kSurfaceKinds] = {"bicubic", "sphere",     "cylinder",    "cone",
+                                                      "disk",    "paraboloid", "hyperboloid", "torus"};
+    return kNames[uint8_t(k)];
+}
+
+std::array<size_t, kSurfaceKinds> surfaceKindCounts(const Scene& scene) {
+    std::array<size_t, kSurfaceKinds> count{};
+    for (const PatchAttributes& a : scene.attributes) ++count[uint8_t(a.kind)];
+    return count;
+}
+
+PlacedQuadric placeQuadric(const SceneQuadric& sq, const Mat4& toSpace) {
+    const Mat4 m = toSpace * sq.worldFromObject, inv = m.inverse();
+    PlacedQuadric pq;
+    pq.q = sq.q;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 4; ++c)
+            pq.toSpace.m[r][c] = float(m.m[r][c]), pq.fromSpace.m[r][c] = float(inv.m[r][c]);
+    return pq;
+}
+
+void quadricHullCorners(const PlacedQuadric& pq, float u0, float u1, float v0, float v1, Vec3 corners[8]) {
+    const Bounds3 b = quadricBounds(pq.q, u0, u1, v0, v1);
+    for (int k = 0; k < 8; ++k)
+        corners[k] = affinePoint(pq.toSpace,
+                                 {k & 1 ? b.hi.x : b.lo.x, k & 2 ? b.hi.y : b.lo.y, k & 4 ? b.hi.z : b.lo.z});
+}
+
+SurfacePoint evalPlacedQuadric(const PlacedQuadric& pq, float u, float v, Vec3* normal) {
+    const SurfacePoint o = evalQuadric(pq.q, u, v);
+    SurfacePoint s;
+    s.p = affinePoint(pq.toSpace, o.p);
+    s.dpdu = affineVector(pq.toSpace, o.dpdu);
+    s.dpdv = affineVector(pq.toSpace, o.dpdv);
+    if (normal) {
+        // Normals map with the inverse transpose; the result keeps dP/du x dP/dv's side (for a map with
+        // negative determinant too, as for the Bezier patches, whose N is the cross product in this space).
+        const Vec3 n = quadricNormal(pq.q, u, v);
+        const Affine3& f = pq.fromSpace;
+        Vec3 w{f.m[0][0] * n.x + f.m[1][0] * n.y + f.m[2][0] * n.z,
+               f.m[0][1] * n.x + f.m[1][1] * n.y + f.m[2][1] * n.z,
+               f.m[0][2] * n.x + f.m[1][2] * n.y + f.m[2][2] * n.z};
+        const float det = dot(cross(affineVector(pq.toSpace, {1, 0, 0}), affineVector(pq.toSpace, {0, 1, 0})),
+                              affineVector(pq.toSpace, {0, 0, 1}));
+        if (det < 0.f) w = -w;
+        *normal = normalize(w);
+    }
+    return s;
+}
+
+}  // namespace tessera

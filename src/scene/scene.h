@@ -1,11 +1,14 @@
 // The scene both engines render: camera, image options, lights, materials and bicubic Bezier patches
 // in world space. Filled by the readers in src/io; read-only for the engines.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "core/bezier.h"
+#include "core/quadric.h"
+#include "core/transform.h"
 #include "scene/camera.h"
 
 namespace tessera {
@@ -17,8 +20,8 @@ struct ImageOptions {
     FilterType filter = FilterType::Gaussian;  // RI default gaussian 2 x 2
     float filterWidthX = 2.f, filterWidthY = 2.f;
     float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
-    bool srgbOutput = false;                         // used for scenes without a RIB (.bpt)
-    std::string displayName;                         // RIB Display name ("" if none)
+    bool srgbOutput = false;                        // used for scenes without a RIB (.bpt)
+    std::string displayName;                        // RIB Display name ("" if none)
     // RIB Hider "hidden" "string blursampling" (simple, interleaved, bbox; "" = the renderer's default)
     // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
     std::string blurSampling;
@@ -68,8 +71,47 @@ struct Material {
 
 // The closed set of surface kinds both engines handle. Reyes' bound/split/dice and the ray tracer's
 // bound/traverse/intersect dispatch on this tag at the surface level (a switch, no virtual calls in the
-// kernels). Bicubic Bezier today; bilinear patches, polygons and the RI quadrics are the next entries.
-enum class SurfaceKind : uint8_t { BicubicBezier };
+// kernels). Bicubic Bezier patches and the seven RI quadrics (core/quadric.h: closed form in their own
+// (u,v), never converted to patches); bilinear patches and polygons are the next entries.
+enum class SurfaceKind : uint8_t {
+    BicubicBezier,
+    Sphere,
+    Cylinder,
+    Cone,
+    Disk,
+    Paraboloid,
+    Hyperboloid,
+    Torus
+};
+inline constexpr int kSurfaceKinds = 8;
+
+constexpr bool isQuadric(SurfaceKind k) {
+    return k != SurfaceKind::BicubicBezier;
+}
+// The quadric kind of a quadric surface kind (the same order).
+constexpr QuadricKind quadricKindOf(SurfaceKind k) {
+    return QuadricKind(uint8_t(k) - 1);
+}
+constexpr SurfaceKind surfaceKindOf(QuadricKind k) {
+    return SurfaceKind(uint8_t(k) + 1);
+}
+// "bicubic", "sphere", ... (statistics, `tessera info`).
+const char* surfaceKindName(SurfaceKind k);
+
+// A quadric of the scene: its RI parameters in object space and where the object is.
+struct SceneQuadric {
+    Quadric q;
+    Mat4 worldFromObject;
+};
+
+// The quadric in the space `toSpace` maps world space to (camera space for the engines), for the kernels.
+PlacedQuadric placeQuadric(const SceneQuadric& sq, const Mat4& toSpace);
+// The 8 corners of the quadric's object-space box over (u,v) rectangle [u0,u1] x [v0,v1], in its space:
+// their convex hull holds that part of the surface.
+void quadricHullCorners(const PlacedQuadric& pq, float u0, float u1, float v0, float v1, Vec3 corners[8]);
+// Position, derivatives and unit geometric normal at (u,v) in the quadric's space (normal before the
+// orientation flip of PatchAttributes::flipNormal).
+SurfacePoint evalPlacedQuadric(const PlacedQuadric& pq, float u, float v, Vec3* normal = nullptr);
 
 // Where a surface's motion keys live: `count` world-space control-point sets Scene::motionPatches[first ...]
 // at scene times Scene::motionTimes[first ...] (increasing). count 0 or 1: static (Scene::patches only).
@@ -85,18 +127,19 @@ struct MotionKeys {
 // Per-primitive attributes the renderers need.
 struct PatchAttributes {
     SurfaceKind kind = SurfaceKind::BicubicBezier;
+    uint32_t shape = 0;  // quadric kinds: index in Scene::quadrics
     MotionKeys motion;
     // RI Attribute "displacementbound" "sphere": how far displacement may move a point (object-space
     // units), so bounds can be grown before displacement runs. 0: not displaced.
     float displacementBound = 0.f;
     uint32_t material = 0;
-    uint32_t object = 0;        // object id (one per RIB primitive call / .bpt file)
-    float shadingRate = 1.f;    // pixels of area per micropolygon
+    uint32_t object = 0;      // object id (one per RIB primitive call / .bpt file)
+    float shadingRate = 1.f;  // pixels of area per micropolygon
     // RI GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis): Reyes coarsens the shading
     // of blurred geometry by these factors (0: no coarsening, the default, so images stay comparable).
     float motionFactor = 0.f, focusFactor = 0.f;
-    bool twoSided = true;       // Sides 2
-    bool flipNormal = false;    // orientation disagrees with dPdu x dPdv
+    bool twoSided = true;     // Sides 2
+    bool flipNormal = false;  // orientation disagrees with dPdu x dPdv
 };
 
 struct Scene {
@@ -104,8 +147,11 @@ struct Scene {
     ImageOptions image;
     std::vector<Light> lights;
     std::vector<Material> materials;
-    std::vector<BezierPatch> patches;           // world space
-    std::vector<PatchAttributes> attributes;    // one per patch
+    // One entry per surface, world space: a bicubic patch's control points, or for a quadric the hull of
+    // its box (quadricHullCorners twice, so every bound of the patches holds it; never evaluated).
+    std::vector<BezierPatch> patches;
+    std::vector<PatchAttributes> attributes;  // one per surface
+    std::vector<SceneQuadric> quadrics;       // the quadric surfaces' parameters (PatchAttributes::shape)
     // Motion keys of moving patches (empty for static scenes), see MotionKeys. Scene::patches holds every
     // patch at shutter open.
     std::vector<BezierPatch> motionPatches;
@@ -117,6 +163,9 @@ struct Scene {
     // Whether anything moves within the shutter (a patch with keys or the camera).
     bool hasMotion() const;
 };
+
+// How many surfaces of each kind the scene has (SurfaceKind order; statistics, `tessera info`).
+std::array<size_t, kSurfaceKinds> surfaceKindCounts(const Scene& scene);
 
 // World-space control points of patch `i` at scene time `time` (linear between its keys).
 BezierPatch patchAtTime(const Scene& scene, size_t i, float time);

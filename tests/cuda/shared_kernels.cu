@@ -1,6 +1,7 @@
 // Compile check (CTest DeviceKernelsCompileWithNvcc): the kernels both engines share (sampler, light
 // samples, surface shading, traced lobes, thin-lens disk map, hemisphere warps, shadow-map lookups) build as
-// CUDA device code, warning-free.
+// CUDA device code, warning-free. Also the quadrics' closed form, bounds and ray intersection.
+#include "core/quadric.h"
 #include "film/sampler.h"
 #include "shading/hemisphere.h"
 #include "scene/camera.h"
@@ -26,4 +27,13 @@ __global__ void shadowKernel(ShadowMapLookup map, const Vec3* P, const Vec3* N, 
     const int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) return;
     out[i] = shadowMapVisibility(map, P[i], N[i]);
+}
+__global__ void quadricKernel(const Quadric* q, const Vec3* o, const Vec3* d, float* out, int n) {
+    const int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    QuadricHit hits[4];
+    const int nh = intersectQuadric(*q, o[i], d[i], 0.f, 1e30f, hits);
+    const SurfacePoint sp = evalQuadric(*q, nh ? hits[0].u : 0.5f, nh ? hits[0].v : 0.5f);
+    const Bounds3 b = quadricBounds(*q, 0.f, 0.5f, 0.25f, 1.f);
+    out[i] = dot(quadricNormal(*q, 0.5f, 0.5f), sp.p) + b.hi.x;
 }
