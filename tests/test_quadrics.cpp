@@ -303,6 +303,119 @@ TEST(QuadricCoverage, FullSphereHasNoPinholesAtThePolesOrTheSeam) {
         }
 }
 
+// Both engines' shading normals (the film's normal channel) against the implicit surface's gradient at
+// the visible point, found by marching the pixel's ray down against the implicit function.
+TEST(QuadricNormals, BothEnginesGiveTheAnalyticNormal) {
+    const std::vector<KindCase> kinds = kindCases();
+    const struct {
+        const char* rib;
+        int kind;     // index in kindCases()
+        float zTop;   // the march starts here: the top of the surface (the cone's implicit form goes on)
+        float minNz;  // pixels whose normal is steeper mix normals across the pixel: not compared
+    } cases[] = {{"Sphere 1.3 -1.3 1.3 360", 0, 1.4f, 0.5f},
+                 {"Cone 2 0.8 360", 2, 1.999f, 0.3f},
+                 {"Paraboloid 1 0 2 360", 4, 2.f, 0.3f},
+                 {"Torus 1 0.3 0 360 360", 6, 0.4f, 0.5f}};
+    const int res = 48;
+    for (const auto& c : cases) {
+        const std::function<double(Vec3)>& F = kinds[c.kind].f.F;
+        Scene s = load(topView(c.rib, res)).scene;
+        const Projector pr(s.camera);
+        const Mat4 worldFromCamera = s.camera.cameraFromWorld.inverse();
+        for (const char* engine : {"reyes", "rt"}) {
+            SCOPED_TRACE(std::string(c.rib) + " " + engine);
+            RenderSettings rs;
+            rs.engine = engine;
+            rs.threads = 2;
+            rs.output.channels = kChannelNormal;
+            const Image img = render(s, rs).image;
+            const ImagePlane* N = img.plane("N");
+            ASSERT_NE(N, nullptr);
+            int compared = 0;
+            for (int y = 0; y < res; ++y)
+                for (int x = 0; x < res; ++x) {
+                    if (alphaAt(img, x, y) < 1.f) continue;
+                    const Vec3 top = worldFromCamera.point(pr.fromRaster(x + 0.5f, y + 0.5f));
+                    // March down from the top to the first sign change, then bisect.
+                    float z0 = c.zTop, z1 = c.zTop;
+                    const double f0 = F({top.x, top.y, z0});
+                    bool found = false;
+                    for (float z = c.zTop; z > -3.f; z -= 0.01f)
+                        if ((F({top.x, top.y, z}) < 0) != (f0 < 0)) {
+                            z1 = z, z0 = z + 0.01f, found = true;
+                            break;
+                        }
+                    if (!found) continue;
+                    for (int it = 0; it < 40; ++it) {
+                        const float zm = 0.5f * (z0 + z1);
+                        ((F({top.x, top.y, zm}) < 0) == (f0 < 0) ? z0 : z1) = zm;
+                    }
+                    Vec3 g = gradient(F, {top.x, top.y, 0.5f * (z0 + z1)});
+                    g = normalize(s.camera.cameraFromWorld.vector(g));
+                    if (std::fabs(g.z) < c.minNz) continue;
+                    if (c.kind == 2 && std::hypot(top.x, top.y) < 0.15f) continue;  // the cone's apex
+                    if (g.z > 0.f) g = -g;  // facing the viewer, as the channel is
+                    const size_t i = img.index(x, y) * 3;
+                    const Vec3 n = normalize(Vec3{N->values[i], N->values[i + 1], N->values[i + 2]});
+                    EXPECT_GT(dot(n, g), 0.998f) << x << "," << y;
+                    ++compared;
+                }
+            EXPECT_GT(compared, 150);
+        }
+    }
+}
+
+// Ray-traced effects on quadrics, seen from straight above: a sphere lit from a slanted light shadows the
+// floor disk beside it; a mirror sphere reflects the lit floor near its rim (its centre looks up into the
+// black sky); a glass sphere shows the floor through it.
+TEST(QuadricEngines, ShadowsMirrorAndGlassWorkOnQuadrics) {
+    const std::string rib = R"(Format 64 64 1
+PixelSamples 2 2
+Projection "orthographic"
+ScreenWindow -2 2 -2 2
+Translate 0 0 5
+Rotate 180 1 0 0
+WorldBegin
+LightSource "ambientlight" 1 "intensity" [ 0.05 ]
+Attribute "light" "shadows" [ "on" ]
+LightSource "distantlight" 2 "intensity" [ 1 ] "from" [ 3 3 10 ] "to" [ 0 0 0 ]
+Surface "matte"
+Disk 0 2 360
+AttributeBegin Translate 0.9 0.9 1 Sphere 0.5 -0.5 0.5 360 AttributeEnd
+AttributeBegin Translate -0.9 -0.9 1 Surface "glass" Sphere 0.5 -0.5 0.5 360 AttributeEnd
+AttributeBegin Translate 0.9 -0.9 0.6 Surface "mirror" Sphere 0.5 -0.5 0.5 360 AttributeEnd
+WorldEnd
+)";
+    Scene s = load(rib).scene;
+    RenderSettings rs;
+    rs.engine = "rt";
+    rs.threads = 2;
+    const Image img = render(s, rs).image;
+    for (int y = 0; y < 64; ++y)
+        for (int x = 0; x < 64; ++x)
+            for (int c = 0; c < 4; ++c) ASSERT_TRUE(std::isfinite(img.pixel(x, y)[c]));
+    const Projector pr(s.camera);
+    auto red = [&](float wx, float wy, float wz) {
+        const Vec3 r = pr.toRaster(s.camera.cameraFromWorld.point({wx, wy, wz}));
+        return img.pixel(int(r.x), int(r.y))[0];
+    };
+    const float lit = red(-0.9f, 0.9f, 0.f);  // open floor
+    EXPECT_GT(lit, 0.7f);
+    // The light comes from (3, 3, 10): the opaque sphere's shadow falls towards (-x, -y) of it.
+    EXPECT_LT(red(0.9f - 0.55f, 0.9f - 0.55f, 0.f), 0.2f * lit) << "the sphere's shadow on the disk";
+    // Mirror: the rim (normal tilted ~60 degrees) sees the floor, the centre the sky.
+    const float rim = red(0.9f - 0.44f, -0.9f, 1.1f), centre = red(0.9f, -0.9f, 1.1f);
+    EXPECT_GT(rim, centre + 0.2f) << "rim " << rim << " centre " << centre;
+    // Glass: the sphere's centre shows what is behind it (refraction), not a lit matte surface: the same
+    // scene with a matte sphere there differs.
+    std::string matte = rib;
+    matte.replace(matte.find("Surface \"glass\""), 16, "Surface \"matte\"");
+    Scene ms = load(matte).scene;
+    const Image mimg = render(ms, rs).image;
+    const Vec3 g = pr.toRaster(s.camera.cameraFromWorld.point({-0.9f, -0.9f, 1.5f}));
+    EXPECT_GT(std::fabs(img.pixel(int(g.x), int(g.y))[0] - mimg.pixel(int(g.x), int(g.y))[0]), 0.2f);
+}
+
 // ---- both engines on all seven ---------------------------------------------------------------------
 
 const char* kAllSeven = R"(Format 160 120 1

@@ -44,7 +44,9 @@ FrameMotion prepareFrameMotion(const Scene& scene, const Camera& camera, bool bl
     fm.firstKey.assign(n, FrameMotion::kStatic);
     uint32_t next = 0;
     for (size_t i = 0; i < n; ++i)
-        if (camera.moving() || scene.attributes[i].motion.moving()) {
+        // Quadrics do not move (docs/inputs.md): not even with the camera; they are seen from shutter open.
+        if (!isQuadric(scene.attributes[i].kind) &&
+            (camera.moving() || scene.attributes[i].motion.moving())) {
             fm.firstKey[i] = next;
             next += uint32_t(K);
         }

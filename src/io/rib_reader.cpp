@@ -52,6 +52,10 @@ class RibReader {
             diag_.fail(lex.eofLine(),
                        "no geometry: the file has no Patch, PatchMesh, NuPatch, SubdivisionMesh or quadric "
                        "primitives");
+        if (!scene_.quadrics.empty() && scene_.camera.moving() && scene_.camera.hasShutter())
+            diag_.warn(lex.eofLine(),
+                       "the camera moves: quadrics do not move yet and are rendered as seen at "
+                       "shutter open (no blur)");
         if (scene_.lights.empty())
             diag_.warn(lex.eofLine(), "no light sources: only \"constant\" surfaces will be visible");
     }
