@@ -167,15 +167,6 @@ TEST(QuadricKernels, SpherePolesAndSeamAreExact) {
 
 // ---- coverage against the exact silhouette --------------------------------------------------------
 
-// An orthographic top view (looking down world -z) of [-1.5, 1.5]^2, one quadric RIB snippet at the origin.
-std::string topView(const std::string& body, int res) {
-    return "Format " + std::to_string(res) + " " + std::to_string(res) +
-           " 1\nPixelSamples 4 4\nPixelFilter \"box\" 1 1\nProjection \"orthographic\"\n"
-           "ScreenWindow -1.5 1.5 -1.5 1.5\nTranslate 0 0 5\nRotate 180 1 0 0\nWorldBegin\n"
-           "LightSource \"ambientlight\" 1 \"intensity\" [1]\nSides 2\nSurface \"matte\"\n" +
-           body + "\nWorldEnd\n";
-}
-
 // Angle of (x, y) in [0, 360) degrees.
 double angleDeg(double x, double y) {
     double a = std::atan2(y, x) * 180 / kPi;
@@ -224,26 +215,6 @@ std::vector<CoverageCase> coverageCases() {
                      return r >= 0.5 && r <= 0.9 && y >= 0;
                  }});
     return c;
-}
-
-// Per-pixel coverage of `inside` by 16 x 16 point samples, through the scene's own projection.
-std::vector<double> exactCoverage(const Scene& s, const std::function<bool(double, double)>& inside) {
-    const Projector pr(s.camera);
-    const Mat4 worldFromCamera = s.camera.cameraFromWorld.inverse();
-    const int w = s.camera.width, h = s.camera.height;
-    std::vector<double> cov(size_t(w) * h, 0.0);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            int n = 0;
-            for (int j = 0; j < 16; ++j)
-                for (int i = 0; i < 16; ++i) {
-                    const Vec3 world =
-                        worldFromCamera.point(pr.fromRaster(x + (i + 0.5f) / 16, y + (j + 0.5f) / 16));
-                    n += inside(world.x, world.y);
-                }
-            cov[size_t(y) * w + x] = n / 256.0;
-        }
-    return cov;
 }
 
 TEST(QuadricCoverage, BothEnginesCoverTheExactSilhouette) {

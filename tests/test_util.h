@@ -1,10 +1,12 @@
 // Helpers shared by the tests: small hand-made scenes with known answers.
 #pragma once
 #include <cmath>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "render/render.h"
+#include "scene/camera.h"
 #include "scene/scene.h"
 #include "shading/registry.h"
 
@@ -122,6 +124,35 @@ inline double alphaSum(const Image& img) {
     for (int y = 0; y < img.height; ++y)
         for (int x = 0; x < img.width; ++x) s += img.pixel(x, y)[3];
     return s;
+}
+
+// An orthographic top view (looking down world -z) of [-1.5, 1.5]^2, one quadric RIB snippet at the origin.
+inline std::string topView(const std::string& body, int res) {
+    return "Format " + std::to_string(res) + " " + std::to_string(res) +
+           " 1\nPixelSamples 4 4\nPixelFilter \"box\" 1 1\nProjection \"orthographic\"\n"
+           "ScreenWindow -1.5 1.5 -1.5 1.5\nTranslate 0 0 5\nRotate 180 1 0 0\nWorldBegin\n"
+           "LightSource \"ambientlight\" 1 \"intensity\" [1]\nSides 2\nSurface \"matte\"\n" +
+           body + "\nWorldEnd\n";
+}
+
+// Per-pixel coverage of `inside` by 16 x 16 point samples, through the scene's own projection.
+inline std::vector<double> exactCoverage(const Scene& s, const std::function<bool(double, double)>& inside) {
+    const Projector pr(s.camera);
+    const Mat4 worldFromCamera = s.camera.cameraFromWorld.inverse();
+    const int w = s.camera.width, h = s.camera.height;
+    std::vector<double> cov(size_t(w) * h, 0.0);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            int n = 0;
+            for (int j = 0; j < 16; ++j)
+                for (int i = 0; i < 16; ++i) {
+                    const Vec3 world =
+                        worldFromCamera.point(pr.fromRaster(x + (i + 0.5f) / 16, y + (j + 0.5f) / 16));
+                    n += inside(world.x, world.y);
+                }
+            cov[size_t(y) * w + x] = n / 256.0;
+        }
+    return cov;
 }
 
 }  // namespace tessera::test

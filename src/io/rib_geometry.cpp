@@ -116,6 +116,99 @@ class PrimitiveReader {
         shape_.patches.push_back(b);
     }
 
+    // The number of points in the request's "P" (or "Pw") parameter, looked for from argument `start`
+    // (0 if it has none: positions() then reports the missing "P").
+    size_t pointCount(const Request& r, size_t start) const {
+        for (size_t i = start; i + 1 < r.args.size(); ++i) {
+            const Value& name = r.args[i];
+            if (name.kind != Value::Kind::String || (name.strs[0] != "P" && name.strs[0] != "Pw")) continue;
+            const size_t per = name.strs[0] == "P" ? 3 : 4;
+            const Value& v = r.args[i + 1];
+            if (!v.numeric() || v.nums.size() % per != 0 || v.nums.empty())
+                diag_.fail(v.line, r.name + ": \"" + name.strs[0] + "\" needs a multiple of " +
+                                       std::to_string(per) + " numbers, got " + describe(v));
+            return v.nums.size() / per;
+        }
+        return 0;
+    }
+
+    // One polygon (vertex indices into pts) as bilinear Bezier pieces: a convex quadrilateral is one
+    // bilinear patch (v0 v1 v3 v2: dP/du x dP/dv follows the vertex order, as RI's polygon normal); any other
+    // polygon is cut into triangles by ear clipping in its plane (Newell normal), each a bilinear patch with
+    // its last edge collapsed (a, b, c, c). Fewer than 3 distinct vertices or no area: warned and skipped.
+    void addPolygon(int line, const std::vector<Vec3>& pts, const std::vector<int>& face,
+                    const std::string& what) {
+        std::vector<Vec3> p;
+        for (int i : face)
+            if (p.empty() || !(pts[size_t(i)] == p.back())) p.push_back(pts[size_t(i)]);
+        while (p.size() > 1 && p.front() == p.back()) p.pop_back();
+        Vec3 nrm{0, 0, 0};  // Newell's normal: twice the vector area
+        for (size_t i = 0; i < p.size(); ++i) {
+            const Vec3 a = p[i], b = p[(i + 1) % p.size()];
+            nrm += Vec3{(a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y)};
+        }
+        float extent = 0.f;
+        for (const Vec3& q : p) extent = std::max(extent, length(q - p[0]));
+        if (p.size() < 3 || !(length(nrm) > 1e-10f * extent * extent)) {
+            diag_.warnOnce("degeneratepolygon", line,
+                           what + ": a polygon with fewer than 3 distinct vertices or no area is skipped");
+            return;
+        }
+        auto turn = [&](Vec3 a, Vec3 b, Vec3 c) { return dot(cross(b - a, c - b), nrm); };
+        if (p.size() == 4) {
+            bool convex = true;
+            for (size_t i = 0; i < 4; ++i)
+                convex = convex && turn(p[i], p[(i + 1) % 4], p[(i + 2) % 4]) > 0.f;
+            if (convex) {
+                const Vec3 g[4] = {p[0], p[1], p[3], p[2]};
+                addPatch(g, false);
+                return;
+            }
+        }
+        // Ear clipping: an ear is a convex corner whose triangle holds no other remaining vertex.
+        std::vector<size_t> ring(p.size());
+        for (size_t i = 0; i < ring.size(); ++i) ring[i] = i;
+        auto inside = [&](Vec3 q, Vec3 a, Vec3 b, Vec3 c) {
+            return turn(a, b, q) >= 0.f && turn(b, c, q) >= 0.f && turn(c, a, q) >= 0.f;
+        };
+        bool clean = true;
+        while (ring.size() > 3) {
+            bool clipped = false;
+            for (size_t k = 0; k < ring.size() && !clipped; ++k) {
+                const size_t ia = ring[(k + ring.size() - 1) % ring.size()], ib = ring[k],
+                             ic = ring[(k + 1) % ring.size()];
+                const Vec3 a = p[ia], b = p[ib], c = p[ic];
+                if (!(turn(a, b, c) > 0.f)) continue;
+                bool empty = true;
+                for (size_t m : ring)
+                    if (m != ia && m != ib && m != ic && !(p[m] == a || p[m] == b || p[m] == c) &&
+                        inside(p[m], a, b, c))
+                        empty = false;
+                if (!empty) continue;
+                const Vec3 g[4] = {a, b, c, c};
+                addPatch(g, false);
+                ring.erase(ring.begin() + long(k));
+                clipped = true;
+            }
+            if (!clipped) {  // self-intersecting or numerically flat: a fan of what is left
+                clean = false;
+                for (size_t k = 1; k + 1 < ring.size(); ++k) {
+                    const Vec3 g[4] = {p[ring[0]], p[ring[k]], p[ring[k + 1]], p[ring[k + 1]]};
+                    addPatch(g, false);
+                }
+                ring.clear();
+            }
+        }
+        if (ring.size() == 3) {
+            const Vec3 g[4] = {p[ring[0]], p[ring[1]], p[ring[2]], p[ring[2]]};
+            addPatch(g, false);
+        }
+        if (!clean)
+            diag_.warnOnce(
+                "selfintersectingpolygon", line,
+                what + ": a polygon that crosses itself was split as a fan (it may not render as intended)");
+    }
+
     // The topology a deformation key must share with the others: words and a hash of `extra` numbers.
     void setTopology(std::string words, const std::vector<double>& extra = {}) {
         shape_.topology = std::move(words);
@@ -161,6 +254,70 @@ class PrimitiveReader {
         addPatch(g, bicubic);
     }
     void skip() { shape_.skipped = true; }
+
+    // Polygon (RI spec 3.2, sec. 5.1): one planar polygon, convex or concave, its vertices in "P".
+    void polygon(const Request& r) {
+        const size_t n = pointCount(r, 0);
+        if (n == 0) diag_.fail(r.line, "Polygon: missing the position parameter \"P\"");
+        auto ps = parseParams(r, 0, decls_, diag_, [&](const std::string& cls) -> size_t {
+            return cls == "uniform" || cls == "constant" ? 1 : n;
+        });
+        requireWorld(r);
+        setTopology("Polygon with " + std::to_string(n) + " vertices");
+        auto pts = positions(r, ps, n, "Polygon");
+        if (!pts) return skip();
+        std::vector<int> face(n);
+        for (size_t i = 0; i < n; ++i) face[i] = int(i);
+        addPolygon(r.line, *pts, face, "Polygon");
+    }
+
+    // PointsPolygons nvertices vertices (RI spec 3.2, sec. 5.1): polygons sharing vertices, each convex or
+    // concave; shared edges give bit-identical patch boundaries up to the weld (no cracks).
+    void pointsPolygons(const Request& r) {
+        Arguments args(r, diag_);
+        args.atLeast(2, "nvertices vertices ...parameterlist...");
+        const std::vector<int> nverts = args.intArray(0, "nvertices"), verts = args.intArray(1, "vertices");
+        if (!r.args[0].isArray() || !r.args[1].isArray())
+            diag_.fail(r.line, "PointsPolygons: nvertices and vertices must be arrays");
+        if (nverts.empty()) diag_.fail(r.args[0].line, "PointsPolygons: no polygons");
+        size_t total = 0;
+        for (size_t f = 0; f < nverts.size(); ++f) {
+            if (nverts[f] < 3)
+                diag_.fail(r.args[0].line, "PointsPolygons: polygon " + std::to_string(f) + " has " +
+                                               std::to_string(nverts[f]) +
+                                               " vertices; a polygon needs at least 3");
+            total += size_t(nverts[f]);
+        }
+        if (total != verts.size())
+            diag_.fail(r.args[1].line, "PointsPolygons: nvertices adds up to " + std::to_string(total) +
+                                           " vertex indices, but vertices has " +
+                                           std::to_string(verts.size()));
+        const size_t npoints = pointCount(r, 2);
+        if (npoints == 0) diag_.fail(r.line, "PointsPolygons: missing the position parameter \"P\"");
+        for (int v : verts)
+            if (v < 0 || size_t(v) >= npoints)
+                diag_.fail(r.args[1].line, "PointsPolygons: vertex index " + std::to_string(v) +
+                                               " is out of range: \"P\" has " + std::to_string(npoints) +
+                                               " points (indices 0.." + std::to_string(npoints - 1) + ")");
+        auto ps = parseParams(r, 2, decls_, diag_, [&](const std::string& cls) -> size_t {
+            if (cls == "vertex" || cls == "varying") return npoints;
+            if (cls == "facevarying" || cls == "facevertex") return verts.size();
+            if (cls == "uniform") return nverts.size();
+            return 1;
+        });
+        requireWorld(r);
+        std::vector<double> topo(nverts.begin(), nverts.end());
+        topo.insert(topo.end(), verts.begin(), verts.end());
+        setTopology("PointsPolygons with " + std::to_string(nverts.size()) + " polygons", topo);
+        auto pts = positions(r, ps, npoints, "PointsPolygons");
+        if (!pts) return skip();
+        size_t at = 0;
+        for (int nv : nverts) {
+            std::vector<int> face(verts.begin() + long(at), verts.begin() + long(at + size_t(nv)));
+            at += size_t(nv);
+            addPolygon(r.line, *pts, face, "PointsPolygons");
+        }
+    }
 
     // Patches along one direction of a PatchMesh (RI spec 5.2: RiPatchMesh).
     int meshPatches(const Request& r, bool bicubic, int n, bool periodic, int step, const char* dir) const {
@@ -458,7 +615,8 @@ class PrimitiveReader {
 }  // namespace
 
 bool isPrimitiveRequest(const std::string& name) {
-    return name == "Patch" || name == "PatchMesh" || name == "NuPatch" || name == "SubdivisionMesh";
+    return name == "Patch" || name == "PatchMesh" || name == "NuPatch" || name == "SubdivisionMesh" ||
+           name == "Polygon" || name == "PointsPolygons";
 }
 
 PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c) {
@@ -469,6 +627,10 @@ PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c) {
         reader.patchMesh(r);
     else if (r.name == "NuPatch")
         reader.nuPatch(r);
+    else if (r.name == "Polygon")
+        reader.polygon(r);
+    else if (r.name == "PointsPolygons")
+        reader.pointsPolygons(r);
     else
         reader.subdivisionMesh(r);
     return std::move(reader.shape());

@@ -49,9 +49,10 @@ class RibReader {
             diag_.fail(lex.eofLine(), std::string("end of file inside ") + blockName(s->block) +
                                           " block opened at " + s->file + ":" + std::to_string(s->line));
         if (scene_.patches.empty())
-            diag_.fail(lex.eofLine(),
-                       "no geometry: the file has no Patch, PatchMesh, NuPatch, SubdivisionMesh or quadric "
-                       "primitives");
+            diag_.fail(
+                lex.eofLine(),
+                "no geometry: the file has no Patch, PatchMesh, NuPatch, SubdivisionMesh, polygon or quadric "
+                "primitives");
         if (!scene_.quadrics.empty() && scene_.camera.moving() && scene_.camera.hasShutter())
             diag_.warn(lex.eofLine(),
                        "the camera moves: quadrics do not move yet and are rendered as seen at "
@@ -946,6 +947,8 @@ class RibReader {
             {"PatchMesh", &RibReader::primitive},
             {"NuPatch", &RibReader::primitive},
             {"SubdivisionMesh", &RibReader::primitive},
+            {"Polygon", &RibReader::primitive},
+            {"PointsPolygons", &RibReader::primitive},
             {"Sphere", &RibReader::quadric},
             {"Cylinder", &RibReader::quadric},
             {"Cone", &RibReader::quadric},
