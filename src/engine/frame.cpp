@@ -18,9 +18,10 @@ FrameSetup::FrameSetup(const Scene& scene, const RenderSettings& settings)
     }
     if (!settings.blur.enabled) projector.lensRadius = 0.f;  // --no-blur: pinhole
     motion = prepareFrameMotion(scene, camera, settings.blur.enabled);
-    blur = makeBlurPattern(settings.blur.sampling, motion.blurred(), projector.hasLens() && projector.perspective,
-                           nx * ny, camera.width, settings.blur.tileSize, settings.blur.permutations,
-                           settings.seed);
+    blur = makeBlurPattern(settings.blur.sampling, motion.blurred(),
+                           projector.hasLens() && projector.perspective, nx * ny, camera.width,
+                           settings.blur.tileSize, settings.blur.permutations, settings.seed);
+    if (!scene.textures.empty()) textures = std::make_shared<const Textures>(scene.textures);
 }
 
 RenderResult FrameSetup::startResult(const RenderSettings& settings) const {

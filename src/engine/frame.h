@@ -1,6 +1,7 @@
 // The prologue both engines share: the film set-up (filter, samples per pixel, region, image with its
 // planes), the camera's projection and the lights in camera space.
 #pragma once
+#include <memory>
 #include <vector>
 
 #include "engine/clock.h"
@@ -8,6 +9,7 @@
 #include "engine/settings.h"
 #include "film/filter.h"
 #include "shading/light.h"
+#include "shading/texture.h"
 
 namespace tessera {
 
@@ -21,6 +23,8 @@ struct FrameSetup {
     std::vector<ShadingLight> lights;  // camera space
     FrameMotion motion;                // the patches' camera-space motion over the shutter
     BlurPattern blur;                  // each sample's time and lens position (inactive: sharp frame)
+    // The scene's textures (Scene::textures), opened for this render; nullptr when it has none.
+    std::shared_ptr<const Textures> textures;
 
     FrameSetup(const Scene& scene, const RenderSettings& settings);
     int samplesPerPixel() const { return nx * ny; }

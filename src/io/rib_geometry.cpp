@@ -9,15 +9,16 @@
 #include "core/basis.h"
 #include "core/nurbs.h"
 #include "core/subdivision.h"
+#include "shading/texture.h"
 
 namespace tessera::rib {
 
 namespace {
 
 bool sameMaterial(const Material& a, const Material& b) {
-    return a.type == b.type && a.Cs == b.Cs && a.Os == b.Os && a.Ka == b.Ka && a.Kd == b.Kd && a.Ks == b.Ks &&
-           a.roughness == b.roughness && a.specularColor == b.specularColor && a.Kr == b.Kr && a.Kt == b.Kt &&
-           a.eta == b.eta;
+    return a.type == b.type && a.texture == b.texture && a.Cs == b.Cs && a.Os == b.Os && a.Ka == b.Ka &&
+           a.Kd == b.Kd && a.Ks == b.Ks && a.roughness == b.roughness && a.specularColor == b.specularColor &&
+           a.Kr == b.Kr && a.Kt == b.Kt && a.eta == b.eta;
 }
 
 bool isBezier(const Basis& b) {
@@ -88,12 +89,68 @@ class PrimitiveReader {
                 diag_.warnOnce("Pz", p.line,
                                what + ": \"Pz\" height fields are not supported; primitive skipped");
                 return std::nullopt;
-            } else {
+            } else if (!isTexCoordParam(p.name)) {
                 warnIgnoredParam(p, r.name, diag_);
             }
         }
         if (!out) diag_.fail(r.line, what + ": missing the position parameter \"P\"");
         return out;
+    }
+
+    static bool isTexCoordParam(const std::string& name) {
+        return name == "st" || name == "s" || name == "t";
+    }
+
+    // The varying s, t values of "st" or "s" and "t" (RI spec 3.2, sec. 5: `n` values, one per patch
+    // corner, interpolated bilinearly); nullopt when the primitive gives none. Any other storage class is
+    // warned about and ignored.
+    std::optional<std::vector<Vec2>> varyingTexCoords(const Request& r, const std::vector<Param>& ps,
+                                                      size_t n, const std::string& what) {
+        const Param *st = nullptr, *s = nullptr, *t = nullptr;
+        for (const Param& p : ps) {
+            if (!isTexCoordParam(p.name)) continue;
+            const std::string cls = p.decl ? p.decl->cls : "";
+            const int per = p.name == "st" ? 2 : 1;
+            if ((cls != "varying" && cls != "facevarying") || !p.decl || p.decl->type != "float" ||
+                p.decl->arraySize != per || !p.value->numeric()) {
+                diag_.warnOnce("stclass:" + p.name, p.line,
+                               what + ": \"" + p.name + "\" is used as \"varying float" +
+                                   (per == 2 ? "[2]" : "") + "\" only; ignored");
+                continue;
+            }
+            if (p.value->nums.size() != n * size_t(per))
+                diag_.fail(p.line, what + ": \"" + p.name + "\" needs " + std::to_string(n * size_t(per)) +
+                                       " numbers (" + std::to_string(n) + " varying values), got " +
+                                       std::to_string(p.value->nums.size()));
+            (p.name == "st" ? st : p.name == "s" ? s : t) = &p;
+        }
+        if (!st && !s && !t) return std::nullopt;
+        if (st && (s || t))
+            diag_.warnOnce("stboth", r.line, what + ": both \"st\" and \"s\"/\"t\" given; \"st\" is used");
+        std::vector<Vec2> out(n);
+        for (size_t i = 0; i < n; ++i) {
+            if (st) {
+                out[i] = {float(st->value->nums[2 * i]), float(st->value->nums[2 * i + 1])};
+                continue;
+            }
+            out[i] = {s ? float(s->value->nums[i]) : 0.f, t ? float(t->value->nums[i]) : 0.f};
+        }
+        for (const Vec2& v : out)
+            if (!std::isfinite(v.x) || !std::isfinite(v.y) || std::fabs(v.x) > 1e30f ||
+                std::fabs(v.y) > 1e30f)
+                diag_.fail(r.line, what + ": texture coordinates must be finite numbers");
+        return out;
+    }
+    // The default s, t at global parameter (u, v): TextureCoordinates' bilinear map of the unit square.
+    Vec2 defaultTexCoords(double u, double v) const {
+        return texCoordsAt(state_.attributes().textureCoordinates, float(u), float(v));
+    }
+    bool hasDefaultTexCoords() const {
+        const PatchTexCoords& tc = state_.attributes().textureCoordinates;
+        const PatchTexCoords id;
+        for (int k = 0; k < 4; ++k)
+            if (tc.st[k].x != id.st[k].x || tc.st[k].y != id.st[k].y) return false;
+        return true;
     }
 
     void addPatch(const Vec3 g[16], bool bicubic) {
@@ -245,6 +302,14 @@ class PrimitiveReader {
         setTopology(what);
         auto pts = positions(r, ps, nv, what);
         if (!pts) return skip();
+        // s, t: the four varying corner values, or TextureCoordinates (default s = u, t = v).
+        if (auto st = varyingTexCoords(r, ps, 4, what)) {
+            PatchTexCoords tc;
+            for (int k = 0; k < 4; ++k) tc.st[k] = (*st)[k];
+            shape_.texCoords.push_back(tc);
+        } else if (!hasDefaultTexCoords()) {
+            shape_.texCoords.push_back(state_.attributes().textureCoordinates);
+        }
         Vec3 g[16];
         if (bicubic) {
             for (int k = 0; k < 16; ++k) g[k] = (*pts)[k];
@@ -372,9 +437,25 @@ class PrimitiveReader {
                     {double(ustep), double(vstep)});
         auto pts = positions(r, ps, nverts, "PatchMesh \"" + args.string(0) + "\"");
         if (!pts) return skip();
+        // s, t: varying values at the patch corners (piecewise bilinear over the mesh), or the default
+        // over the mesh's (u,v), which goes from 0 to 1 across the whole mesh (RI spec 3.2, sec. 5.2).
+        const auto st = varyingTexCoords(r, ps, nvaryings, "PatchMesh \"" + args.string(0) + "\"");
+        const bool meshTexCoords = st || !hasDefaultTexCoords() || npu > 1 || npv > 1;
+        const int rowLength = npu + (uper ? 0 : 1), columnLength = npv + (vper ? 0 : 1);
         int order = bicubic ? 4 : 2;
         for (int pv = 0; pv < npv; ++pv)
             for (int pu = 0; pu < npu; ++pu) {
+                if (meshTexCoords) {
+                    PatchTexCoords tc;
+                    for (int k = 0; k < 4; ++k) {
+                        const int cu = pu + (k & 1), cv = pv + (k >> 1);
+                        if (st)
+                            tc.st[k] = (*st)[size_t(cv % columnLength) * rowLength + size_t(cu % rowLength)];
+                        else
+                            tc.st[k] = defaultTexCoords(double(cu) / npu, double(cv) / npv);
+                    }
+                    shape_.texCoords.push_back(tc);
+                }
                 Vec3 g[16];
                 for (int j = 0; j < order; ++j)
                     for (int i = 0; i < order; ++i) {
@@ -444,6 +525,7 @@ class PrimitiveReader {
         }
         auto pts = positions(r, ps, nverts, "NuPatch");
         if (!pts) return skip();
+        const auto st = varyingTexCoords(r, ps, (segu + 1) * (segv + 1), "NuPatch");
         s.cp = std::move(*pts);
         std::vector<BezierPatch> patches;
         try {
@@ -452,6 +534,63 @@ class PrimitiveReader {
             diag_.fail(r.line, std::string("NuPatch: ") + e.what());
         }
         shape_.patches = std::move(patches);
+        nuPatchTexCoords(s, segu, st);
+    }
+
+    // The s, t of each Bezier patch of a NuPatch. Its patches are its non-empty knot spans inside
+    // [umin,umax] x [vmin,vmax], u spans outer (nurbsToBezier). Varying values sit at the knots
+    // uknot[uorder-1 .. nu] (one per span boundary, RI spec 3.2, sec. 5.3) and are interpolated linearly
+    // within a span; without them s = u, t = v through TextureCoordinates.
+    void nuPatchTexCoords(const NurbsSurface& s, size_t segu, const std::optional<std::vector<Vec2>>& st) {
+        if (!st && hasDefaultTexCoords() && s.umin == 0 && s.umax == 1 && s.vmin == 0 && s.vmax == 1 &&
+            shape_.patches.size() == 1)
+            return;
+        // The breakpoints nurbsToBezier splits at: umin, umax and every distinct knot between them.
+        auto breaks = [](const std::vector<double>& knot, double lo, double hi) {
+            std::vector<double> b{lo};
+            for (double k : knot)
+                if (k > lo && k < hi && k != b.back()) b.push_back(k);
+            b.push_back(hi);
+            return b;
+        };
+        const std::vector<double> bu = breaks(s.uknot, std::max(s.umin, s.uknot[size_t(s.uorder - 1)]),
+                                              std::min(s.umax, s.uknot[size_t(s.nu)]));
+        const std::vector<double> bv = breaks(s.vknot, std::max(s.vmin, s.vknot[size_t(s.vorder - 1)]),
+                                              std::min(s.vmax, s.vknot[size_t(s.nv)]));
+        if ((bu.size() - 1) * (bv.size() - 1) != shape_.patches.size()) return;  // cannot happen; keep u, v
+        // The varying value at (u, v): bilinear within the knot span that holds it.
+        auto varyingAt = [&](double u, double v) -> Vec2 {
+            auto locate = [](const std::vector<double>& knot, int order, int n, double x, size_t& i,
+                             double& w) {
+                i = 0;
+                for (int k = 0; k < n - order + 1; ++k)
+                    if (knot[size_t(order - 1 + k)] <= x &&
+                        knot[size_t(order + k)] > knot[size_t(order - 1 + k)])
+                        i = size_t(k);
+                const double a = knot[size_t(order - 1) + i], b = knot[size_t(order) + i];
+                w = b > a ? std::clamp((x - a) / (b - a), 0.0, 1.0) : 0.0;
+            };
+            size_t iu, iv;
+            double wu, wv;
+            locate(s.uknot, s.uorder, s.nu, u, iu, wu);
+            locate(s.vknot, s.vorder, s.nv, v, iv, wv);
+            auto at = [&](size_t a, size_t b) { return (*st)[b * (segu + 1) + a]; };
+            const Vec2 c00 = at(iu, iv), c10 = at(iu + 1, iv), c01 = at(iu, iv + 1), c11 = at(iu + 1, iv + 1);
+            const float fu = float(wu), fv = float(wv);
+            auto mix = [](Vec2 a, Vec2 b, float w) {
+                return Vec2{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w};
+            };
+            return mix(mix(c00, c10, fu), mix(c01, c11, fu), fv);
+        };
+        for (size_t i = 0; i + 1 < bu.size(); ++i)
+            for (size_t j = 0; j + 1 < bv.size(); ++j) {
+                PatchTexCoords tc;
+                for (int k = 0; k < 4; ++k) {
+                    const double u = bu[i + (k & 1)], v = bv[j + (k >> 1)];
+                    tc.st[k] = st ? varyingAt(u, v) : defaultTexCoords(u, v);
+                }
+                shape_.texCoords.push_back(tc);
+            }
     }
 
     // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted by subdivToBezier().
@@ -830,11 +969,20 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         return b;
     };
     const size_t n = keys.front().patches.size();
+    // Texture coordinates do not move: the first key's. Scene::texCoords stays empty while every patch
+    // has the default.
+    const std::vector<PatchTexCoords>& st = keys.front().texCoords;
+    auto addTexCoords = [&](size_t j) {
+        if (st.size() != n && scene.texCoords.empty()) return;
+        scene.texCoords.resize(scene.patches.size() - 1);
+        scene.texCoords.push_back(st.size() == n ? st[j] : PatchTexCoords{});
+    };
     if (T.size() < 2) {
         const Mat4 m = ctm.at(open);
         for (size_t j = 0; j < n; ++j) {
             scene.patches.push_back(transformed(m, keys.front().patches[j]));
             scene.attributes.push_back(a);
+            addTexCoords(j);
         }
         return;
     }
@@ -867,6 +1015,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         }
         scene.patches.push_back(world[0]);
         scene.attributes.push_back(pa);
+        addTexCoords(j);
         // Scene::patches holds the patch at shutter open (clamped to its keys).
         if (!same) scene.patches.back() = patchAtTime(scene, scene.patches.size() - 1, float(open));
     }

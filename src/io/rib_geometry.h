@@ -28,6 +28,9 @@ struct PrimitiveShape {
     int line = 0;
     bool skipped = false;  // not rendered (warned): e.g. "Pz" or an unsupported subdivision scheme
     std::vector<BezierPatch> patches;
+    // The s, t of each patch (RI "st" / "s" "t" varying primitive variables, or TextureCoordinates);
+    // empty: every patch has the default s = u, t = v.
+    std::vector<PatchTexCoords> texCoords;
     // What the keys of a deformation block must share, in words (e.g. `PatchMesh "bicubic" 7
     // "nonperiodic" 4 "nonperiodic"`) and as a hash that also covers vertex indices, knots and tags.
     std::string topology;

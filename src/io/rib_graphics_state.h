@@ -80,6 +80,9 @@ struct Attributes {
     // Attribute "shadow" "resolution" / "shadingrate" / "bias" / "filterwidth": the shadow map of the
     // lights declared from here on (scene.h ShadowMapParams; docs/shading.md).
     ShadowMapParams shadowMap;
+    // TextureCoordinates s1 t1 s2 t2 s3 t3 s4 t4 (RI spec 3.2, sec. 4.2.7): s, t at the corners of the
+    // parameter unit square of the primitives that follow (default s = u, t = v).
+    PatchTexCoords textureCoordinates;
 };
 
 enum class Block { Frame, World, Attribute, Transform };

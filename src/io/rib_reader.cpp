@@ -23,6 +23,7 @@
 #include "io/rib_request.h"
 #include "io/rib_shaders.h"
 #include "shading/registry.h"
+#include "shading/texture.h"
 
 namespace tessera {
 
@@ -398,8 +399,119 @@ class RibReader {
         args.atLeast(1, "name ...parameterlist...");
         const std::string& name = args.string(0);
         parseParams(r, 1, decls_, diag_);
-        if (name == "searchpath") return;  // shaders are built in; search paths are meaningless here
+        if (name == "searchpath") {
+            // "texture": where texture names are looked up (below); "shader" and others are meaningless
+            // here (the shaders are built in).
+            for (const Param& p : parseParams(r, 1, decls_, diag_))
+                if (p.name == "texture") setTextureSearchPath(paramString(r, p, diag_));
+            return;
+        }
         diag_.warnOnce("option:" + name, r.line, "Option \"" + name + "\" is not supported; ignored");
+    }
+
+    // ---- textures (RI spec 3.2, sec. 8.3 and 4.1.6) -----------------------------------------------
+    // Option "searchpath" "texture" "dir:dir:...": "&" is the previous path, "@" the default (the directory
+    // of the file being read); relative directories are relative to that file's directory.
+    void setTextureSearchPath(const std::string& text) {
+        std::vector<std::string> out;
+        size_t start = 0;
+        while (start <= text.size()) {
+            size_t end = text.find(':', start);
+            if (end == std::string::npos) end = text.size();
+            const std::string dir = text.substr(start, end - start);
+            if (dir == "&")
+                out.insert(out.end(), textureSearchPath_.begin(), textureSearchPath_.end());
+            else if (dir == "@")
+                out.push_back(fileDirectory());
+            else if (!dir.empty())
+                out.push_back(relativeToFile(dir));
+            start = end + 1;
+        }
+        textureSearchPath_ = std::move(out);
+    }
+    std::string fileDirectory() const { return std::filesystem::path(lex_->file()).parent_path().string(); }
+    std::string relativeToFile(const std::string& name) const {
+        namespace fs = std::filesystem;
+        fs::path p(name);
+        if (p.is_relative()) p = fs::path(lex_->file()).parent_path() / p;
+        return p.string();
+    }
+    // The index in Scene::textures of texture `name` (found through the search path, checked readable):
+    // a missing or unreadable file is an error at the line that names it (docs/textures.md).
+    size_t textureIndex(int line, const std::string& name, const std::string& what) {
+        namespace fs = std::filesystem;
+        std::vector<std::string> dirs = textureSearchPath_;
+        if (dirs.empty()) dirs.push_back(fileDirectory());
+        std::string path;
+        std::error_code ec;
+        if (fs::path(name).is_absolute()) {
+            path = name;
+        } else {
+            for (const std::string& d : dirs) {
+                const fs::path candidate = d.empty() ? fs::path(name) : fs::path(d) / name;
+                if (fs::is_regular_file(candidate, ec)) {
+                    path = candidate.string();
+                    break;
+                }
+            }
+        }
+        if (path.empty() || !fs::is_regular_file(path, ec)) {
+            std::string where;
+            for (const std::string& d : dirs) where += (where.empty() ? "" : ":") + (d.empty() ? "." : d);
+            diag_.fail(line, what + ": texture file \"" + printable(name, 200) + "\" not found" +
+                                 (fs::path(name).is_absolute() ? "" : " (searched " + where + ")"));
+        }
+        for (size_t i = 0; i < scene_.textures.size(); ++i)
+            if (scene_.textures[i] == path) return i;
+        const std::string why = textureReadError(path);
+        if (!why.empty())
+            diag_.fail(line, what + ": cannot read texture file \"" + printable(path, 200) + "\": " + why);
+        scene_.textures.push_back(path);
+        return scene_.textures.size() - 1;
+    }
+    // MakeTexture picturename texturename swrap twrap filter swidth twidth ...parameterlist... (RI spec 3.2,
+    // sec. 8.3): converts the picture (relative names: to the file being read's directory) to a tiled,
+    // mip-mapped texture with OpenImageIO, as RenderMan renderers do when the request is read. The filter
+    // is checked; OIIO's make_texture filters its own way.
+    void makeTextureRequest(const Request& r, const Arguments& args) {
+        args.atLeast(7, "picturename texturename swrap twrap filter swidth twidth ...parameterlist...");
+        const std::string& picture = args.string(0);
+        const std::string& texture = args.string(1);
+        const std::string& swrap = args.string(2);
+        const std::string& twrap = args.string(3);
+        const std::string& filter = args.string(4);
+        const double sw = args.number(5), tw = args.number(6);
+        parseParams(r, 7, decls_, diag_);
+        for (const std::string* w : {&swrap, &twrap})
+            if (*w != "periodic" && *w != "clamp" && *w != "black")
+                diag_.fail(r.line,
+                           "MakeTexture: wrap mode must be \"periodic\", \"clamp\" or \"black\", found \"" +
+                               printable(*w) + "\"");
+        static const std::set<std::string> filters = {"box",  "triangle", "gaussian", "catmull-rom",
+                                                      "sinc", "disk",     "bessel"};
+        if (!filters.count(filter))
+            diag_.fail(r.line, "MakeTexture: unknown filter \"" + printable(filter) + "\"");
+        if (!(sw > 0) || !(tw > 0)) diag_.fail(r.line, "MakeTexture: swidth and twidth must be positive");
+        const std::string in = relativeToFile(picture), out = relativeToFile(texture);
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(in, ec))
+            diag_.fail(r.line, "MakeTexture: picture file \"" + printable(in, 200) + "\" not found");
+        if (const std::string why = textureReadError(in); !why.empty())
+            diag_.fail(r.line,
+                       "MakeTexture: cannot read picture file \"" + printable(in, 200) + "\": " + why);
+        if (const std::string why = makeTexture(in, out, swrap, twrap); !why.empty())
+            diag_.fail(r.line, "MakeTexture: cannot write texture \"" + printable(out, 200) + "\": " + why);
+    }
+    // TextureCoordinates s1 t1 s2 t2 s3 t3 s4 t4 (RI spec 3.2, sec. 4.2.7).
+    void textureCoordinates(const Request& r, const Arguments& args) {
+        auto v = args.numbers(8, "s1 t1 s2 t2 s3 t3 s4 t4");
+        PatchTexCoords& tc = state_.attributes().textureCoordinates;
+        for (int k = 0; k < 4; ++k) {
+            if (!std::isfinite(v[2 * k]) || !std::isfinite(v[2 * k + 1]) || std::fabs(v[2 * k]) > 1e30 ||
+                std::fabs(v[2 * k + 1]) > 1e30)
+                diag_.fail(r.line, "TextureCoordinates: the coordinates must be finite numbers");
+            tc.st[k] = {float(v[2 * k]), float(v[2 * k + 1])};
+        }
     }
 
     // ---- attributes (RI spec 3.2, sec. 4.2) -----------------------------------------------------
@@ -539,7 +651,19 @@ class RibReader {
         Material m = defaultMaterial(shader->type);
         m.Cs = state_.attributes().surface.Cs;
         m.Os = state_.attributes().surface.Os;
-        applyShaderParams(shader->params, r, ps, m, "Surface \"" + name + "\"", diag_);
+        // paintedplastic's "texturename" (RI spec 3.2, appendix A): Cs * texture(texturename); "" is none.
+        // shinymetal's names an environment map, which is not supported yet (warned as ignored).
+        const std::string what = "Surface \"" + name + "\"";
+        std::vector<Param> rest;
+        for (const Param& p : ps) {
+            if (p.name == "texturename" && shader->type == MaterialType::PaintedPlastic) {
+                const std::string file = paramString(r, p, diag_);
+                if (!file.empty()) m.texture = int32_t(textureIndex(p.line, file, what));
+            } else {
+                rest.push_back(p);
+            }
+        }
+        applyShaderParams(shader->params, r, rest, m, what, diag_);
         state_.attributes().surface = m;
     }
     // LightSource (RI spec 3.2, sec. 4.2.2): the light's "shader space" is the current object space.
@@ -957,6 +1081,8 @@ class RibReader {
             {"Hyperboloid", &RibReader::quadric},
             {"Torus", &RibReader::quadric},
             {"ReadArchive", &RibReader::readArchive},
+            {"MakeTexture", &RibReader::makeTextureRequest},
+            {"TextureCoordinates", &RibReader::textureCoordinates},
         };
         auto it = handlers.find(name);
         return it == handlers.end() ? nullptr : it->second;
@@ -972,6 +1098,8 @@ class RibReader {
     std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;
     int archiveDepth_ = 0;  // ReadArchive nesting of the file being read
+    // Option "searchpath" "texture" (empty: the directory of the file that names the texture).
+    std::vector<std::string> textureSearchPath_;
 };
 
 }  // namespace

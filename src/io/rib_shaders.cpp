@@ -29,8 +29,8 @@ constexpr SurfaceParam kPlasticParams[] = {kKa, kKd, kKs, kRoughness, kSpecularC
                                            kKt, kEta};
 constexpr SurfaceParam kMetalParams[] = {kKa, kKs, kRoughness, /* also */ kKd, kSpecularColor,
                                          kKr, kKt, kEta};
-// shinymetal's texturename and paintedplastic's texturename are strings for the texture work to come: until
-// then they are warned about and ignored like any parameter without a row.
+// paintedplastic's "texturename" (a string) is read by the reader's Surface handler (a texture file);
+// shinymetal's (an environment map) is warned about and ignored like any parameter without a row.
 constexpr SurfaceParam kShinyMetalParams[] = {kKa, kKs, kKr, kRoughness, /* also */ kKd, kSpecularColor,
                                               kKt, kEta};
 constexpr SurfaceParam kConstantParams[] = {/* also */ kKa, kKd, kKs, kRoughness,
@@ -41,9 +41,12 @@ constexpr SurfaceParam kGlassParams[] = {kKr, kKt, kEta,       /* also */ kKa,
                                          kKd, kKs, kRoughness, kSpecularColor};
 
 constexpr SurfaceShader kSurfaceShaders[] = {
-    {"matte", MaterialType::Matte, kMatteParams},    {"plastic", MaterialType::Plastic, kPlasticParams},
-    {"metal", MaterialType::Metal, kMetalParams},    {"constant", MaterialType::Constant, kConstantParams},
-    {"mirror", MaterialType::Mirror, kMirrorParams}, {"glass", MaterialType::Glass, kGlassParams},
+    {"matte", MaterialType::Matte, kMatteParams},
+    {"plastic", MaterialType::Plastic, kPlasticParams},
+    {"metal", MaterialType::Metal, kMetalParams},
+    {"constant", MaterialType::Constant, kConstantParams},
+    {"mirror", MaterialType::Mirror, kMirrorParams},
+    {"glass", MaterialType::Glass, kGlassParams},
     {"shinymetal", MaterialType::ShinyMetal, kShinyMetalParams},
     {"paintedplastic", MaterialType::PaintedPlastic, kPlasticParams},
 };
@@ -61,8 +64,8 @@ constexpr LightParam kPointParams[] = {kIntensity, kLightColor, kFrom};
 constexpr LightParam kConeAngle{"coneangle", &LightShaderParams::coneangle};
 constexpr LightParam kConeDeltaAngle{"conedeltaangle", &LightShaderParams::conedeltaangle};
 constexpr LightParam kBeamDistribution{"beamdistribution", &LightShaderParams::beamdistribution};
-constexpr LightParam kSpotParams[] = {kIntensity, kLightColor,     kFrom,           kTo,
-                                      kConeAngle, kConeDeltaAngle, kBeamDistribution};
+constexpr LightParam kSpotParams[] = {kIntensity,      kLightColor,      kFrom, kTo, kConeAngle,
+                                      kConeDeltaAngle, kBeamDistribution};
 
 constexpr LightShader kLightShaders[] = {
     {"ambientlight", LightType::Ambient, kAmbientParams},
@@ -109,6 +112,9 @@ const LightShader* findLightShader(std::string_view name) {
 void declareShaderParams(Declarations& decls) {
     for (const SurfaceShader& s : surfaceShaders()) declareRows(s.params, decls);
     for (const LightShader& s : lightShaders()) declareRows(s.params, decls);
+    Decl name;
+    name.type = "string";
+    decls.declare("texturename", name);  // paintedplastic, shinymetal, bumpy (RI spec 3.2, appendix A)
 }
 
 template <class Target>

@@ -57,7 +57,7 @@ const char* filterName(FilterType f) {
     }
 }
 
-void writeSurface(std::ostream& o, const Material& m) {
+void writeSurface(std::ostream& o, const Material& m, const Scene& scene) {
     o << "Color [" << triple(m.Cs) << "]\n";
     o << "Opacity [" << triple(m.Os) << "]\n";
     switch (m.type) {
@@ -88,7 +88,14 @@ void writeSurface(std::ostream& o, const Material& m) {
             o << "Surface \"" << (m.type == MaterialType::PaintedPlastic ? "paintedplastic" : "plastic")
               << "\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" [" << num(m.Ks)
               << "] \"roughness\" [" << num(m.roughness) << "] \"specularcolor\" [" << triple(m.specularColor)
-              << "]\n";
+              << "]";
+            // The texture as an absolute path: the written file may live elsewhere.
+            if (m.type == MaterialType::PaintedPlastic && m.texture >= 0 &&
+                size_t(m.texture) < scene.textures.size())
+                o << " \"texturename\" \""
+                  << std::filesystem::absolute(scene.textures[size_t(m.texture)]).lexically_normal().string()
+                  << "\"";
+            o << "\n";
             break;
     }
 }
@@ -239,7 +246,7 @@ void writeRib(const Scene& scene, std::ostream& o) {
     while (i < scene.patches.size()) {
         const PatchAttributes& a = i < scene.attributes.size() ? scene.attributes[i] : defaults;
         o << "AttributeBegin\n";
-        if (a.material < scene.materials.size()) writeSurface(o, scene.materials[a.material]);
+        if (a.material < scene.materials.size()) writeSurface(o, scene.materials[a.material], scene);
         o << "ShadingRate " << num(a.shadingRate) << "\n";
         o << "Sides " << (a.twoSided ? 2 : 1) << "\n";
         o << "Orientation \"" << ((a.flipNormal != mirrored) ? "rh" : "lh") << "\"\n";
@@ -257,7 +264,15 @@ void writeRib(const Scene& scene, std::ostream& o) {
             auto patch = [&](const BezierPatch& p) {
                 o << "Patch \"bicubic\" \"P\" [";
                 for (int k = 0; k < 16; ++k) o << (k ? " " : "") << triple(p.cp[k]);
-                o << "]\n";
+                o << "]";
+                if (i < scene.texCoords.size()) {  // s, t as the four varying corner values
+                    o << " \"st\" [";
+                    for (int k = 0; k < 4; ++k)
+                        o << (k ? " " : "") << num(scene.texCoords[i].st[k].x) << " "
+                          << num(scene.texCoords[i].st[k].y);
+                    o << "]";
+                }
+                o << "\n";
             };
             if (isQuadric(b.kind) && b.shape < scene.quadrics.size()) {
                 const SceneQuadric& q = scene.quadrics[b.shape];

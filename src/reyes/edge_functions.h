@@ -77,11 +77,11 @@ inline void writeSampleHit(const Grid& g, int a, int b, int c, float l0, float l
             N = normalize(Vec3{l0 * g.NX[a] + l1 * g.NX[b] + l2 * g.NX[c],
                                l0 * g.NY[a] + l1 * g.NY[b] + l2 * g.NY[c],
                                l0 * g.NZ[a] + l1 * g.NZ[b] + l2 * g.NZ[c]});
-        // Lights in shadow: the nearest vertex's count (counts are not interpolated). No textures yet.
+        // Lights in shadow: the nearest vertex's count (counts are not interpolated).
         int shadowed = 0;
         if (!g.shadowedLights.empty())
             shadowed = g.shadowedLights[l0 >= l1 && l0 >= l2 ? a : l1 >= l2 ? b : c];
-        tile.setAttributes(i, g.objectId, N, shadowed, false);
+        tile.setAttributes(i, g.objectId, N, shadowed, g.textured);
     }
 }
 

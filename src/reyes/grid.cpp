@@ -30,7 +30,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     grid.front.resize(count);
     // Dice first (positions, normals, view directions of the whole grid), then shade the grid as one batch.
     thread_local std::vector<Vec3> Ps, Ns, Is;
-    thread_local std::vector<Color> Ci;
+    thread_local std::vector<Color> Ci, Ct;
+    const bool textured = shade.textures && shade.material->texture >= 0 && !shade.depthOnly;
+    if (textured) Ct.resize(count);
     Ps.resize(count);
     Ns.resize(count);
     Is.resize(count);
@@ -104,6 +106,10 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 owners[v] = owner ? int(owner - e) : -1;
                 lattice[v] = k;
             }
+            // Texture coordinates follow the vertex's (u,v) on the patch, so they follow every split.
+            if (textured)
+                Ct[v] = surfaceTextureColor(*shade.textures, *shade.material, view.projector, shade.texCoords,
+                                            P, sp.dpdu, sp.dpdv, uv, shade.textureScale);
             Ps[v] = P;
             Ns[v] = N;
             Is[v] = normalize(P);  // the eye is at the camera-space origin
@@ -180,6 +186,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     points.P = Ps.data();
     points.N = Ns.data();
     points.I = Is.data();
+    points.textureColor = textured ? Ct.data() : nullptr;
     const std::span<const Material> material(shade.material, 1);
     bool queries = false;
     if (shade.visibility)
@@ -210,6 +217,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
         shadeSurfacesUnoccluded(shade.lights, material, points, Ci.data());
     }
     grid.objectId = shade.objectId;
+    grid.textured = textured;
     if (shade.wantNormals) {
         grid.NX.resize(count);
         grid.NY.resize(count);

@@ -9,6 +9,7 @@
 #include "film/film.h"
 #include "reyes/split.h"
 #include "shading/surface.h"
+#include "shading/texture.h"
 
 namespace tessera {
 
@@ -32,6 +33,7 @@ struct Grid {
     // For the film's attribute channels: the object, and (when the film wants normals) the unit shading
     // normal per vertex, facing the viewer.
     uint32_t objectId = 0;
+    bool textured = false;  // its surface has a texture (the film's has-texture channel)
     std::vector<float> NX, NY, NZ;
     // When the film counts lights in shadow and lights cast shadows: per vertex, the lights more than half
     // blocked (empty: none).
@@ -69,6 +71,11 @@ struct ShadeInputs {
     // Quadric kinds: the quadric in camera space (ReyesView::quadrics[shape]); its closed form gives every
     // vertex's position and normal. Quadrics do not move (the reader takes them at shutter open).
     const PlacedQuadric* quadric = nullptr;
+    // The frame's textures (nullptr: the scene has none), the patch's s, t, and how many raster pixels a
+    // texture lookup's footprint spans (the micropolygon side when it is wider than a pixel).
+    const Textures* textures = nullptr;
+    PatchTexCoords texCoords{};
+    float textureScale = 1.f;
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

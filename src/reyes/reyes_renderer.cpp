@@ -149,6 +149,9 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                                false,
                                (settings.output.channels & kChannelShadowCount) != 0,
                                quadricOf(view, attr)};
+                in.textures = frame.textures.get();
+                in.texCoords = texCoordsOf(scene, piece.patch);
+                in.textureScale = std::max(1.f, std::sqrt(attr.shadingRate));
                 diceAndShade(view, piece, in, g);
                 ++tc.grids;
                 tc.micropolygons += uint64_t(g.nu) * g.nv;

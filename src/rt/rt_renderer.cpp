@@ -17,6 +17,7 @@
 #include "rt/shadow_rays.h"
 #include "shading/hemisphere.h"
 #include "shading/surface.h"
+#include "shading/texture.h"
 
 namespace tessera {
 namespace {
@@ -34,6 +35,7 @@ struct Workspace {
     // The generation's hits as one shading batch (structure of arrays, hit k is ray hitRay[k]).
     std::vector<uint32_t> hitRay, hitMaterial;
     std::vector<Vec3> hitP, hitN, hitI;
+    std::vector<Color> hitTexture;  // per hit: its texture colour (white when untextured)
     LightSamples lightSamples;
     std::vector<uint32_t> shadowIdx;      // [hit * lights + light]: its shadow ray (kNone: none)
     std::vector<uint8_t> shadowedLights;  // per hit: lights in shadow (the film's shadow-count channel)
@@ -49,13 +51,17 @@ struct Frame {
     const RtAccel& acc;
     std::span<const ShadingLight> lights;
     int maxDepth;
+    const Projector& projector;
+    const Textures* textures;  // nullptr: the scene has none
 };
 
 // ---- Shading through src/shading: hits -> light samples -> shadow rays -> radiance + traced lobes ------
 
 // The generation's hits as a shading batch: position, unit normal (orientation applied), unit incident
-// direction, material.
-SurfacePoints hitBatch(const RtAccel& acc, Workspace& ws) {
+// direction, material; and the texture colour of textured surfaces at the hit's s, t (filtered over the
+// raster pixel the hit's footprint covers as seen from the camera: the footprint Reyes filters over too).
+SurfacePoints hitBatch(const Frame& fr, Workspace& ws) {
+    const RtAccel& acc = fr.acc;
     const RayList& rays = ws.rays;
     ws.hitRay.clear();
     for (size_t r = 0; r < rays.size(); ++r)
@@ -70,7 +76,27 @@ SurfacePoints hitBatch(const RtAccel& acc, Workspace& ws) {
         ws.hitI[k] = normalize(rays.d[r]);
         ws.hitMaterial[k] = acc.material[rh.patch];
     }
-    return SurfacePoints{n, ws.hitP.data(), ws.hitN.data(), ws.hitI.data(), ws.hitMaterial.data()};
+    SurfacePoints pts{n, ws.hitP.data(), ws.hitN.data(), ws.hitI.data(), ws.hitMaterial.data()};
+    if (fr.textures) {
+        ws.hitTexture.resize(n);
+        for (size_t k = 0; k < n; ++k) {
+            const RayHit& rh = ws.hits[ws.hitRay[k]];
+            const Material& m = fr.scene.materials[ws.hitMaterial[k]];
+            // Textures on bicubic patches only (as Reyes: quadrics have no s, t yet).
+            if (m.texture < 0 || fr.scene.attributes[rh.patch].kind != SurfaceKind::BicubicBezier) {
+                ws.hitTexture[k] = {1, 1, 1};
+                continue;
+            }
+            // The texture coordinates follow the hit's (u,v) on the patch (at shutter open for the
+            // footprint's derivatives).
+            const SurfacePoint sp = evalPatchDeriv(acc.patches[rh.patch], rh.h.u, rh.h.v);
+            ws.hitTexture[k] =
+                surfaceTextureColor(*fr.textures, m, fr.projector, texCoordsOf(fr.scene, rh.patch), rh.h.p,
+                                    sp.dpdu, sp.dpdv, Vec2{rh.h.u, rh.h.v});
+        }
+        pts.textureColor = ws.hitTexture.data();
+    }
+    return pts;
 }
 
 // The visibility queries of the light samples as shadow rays (rt/shadow_rays.h), each from its hit.
@@ -109,7 +135,9 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
             tile.z[s] = rh.h.t;
             tile.pixelHit[s / size_t(tile.spp)] = 1;
             if (tile.channels)
-                tile.setAttributes(s, fr.scene.attributes[rh.patch].object, Nf, ws.shadowedLights[k], false);
+                tile.setAttributes(s, fr.scene.attributes[rh.patch].object, Nf, ws.shadowedLights[k],
+                                   fr.scene.materials[pts.materialOf(k)].texture >= 0 &&
+                                       fr.scene.attributes[rh.patch].kind == SurfaceKind::BicubicBezier);
         }
         const Color w = rays.weight[r];
         const Color c = w * ws.radiance[k];
@@ -134,7 +162,7 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
 // accumulate colour into the tile and write the next generation (reflection, refraction) to `ws.next`.
 void shadeGeneration(const Frame& fr, Workspace& ws) {
     auto ts = EngineClock::now();
-    const SurfacePoints pts = hitBatch(fr.acc, ws);
+    const SurfacePoints pts = hitBatch(fr, ws);
     sampleLights(fr.lights, fr.scene.materials, pts, ws.lightSamples);
     makeShadowRays(fr, pts, ws);
     ws.shadeMs += msSince(ts);
@@ -161,7 +189,7 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
 // has an "occlusion" AOV, there too. Both sides of every surface block the rays.
 void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_t seed, Workspace& ws) {
     auto ts = EngineClock::now();
-    const SurfacePoints pts = hitBatch(fr.acc, ws);
+    const SurfacePoints pts = hitBatch(fr, ws);
     SampleTile& tile = ws.tile;
     const RayList& rays = ws.rays;
     const size_t n = pts.count, N = size_t(std::max(1, ao.samples));
@@ -378,8 +406,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     const bool binning =
         settings.rayBinning && TraceService::binningPays(leavesPerSample) && acc.forest.slabCount == 0;
     const TraceServiceOptions traceOpt{settings.cullBackfaces, binning};
-    const Frame fr{scene, acc, frame.lights, std::max(0, settings.maxDepth)};
     const Projector& proj = frame.projector;
+    const Frame fr{scene, acc, frame.lights, std::max(0, settings.maxDepth), proj, frame.textures.get()};
 
     // Tiles of at most 64x64 pixels and about 16k samples: the wavefront's ray and candidate lists scale
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory; at 1

@@ -67,6 +67,15 @@ struct Material {
     float Ka = 1.f, Kd = 1.f, Ks = 0.5f, roughness = 0.1f;
     Color specularColor{1, 1, 1};
     float Kr = 1.f, Kt = 1.f, eta = 1.5f;
+    // paintedplastic's "texturename": index into Scene::textures (-1: none, Cs alone).
+    int32_t texture = -1;
+};
+
+// A surface's RI texture coordinates s, t (RI spec 3.2, sec. 4.2.7 and 5.2): the values at its (u,v)
+// corners (0,0), (1,0), (0,1), (1,1), interpolated bilinearly in between (RI "varying"). Default: s = u,
+// t = v.
+struct PatchTexCoords {
+    Vec2 st[4] = {{0, 0}, {1, 0}, {0, 1}, {1, 1}};
 };
 
 // The closed set of surface kinds both engines handle. Reyes' bound/split/dice and the ray tracer's
@@ -156,6 +165,11 @@ struct Scene {
     // patch at shutter open.
     std::vector<BezierPatch> motionPatches;
     std::vector<float> motionTimes;
+    // Texture coordinates per patch (index as `patches`), or empty when every patch has the default s = u,
+    // t = v; see texCoordsOf.
+    std::vector<PatchTexCoords> texCoords;
+    // The texture files materials refer to (Material::texture), resolved to paths by the reader.
+    std::vector<std::string> textures;
     uint32_t objectCount = 0;
     std::string sourcePath;
 
@@ -166,6 +180,11 @@ struct Scene {
 
 // How many surfaces of each kind the scene has (SurfaceKind order; statistics, `tessera info`).
 std::array<size_t, kSurfaceKinds> surfaceKindCounts(const Scene& scene);
+
+// The texture coordinates of patch `i` (the default s = u, t = v when the scene has none).
+inline PatchTexCoords texCoordsOf(const Scene& scene, size_t i) {
+    return i < scene.texCoords.size() ? scene.texCoords[i] : PatchTexCoords{};
+}
 
 // World-space control points of patch `i` at scene time `time` (linear between its keys).
 BezierPatch patchAtTime(const Scene& scene, size_t i, float time);

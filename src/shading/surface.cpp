@@ -34,7 +34,8 @@ void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& poi
     const size_t nL = ls.lights;
     for (size_t i = begin; i < end; ++i)
         Ci[i] = shadeSurfacePoint(materials[points.materialOf(i)], points.N[i], points.I[i],
-                                  ls.sample.data() + i * nL, ls.visibility.data() + i * nL, nL);
+                                  ls.sample.data() + i * nL, ls.visibility.data() + i * nL, nL,
+                                  points.textureOf(i));
 }
 
 void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<const Material> materials,
@@ -43,7 +44,8 @@ void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<con
         const Vec3 P = points.P[i];
         Ci[i] = shadeSurfaceLights(
             materials[points.materialOf(i)], points.N[i], points.I[i], lights.size(),
-            [&](size_t l) { return sampleLight(lights[l], P); }, [](size_t) { return 1.f; });
+            [&](size_t l) { return sampleLight(lights[l], P); }, [](size_t) { return 1.f; },
+            points.textureOf(i));
     }
 }
 

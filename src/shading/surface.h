@@ -24,7 +24,11 @@ struct SurfacePoints {
     const Vec3* N = nullptr;
     const Vec3* I = nullptr;
     const uint32_t* material = nullptr;  // index into the materials per point; nullptr: all use materials[0]
+    // Per point: the texture colour of a textured surface (paintedplastic's texture(texturename)), white
+    // for untextured points; nullptr: no point is textured (shading/texture.h, shadeTexture).
+    const Color* textureColor = nullptr;
     uint32_t materialOf(size_t i) const { return material ? material[i] : 0u; }
+    Color textureOf(size_t i) const { return textureColor ? textureColor[i] : Color{1, 1, 1}; }
 };
 
 // The light samples of a batch, [point * lights + light]. A sample with needsVisibility set asks the engine
@@ -62,9 +66,10 @@ void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& poi
 
 // The local response of one point, over light samples given by sampleAt(l) and their visibility by
 // visibilityAt(l): the one accumulation of the RI ambient, diffuse and specular terms that every path uses.
+// `Ct` is the point's texture colour (white when untextured).
 template <class SampleAt, class VisibilityAt>
 TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t lightCount, SampleAt&& sampleAt,
-                                    VisibilityAt&& visibilityAt) {
+                                    VisibilityAt&& visibilityAt, Color Ct = Color{1, 1, 1}) {
     if (m.type == MaterialType::Constant) return m.Os * m.Cs;
     const Vec3 Nf = faceForward(N, I);
     const Vec3 V = -I;
@@ -92,11 +97,12 @@ TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t li
         case MaterialType::Metal:
         case MaterialType::ShinyMetal:
             return m.Os * m.Cs * (ambient * m.Ka + specular * m.Ks);
-        // paintedplastic multiplies Cs by a texture; with no textures yet it is plastic.
+        // paintedplastic is plastic with Cs * texture(texturename) (RI spec 3.2, appendix A).
+        case MaterialType::PaintedPlastic:
+            return m.Os * (m.Cs * Ct * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
         // Mirror and glass: the RI plastic terms with their own Ka, Kd, Ks (defaults 0, 0, 0.5: a highlight)
         // as the local part; reflection and refraction are traced lobes.
         case MaterialType::Plastic:
-        case MaterialType::PaintedPlastic:
         case MaterialType::Mirror:
         case MaterialType::Glass:
         default:
@@ -107,10 +113,10 @@ TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t li
 // The local response of one point from stored light samples and visibilities (the batch loop, and tests
 // that check both engines get the same radiance for the same hit).
 TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const LightSample* samples,
-                                   const float* visibility, size_t lightCount) {
+                                   const float* visibility, size_t lightCount, Color Ct = Color{1, 1, 1}) {
     return shadeSurfaceLights(
         m, N, I, lightCount, [&](size_t l) -> const LightSample& { return samples[l]; },
-        [&](size_t l) { return visibility[l]; });
+        [&](size_t l) { return visibility[l]; }, Ct);
 }
 
 // Steps 1-3 fused for a batch whose every visibility query answers "visible" (Reyes when no light casts
