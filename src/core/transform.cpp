@@ -1,5 +1,6 @@
 #include "core/transform.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -59,6 +60,16 @@ Mat4 Mat4::operator*(const Mat4& b) const {
             r.m[i][j] = s;
         }
     return r;
+}
+
+double Mat4::maxStretch() const {
+    double mtm[3][3] = {}, largest = 0;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            for (int k = 0; k < 3; ++k) mtm[i][j] += m[k][i] * m[k][j];
+    for (int i = 0; i < 3; ++i)
+        largest = std::max(largest, std::fabs(mtm[i][0]) + std::fabs(mtm[i][1]) + std::fabs(mtm[i][2]));
+    return std::sqrt(largest);
 }
 
 double Mat4::det3() const {

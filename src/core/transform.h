@@ -19,7 +19,10 @@ struct Mat4 {
     Mat4 operator*(const Mat4& b) const;
     Mat4 inverse() const;  // general inverse; returns identity-scaled garbage only if singular (check det)
     double determinant() const;
-    double det3() const;   // determinant of the upper-left 3x3 (handedness)
+    double det3() const;  // determinant of the upper-left 3x3 (handedness)
+    // An upper bound on how much the linear part stretches a vector: sqrt of a Gershgorin bound on the
+    // eigenvalues of M^T M (exact for rotations with uniform scale).
+    double maxStretch() const;
 
     Vec3 point(Vec3 p) const;   // with homogeneous divide
     Vec3 vector(Vec3 v) const;  // no translation

@@ -793,6 +793,8 @@ PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& 
     a.twoSided = c.state.attributes().twoSided;
     a.motionFactor = c.state.attributes().motionFactor;
     a.focusFactor = c.state.attributes().focusFactor;
+    a.displacement = c.state.attributes().displacement;
+    a.displacementBound = c.state.attributes().displacementBound;
     const bool mirrored = (scene.camera.cameraFromWorld * ctm.at(scene.camera.shutterOpen)).det3() < 0;
     a.flipNormal = c.state.attributes().rightHanded != mirrored;
     return a;

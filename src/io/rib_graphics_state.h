@@ -83,6 +83,10 @@ struct Attributes {
     // TextureCoordinates s1 t1 s2 t2 s3 t3 s4 t4 (RI spec 3.2, sec. 4.2.7): s, t at the corners of the
     // parameter unit square of the primitives that follow (default s = u, t = v).
     PatchTexCoords textureCoordinates;
+    // Displacement (RI spec 3.2, sec. 4.2.3; -1: none): index into Scene::displacements, and Attribute
+    // "displacementbound" "sphere" r "coordinatesystem" space, r converted to world units (0: not given).
+    int32_t displacement = -1;
+    float displacementBound = 0.f;
 };
 
 enum class Block { Frame, World, Attribute, Transform };

@@ -546,6 +546,10 @@ class RibReader {
             }
             return;
         }
+        if (name == "displacementbound") {
+            displacementBound(r, ps);
+            return;
+        }
         if (name == "shadow") {
             // The shadow map of the lights declared from here on: each parameter's range (docs/shading.md).
             struct Field {
@@ -582,6 +586,43 @@ class RibReader {
             return;
         }
         diag_.warnOnce("attribute:" + name, r.line, "Attribute \"" + name + "\" is not supported; ignored");
+    }
+    // Attribute "displacementbound" "sphere" r "coordinatesystem" space (PRMan, Aqsis): displacement moves
+    // points at most r units of `space` ("object" by default, "shader", "world", "camera", "current" or a
+    // named CoordinateSystem); stored in world units, r times the largest stretch of space-to-world.
+    void displacementBound(const Request& r, const std::vector<Param>& ps) {
+        double radius = -1;
+        std::string space = "object";
+        for (const Param& p : ps) {
+            if (p.name == "sphere") {
+                if (!p.value->numeric() || p.value->nums.size() != 1)
+                    diag_.fail(p.line, "Attribute \"displacementbound\": \"sphere\" takes one number");
+                radius = p.value->nums[0];
+                if (!std::isfinite(radius) || radius < 0 || radius > 1e30)
+                    diag_.fail(p.line,
+                               "Attribute \"displacementbound\": \"sphere\" must be a number >= 0, found " +
+                                   fmtNum(radius));
+            } else if (p.name == "coordinatesystem") {
+                space = paramString(r, p, diag_);
+            } else {
+                warnIgnoredParam(p, "Attribute \"displacementbound\"", diag_);
+            }
+        }
+        if (radius < 0) diag_.fail(r.line, "Attribute \"displacementbound\": missing \"sphere\" r");
+        Mat4 worldFromSpace;
+        if (space == "object" || space == "shader")
+            worldFromSpace = state_.transform().at(scene_.camera.shutterOpen);
+        else if (space == "camera" || space == "current")
+            worldFromSpace = scene_.camera.cameraFromWorld.inverse();
+        else if (const Transform* named = state_.coordinateSystem(space))
+            worldFromSpace = named->at(scene_.camera.shutterOpen);
+        else if (space != "world")
+            diag_.fail(r.line, "Attribute \"displacementbound\": unknown coordinate system \"" +
+                                   printable(space) + "\"");
+        const double world = radius * worldFromSpace.maxStretch();
+        if (!(world < 1e30))
+            diag_.fail(r.line, "Attribute \"displacementbound\": the bound overflows in world space");
+        state_.attributes().displacementBound = float(world);
     }
     // GeometricApproximation type value (RI spec 3.2, sec. 4.2.5): "motionfactor" and "focusfactor" (PRMan,
     // Aqsis) coarsen the shading of blurred geometry; "flatness" and others are not used.
@@ -666,6 +707,51 @@ class RibReader {
         applyShaderParams(shader->params, r, rest, m, what, diag_);
         state_.attributes().surface = m;
     }
+    // Displacement (RI spec 3.2, sec. 4.2.3 and appendix A): "bumpy" "Km" k "texturename" "file" (P += Km *
+    // texture * normalize(N)), Tessera's "offset" "Km" d (a constant amplitude; RI has no standard shader for
+    // it), "null" (none). Any other name is an error: rendering a different shape silently would be worse.
+    void displacement(const Request& r, const Arguments& args) {
+        args.atLeast(1, "name ...parameterlist...");
+        const std::string& name = args.string(0);
+        auto ps = parseParams(r, 1, decls_, diag_);
+        if (name == "null" || name.empty()) {
+            state_.attributes().displacement = -1;
+            return;
+        }
+        const DisplacementShaderInfo* info = tessera::findDisplacementShader(name);
+        if (!info) {
+            std::string known;
+            for (const DisplacementShaderInfo& d : displacementShaders())
+                known += " \"" + std::string(d.name) + "\"";
+            diag_.fail(r.line, "Displacement: unknown displacement shader \"" + printable(name) +
+                                   "\" (Tessera has" + known + " and \"null\")");
+        }
+        DisplacementShader d;
+        d.type = info->type;
+        const std::string what = "Displacement \"" + name + "\"";
+        for (const Param& p : ps) {
+            if (p.name == "Km") {
+                d.Km = paramFloat(r, p, diag_);
+                if (!std::isfinite(d.Km) || std::fabs(d.Km) > 1e30f)
+                    diag_.fail(p.line, what + ": \"Km\" must be a finite number");
+            } else if (p.name == "texturename" && d.type == DisplacementType::Bumpy) {
+                const std::string file = paramString(r, p, diag_);
+                if (!file.empty()) d.texture = int32_t(textureIndex(p.line, file, what));
+            } else {
+                warnIgnoredParam(p, what, diag_);
+            }
+        }
+        if (d.type == DisplacementType::Bumpy && d.texture < 0)
+            diag_.warnOnce("bumpynotexture", r.line,
+                           what +
+                               " without a \"texturename\" does not move the surface (RI bumpy); "
+                               "Displacement \"offset\" \"Km\" d displaces by a constant d");
+        size_t i = 0;
+        while (i < scene_.displacements.size() && !(scene_.displacements[i] == d)) ++i;
+        if (i == scene_.displacements.size()) scene_.displacements.push_back(d);
+        state_.attributes().displacement = int32_t(i);
+    }
+
     // LightSource (RI spec 3.2, sec. 4.2.2): the light's "shader space" is the current object space.
     void lightSource(const Request& r, const Arguments& args) {
         args.atLeast(2, "shadername handle ...parameterlist...");
@@ -864,7 +950,8 @@ class RibReader {
         const std::string where =
             " (the motion block opened at " + m.file + ":" + std::to_string(m.line) + ")";
         if (r.name == "MotionBegin") diag_.fail(r.line, "nested MotionBegin" + where + " is still open");
-        static const std::set<std::string> shading = {"Color", "Opacity", "Surface", "LightSource"};
+        static const std::set<std::string> shading = {"Color", "Opacity", "Surface", "LightSource",
+                                                      "Displacement"};
         static const std::set<std::string> riMoving = {"Skew",           "Perspective",
                                                        "Deformation",    "Displacement",
                                                        "Interior",       "Exterior",
@@ -1049,6 +1136,7 @@ class RibReader {
             {"Orientation", &RibReader::orientation},
             {"ReverseOrientation", &RibReader::reverseOrientation},
             {"Surface", &RibReader::surface},
+            {"Displacement", &RibReader::displacement},
             {"LightSource", &RibReader::lightSource},
             {"Illuminate", &RibReader::illuminate},
             {"Basis", &RibReader::basis},

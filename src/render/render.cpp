@@ -28,6 +28,12 @@ RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSet
     return result;
 }
 
+bool anyDisplaced(const Scene& scene) {
+    for (const PatchAttributes& a : scene.attributes)
+        if (a.displacement >= 0) return true;
+    return false;
+}
+
 bool anyLightCastsShadows(const Scene& scene, const RenderSettings& settings) {
     for (const Light& l : scene.lights)
         if (lightCastsShadows(l, settings.shadows)) return true;
@@ -52,6 +58,19 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
             throw std::invalid_argument("unknown engine '" + settings.engine + "' (use reyes or rt)");
         }
     });
+    // The ray tracer does not displace yet (docs/textures.md): say so rather than silently render another
+    // shape.
+    if (anyDisplaced(scene)) {
+        if (settings.engine == "rt")
+            result.warnings.push_back(
+                "the scene has displaced surfaces: --engine rt ignores displacement (renders them "
+                "undisplaced); "
+                "--engine reyes displaces");
+        else if (settings.reyesShadows == ReyesShadows::Raytrace && anyLightCastsShadows(scene, settings))
+            result.warnings.push_back(
+                "--reyes-shadows raytrace traces the undisplaced surfaces: shadows of displacement need "
+                "--reyes-shadows map");
+    }
     result.stats["threads"] = threads;
     const Camera& cam = viewCamera(scene, settings);
     result.stats["width"] = cam.width;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "reyes/displace.h"
+
 namespace tessera {
 namespace {
 
@@ -31,7 +33,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     // Dice first (positions, normals, view directions of the whole grid), then shade the grid as one batch.
     thread_local std::vector<Vec3> Ps, Ns, Is;
     thread_local std::vector<Color> Ci, Ct;
-    const bool textured = shade.textures && shade.material->texture >= 0 && !shade.depthOnly;
+    // Textures on bicubic patches only (quadrics have no s, t yet).
+    const bool textured =
+        shade.textures && shade.material->texture >= 0 && !shade.depthOnly && !shade.quadric;
     if (textured) Ct.resize(count);
     Ps.resize(count);
     Ns.resize(count);
@@ -41,6 +45,11 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     // lattice point, to evaluate it again at the other knots of a moving patch.
     const PlacedQuadric* quadric = shade.quadric;
     const bool moves = !quadric && view.patchMoves(piece.patch) && view.knotCount() > 1;
+    // Displacement (reyes/displace.h): each vertex moves along the exact normal; a moving patch keeps the
+    // offsets of shutter open at its other knots.
+    const bool displaced = view.displacement && view.displacement->displaced(piece.patch);
+    thread_local std::vector<Vec3> offsets;
+    if (displaced && moves) offsets.resize(count);
     thread_local std::vector<Vec2> UVs;
     thread_local std::vector<int> owners, lattice;
     UVs.resize(count);
@@ -77,9 +86,13 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             }
             const int v = j * (nu + 1) + i;
             if (shade.depthOnly) {  // a shadow map's pass: positions only
-                const Vec3 P =
-                    quadric ? quadricPoint(*quadric, uv)
-                            : (owner ? latticePosition(patch, *owner, k) : evalPatch(patch, uv.x, uv.y));
+                Vec3 P = quadric ? quadricPoint(*quadric, uv)
+                                 : (owner ? latticePosition(patch, *owner, k) : evalPatch(patch, uv.x, uv.y));
+                if (displaced)
+                    P = displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P,
+                                       shade.flipNormal,
+                                       /*normal=*/false)
+                            .P;
                 const Vec3 r = view.projector.toRaster(P);
                 grid.X[v] = rasterToFixed(r.x);
                 grid.Y[v] = rasterToFixed(r.y);
@@ -87,12 +100,13 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 continue;
             }
             Vec3 P, N;
+            SurfacePoint sp{};
             if (quadric) {
                 // Closed form: on an edge uv is the lattice point's own (latticeUV), so neighbours agree.
                 P = quadricPoint(*quadric, uv);
                 evalPlacedQuadric(*quadric, uv.x, uv.y, &N);
             } else {
-                SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
+                sp = evalPatchDeriv(patch, uv.x, uv.y);
                 P = owner ? latticePosition(patch, *owner, k) : sp.p;
                 N = cross(sp.dpdu, sp.dpdv);
                 float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);
@@ -110,6 +124,13 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             if (textured)
                 Ct[v] = surfaceTextureColor(*shade.textures, *shade.material, view.projector, shade.texCoords,
                                             P, sp.dpdu, sp.dpdv, uv, shade.textureScale);
+            if (displaced) {
+                const DisplacedVertex d =
+                    displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P, shade.flipNormal);
+                if (moves) offsets[v] = d.P - P;
+                P = d.P;
+                N = d.N;
+            }
             Ps[v] = P;
             Ns[v] = N;
             Is[v] = normalize(P);  // the eye is at the camera-space origin
@@ -161,7 +182,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                     P = latticePosition(at, e[owners[v]], lattice[v]);  // an interior line: through the patch
                 else
                     P = evalPatch(at, UVs[v].x, UVs[v].y);
-                store(size_t(kn) * count + v, P);
+                store(size_t(kn) * count + v, displaced ? P + offsets[v] : P);
             }
         }
         // What the blurred rasterizer's bounds need of the whole grid, once per grid (not per bucket).

@@ -10,6 +10,7 @@
 
 #include "engine/frame.h"
 #include "engine/tile_loop.h"
+#include "reyes/displace.h"
 #include "reyes/grid.h"
 #include "reyes/pipeline.h"
 #include "reyes/rasterize.h"
@@ -50,7 +51,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     for (const ShadingLight& l : frame.lights) shadows = shadows || l.castsShadows;
     std::unique_ptr<ShadowMaps> shadowMaps;
     if (shadows && !visibility) {
-        shadowMaps = std::make_unique<ShadowMaps>(scene, settings, cam, frame.lights);
+        shadowMaps = std::make_unique<ShadowMaps>(scene, settings, cam, frame.lights, frame.textures.get());
         visibility = shadowMaps.get();
     }
 
@@ -87,6 +88,10 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     view.patches = patches.data();
     view.quadrics = quadrics.data();
     view.projector = frame.projector;
+    // Displacement (reyes/displace.h): per-patch bounds and the shared points of displaced patches.
+    const DisplacementFrame displacement =
+        makeDisplacementFrame(scene, frame.textures.get(), patches, float(cam.cameraFromWorld.maxStretch()));
+    if (displacement.any()) view.displacement = &displacement;
     view.lens = frame.blur.lens;
     if (motion.blurred()) {
         view.knotPatches.push_back(patches.data());

@@ -8,6 +8,7 @@
 #include <numbers>
 
 #include "engine/clock.h"
+#include "reyes/displace.h"
 #include "reyes/pipeline.h"
 #include "reyes/rasterize.h"
 
@@ -66,7 +67,8 @@ Camera perspectiveFace(const ShadowMapParams& p, const Mat4& cameraFromWorld, fl
 }  // namespace
 
 std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera, float shadingRate,
-                                  const RenderSettings& settings, DepthPassStats& stats) {
+                                  const RenderSettings& settings, DepthPassStats& stats,
+                                  const Textures* textures) {
     const auto t0 = EngineClock::now();
     const int width = lightCamera.width, height = lightCamera.height;
     // Bound: the patches in the light's space, shared edges welded (cracks would be light leaks).
@@ -76,6 +78,9 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     ReyesView view(lightCamera);
     view.patches = patches.data();
     view.quadrics = quadrics.data();
+    // Displaced surfaces cast their displaced shadows (the light's space is rigid: no stretch).
+    const DisplacementFrame displacement = makeDisplacementFrame(scene, textures, patches, 1.f);
+    if (displacement.any()) view.displacement = &displacement;
     // Geometry nearer to a light than 1% of the scene's size is diced as if it were that far: texels are
     // tiny there, and edges passing beside the light would otherwise be diced at the rate cap.
     if (lightCamera.perspective) {
@@ -142,7 +147,7 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
 }
 
 ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const Camera& shadingCamera,
-                       std::span<const ShadingLight> lights) {
+                       std::span<const ShadingLight> lights, const Textures* textures) {
     const auto t0 = EngineClock::now();
     const Mat4 worldFromShading = shadingCamera.cameraFromWorld.inverse();
     const Bounds3 bounds = scene.worldBounds();
@@ -201,7 +206,7 @@ ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const
         }
         for (const Camera& c : faces) {
             DepthPassStats st;
-            map->depth.push_back(renderDepthMap(scene, c, p.shadingRate, settings, st));
+            map->depth.push_back(renderDepthMap(scene, c, p.shadingRate, settings, st, textures));
             map->stats.pieces += st.pieces, map->stats.grids += st.grids;
             map->stats.micropolygons += st.micropolygons, map->stats.sampleTests += st.sampleTests;
             map->stats.ms += st.ms;

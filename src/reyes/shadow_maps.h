@@ -15,6 +15,7 @@
 #include "engine/settings.h"
 #include "engine/visibility.h"
 #include "shading/shadow_map.h"
+#include "shading/texture.h"
 
 namespace tessera {
 
@@ -27,15 +28,17 @@ struct DepthPassStats {
 // Renders the depth map seen by `lightCamera` (a square image of lightCamera.width texels): the scene's
 // patches at shutter open, split and diced at `shadingRate` texels of area per micropolygon, both sides,
 // nearest depth at each texel centre (infinity where nothing is seen). Row-major, top row first.
+// `textures`: the frame's (displacement textures; nullptr: none).
 std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera, float shadingRate,
-                                  const RenderSettings& settings, DepthPassStats& stats);
+                                  const RenderSettings& settings, DepthPassStats& stats,
+                                  const Textures* textures = nullptr);
 
 class ShadowMaps final : public LightVisibility {
   public:
     // Renders the maps of the lights whose ShadingLight casts shadows (`lights`: the frame's lights, in the
     // order of scene.lights), for lookups from `shadingCamera`'s camera space.
     ShadowMaps(const Scene& scene, const RenderSettings& settings, const Camera& shadingCamera,
-               std::span<const ShadingLight> lights);
+               std::span<const ShadingLight> lights, const Textures* textures = nullptr);
     void answer(const VisibilityQuery& query, LightSamples& samples) const override;
     void writeStats(nlohmann::json& shadows) const override;
 

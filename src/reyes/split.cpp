@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "reyes/displace.h"
 #include "scene/scene.h"
 
 namespace tessera {
@@ -166,6 +167,15 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
         const int count = hullOf(k, piece.patch, u0, u1, v0, v1, hull);
         Bounds3 b;
         for (int i = 0; i < count; ++i) b.extend(hull[i]);
+        // Displacement moves points at most `grow` from the surface (reyes/displace.h): the hull's box grown
+        // by it bounds the displaced piece.
+        const float grow = view.displacement && view.displacement->displaced(piece.patch)
+                               ? view.displacement->radius[piece.patch]
+                               : 0.f;
+        if (grow > 0.f) {
+            b.lo = b.lo - Vec3{grow, grow, grow};
+            b.hi = b.hi + Vec3{grow, grow, grow};
+        }
         if (!(b.hi.z >= pr.nearClip) || !(b.lo.z <= pr.farClip)) continue;
         anyInRange = true;
         if (b.lo.z < pr.nearClip) {
@@ -173,7 +183,10 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
             continue;
         }
         float kx0, ky0, kx1, ky1;
-        hullRaster(pr, hull, count, kx0, ky0, kx1, ky1);
+        if (grow > 0.f)
+            pr.rasterBounds(b, kx0, kx1, ky0, ky1);
+        else
+            hullRaster(pr, hull, count, kx0, ky0, kx1, ky1);
         if (k == 0) sharpW = kx1 - kx0, sharpH = ky1 - ky0;
         if (view.lens) {
             // Grown by the circle of confusion of the hull's depth range (Projector::lensShift).

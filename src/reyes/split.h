@@ -52,6 +52,8 @@ inline int pieceGridV(const Piece& p) {
     return std::max({p.edge[1].segments(), p.edge[3].segments(), 1});
 }
 
+struct DisplacementFrame;  // reyes/displace.h
+
 // Everything split and dice need, read-only during a render. Patches are in camera space.
 struct ReyesView {
     const BezierPatch* patches = nullptr;
@@ -76,6 +78,8 @@ struct ReyesView {
     // otherwise measure near-infinite edges (DiagSplit fixes an edge's rate from the whole edge) and be
     // diced at the rate cap where they are visible too.
     float lengthNearZ = 0.f;
+    // Displaced patches (nullptr or empty: none): bounds grow by each patch's radius, dicing displaces.
+    const DisplacementFrame* displacement = nullptr;
     explicit ReyesView(const Camera& cam) : projector(cam) {}
 };
 

@@ -78,6 +78,17 @@ struct PatchTexCoords {
     Vec2 st[4] = {{0, 0}, {1, 0}, {0, 1}, {1, 1}};
 };
 
+// Displacement shaders (docs/textures.md, "Displacement"): RI bumpy (P += Km * texture(texturename, s, t) *
+// normalize(N), RI spec 3.2, appendix A) and Tessera's offset (P += Km * normalize(N): a constant amplitude,
+// which RI's standard shaders do not offer). Amplitudes are in camera-space ("current") units, as RI's bumpy.
+enum class DisplacementType : uint8_t { Bumpy, Offset };
+struct DisplacementShader {
+    DisplacementType type = DisplacementType::Bumpy;
+    float Km = 1.f;
+    int32_t texture = -1;  // index into Scene::textures (-1: none; bumpy then does not move the surface)
+    bool operator==(const DisplacementShader&) const = default;
+};
+
 // The closed set of surface kinds both engines handle. Reyes' bound/split/dice and the ray tracer's
 // bound/traverse/intersect dispatch on this tag at the surface level (a switch, no virtual calls in the
 // kernels). Bicubic Bezier patches and the seven RI quadrics (core/quadric.h: closed form in their own
@@ -138,8 +149,11 @@ struct PatchAttributes {
     SurfaceKind kind = SurfaceKind::BicubicBezier;
     uint32_t shape = 0;  // quadric kinds: index in Scene::quadrics
     MotionKeys motion;
-    // RI Attribute "displacementbound" "sphere": how far displacement may move a point (object-space
-    // units), so bounds can be grown before displacement runs. 0: not displaced.
+    // The displacement shader (index into Scene::displacements; -1: none) and RI Attribute
+    // "displacementbound" "sphere" r "coordinatesystem" space: how far displacement may move a point, in
+    // world-space units (the reader converts r from its space; 0: not given, the bound then comes from the
+    // shader and its texture's range).
+    int32_t displacement = -1;
     float displacementBound = 0.f;
     uint32_t material = 0;
     uint32_t object = 0;      // object id (one per RIB primitive call / .bpt file)
@@ -170,6 +184,7 @@ struct Scene {
     std::vector<PatchTexCoords> texCoords;
     // The texture files materials refer to (Material::texture), resolved to paths by the reader.
     std::vector<std::string> textures;
+    std::vector<DisplacementShader> displacements;  // PatchAttributes::displacement
     uint32_t objectCount = 0;
     std::string sourcePath;
 

@@ -24,7 +24,10 @@ constexpr std::array kLights = {
     LightShaderInfo{"spotlight", LightType::Spot},
 };
 
-constexpr std::array<DisplacementShaderInfo, 0> kDisplacements = {};
+constexpr std::array kDisplacements = {
+    DisplacementShaderInfo{"bumpy", DisplacementType::Bumpy},
+    DisplacementShaderInfo{"offset", DisplacementType::Offset},
+};
 
 template <class Table>
 const typename Table::value_type* findIn(const Table& table, std::string_view name) {
@@ -35,13 +38,25 @@ const typename Table::value_type* findIn(const Table& table, std::string_view na
 
 }  // namespace
 
-std::span<const SurfaceShaderInfo> surfaceShaders() { return kSurfaces; }
-std::span<const LightShaderInfo> lightShaders() { return kLights; }
-std::span<const DisplacementShaderInfo> displacementShaders() { return kDisplacements; }
+std::span<const SurfaceShaderInfo> surfaceShaders() {
+    return kSurfaces;
+}
+std::span<const LightShaderInfo> lightShaders() {
+    return kLights;
+}
+std::span<const DisplacementShaderInfo> displacementShaders() {
+    return kDisplacements;
+}
 
-const SurfaceShaderInfo* findSurfaceShader(std::string_view name) { return findIn(kSurfaces, name); }
-const LightShaderInfo* findLightShader(std::string_view name) { return findIn(kLights, name); }
-const DisplacementShaderInfo* findDisplacementShader(std::string_view name) { return findIn(kDisplacements, name); }
+const SurfaceShaderInfo* findSurfaceShader(std::string_view name) {
+    return findIn(kSurfaces, name);
+}
+const LightShaderInfo* findLightShader(std::string_view name) {
+    return findIn(kLights, name);
+}
+const DisplacementShaderInfo* findDisplacementShader(std::string_view name) {
+    return findIn(kDisplacements, name);
+}
 
 const SurfaceShaderInfo& surfaceShaderInfo(MaterialType type) {
     for (const auto& e : kSurfaces)
@@ -53,14 +68,29 @@ Material defaultMaterial(MaterialType type) {
     Material m;
     m.type = type;
     switch (type) {
-        case MaterialType::Matte: m.Ka = 1, m.Kd = 1; break;
+        case MaterialType::Matte:
+            m.Ka = 1, m.Kd = 1;
+            break;
         case MaterialType::Plastic:
-        case MaterialType::PaintedPlastic: m.Ka = 1, m.Kd = 0.5f, m.Ks = 0.5f, m.roughness = 0.1f; break;
-        case MaterialType::Metal: m.Ka = 1, m.Ks = 1, m.roughness = 0.1f; break;
-        case MaterialType::ShinyMetal: m.Ka = 1, m.Ks = 1, m.Kr = 1, m.roughness = 0.1f; break;
-        case MaterialType::Constant: break;
-        case MaterialType::Mirror: m.Kr = 1; m.Ka = 0, m.Kd = 0; break;
-        case MaterialType::Glass: m.Kr = 1, m.Kt = 1, m.eta = 1.5f; m.Ka = 0, m.Kd = 0; break;
+        case MaterialType::PaintedPlastic:
+            m.Ka = 1, m.Kd = 0.5f, m.Ks = 0.5f, m.roughness = 0.1f;
+            break;
+        case MaterialType::Metal:
+            m.Ka = 1, m.Ks = 1, m.roughness = 0.1f;
+            break;
+        case MaterialType::ShinyMetal:
+            m.Ka = 1, m.Ks = 1, m.Kr = 1, m.roughness = 0.1f;
+            break;
+        case MaterialType::Constant:
+            break;
+        case MaterialType::Mirror:
+            m.Kr = 1;
+            m.Ka = 0, m.Kd = 0;
+            break;
+        case MaterialType::Glass:
+            m.Kr = 1, m.Kt = 1, m.eta = 1.5f;
+            m.Ka = 0, m.Kd = 0;
+            break;
     }
     return m;
 }

@@ -20,8 +20,7 @@ struct LightShaderInfo {
     LightType type;
 };
 
-// Displacement shaders get their entries with the displacement issue; the kind tag has its place now.
-enum class DisplacementType { None };
+// Displacement shaders: RI bumpy and Tessera's constant-amplitude offset (scene.h DisplacementType).
 struct DisplacementShaderInfo {
     std::string_view name;
     DisplacementType type;

@@ -33,15 +33,20 @@ struct Textures::Impl {
     OIIO::TextureSystem* ts = nullptr;
     std::vector<std::unique_ptr<Entry>> entries;
 
-    float lookup(const Entry& e, const TextureLookup& q, int nchannels, float* out) const {
+    float lookup(const Entry& e, const TextureLookup& q, int nchannels, float* out, float* dds = nullptr,
+                 float* ddt = nullptr) const {
         OIIO::TextureOpt opt;
         opt.swrap = opt.twrap = e.wrap;
         opt.fill = 0.f;
         // The per-thread info of the calling thread (OIIO keeps one per thread and texture system).
         OIIO::TextureSystem::Perthread* thread = ts->get_perthread_info();
-        const bool ok =
-            ts->texture(e.handle, thread, opt, q.s, q.t, q.dsdx, q.dtdx, q.dsdy, q.dtdy, nchannels, out);
-        if (!ok) std::fill(out, out + nchannels, 0.f);
+        const bool ok = ts->texture(e.handle, thread, opt, q.s, q.t, q.dsdx, q.dtdx, q.dsdy, q.dtdy,
+                                    nchannels, out, dds, ddt);
+        if (!ok) {
+            std::fill(out, out + nchannels, 0.f);
+            if (dds) std::fill(dds, dds + nchannels, 0.f);
+            if (ddt) std::fill(ddt, ddt + nchannels, 0.f);
+        }
         return out[0];
     }
 };
@@ -99,6 +104,13 @@ Color Textures::color(uint32_t texture, const TextureLookup& q) const {
 float Textures::value(uint32_t texture, const TextureLookup& q) const {
     float c[1];
     return impl_->lookup(*impl_->entries[texture], q, 1, c);
+}
+
+float Textures::value(uint32_t texture, const TextureLookup& q, float& dds, float& ddt) const {
+    float c[1], ds[1], dt[1];
+    const float v = impl_->lookup(*impl_->entries[texture], q, 1, c, ds, dt);
+    dds = ds[0], ddt = dt[0];
+    return v;
 }
 
 void Textures::range(uint32_t texture, float& lo, float& hi) const {

@@ -92,6 +92,8 @@ class Textures {
     Color color(uint32_t texture, const TextureLookup& q) const;
     // Filtered first channel (displacement amplitudes).
     float value(uint32_t texture, const TextureLookup& q) const;
+    // The same with its derivatives d/ds and d/dt (for the normals of displaced surfaces).
+    float value(uint32_t texture, const TextureLookup& q, float& dds, float& ddt) const;
     // Smallest and largest value of the first channel over the whole texture (its finest level).
     void range(uint32_t texture, float& lo, float& hi) const;
 

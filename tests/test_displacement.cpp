@@ -1,0 +1,280 @@
+// Reyes displacement (issue 12, paper 000 sec. 3.1): a constant displacement of a plane and of a curved
+// bicubic equals the offset surface; a displaced teapot has no pinholes; the bound contains every displaced
+// point; bad bounds and unknown displacement shaders are errors; the ray tracer warns that it ignores it.
+#include <OpenImageIO/imageio.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "engine/frame.h"
+#include "render/render.h"
+#include "reyes/displace.h"
+#include "reyes/grid.h"
+#include "reyes/pipeline.h"
+#include "rib_test_util.h"
+
+using namespace tessera;
+using namespace tessera::test;
+
+namespace {
+
+std::string writeGrey(const std::string& name, int n, const std::vector<float>& px) {
+    const std::string path = (testScratchDir() / name).string();
+    auto out = OIIO::ImageOutput::create(path);
+    OIIO::ImageSpec spec(n, n, 1, OIIO::TypeFloat);
+    out->open(path, spec);
+    out->write_image(OIIO::TypeFloat, px.data());
+    out->close();
+    return path;
+}
+
+// Every diced vertex of every piece of the scene's patches, in camera space (orthographic views only:
+// raster positions are inverted exactly up to the 1/256-pixel fixed point), with the piece's raster bound.
+struct DicedVertex {
+    Vec3 P;
+    uint32_t patch;
+    bool insideBound;
+};
+std::vector<DicedVertex> diceAll(const Scene& scene, int maxGrid = 16) {
+    RenderSettings rs;
+    const FrameSetup frame(scene, rs);
+    std::vector<BezierPatch> patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
+    weldSharedEdges(patches, defaultWeldTolerance(patches));
+    ReyesView view(frame.camera);
+    view.patches = patches.data();
+    view.projector = frame.projector;
+    const DisplacementFrame disp = makeDisplacementFrame(scene, frame.textures.get(), patches, 1.f);
+    if (disp.any()) view.displacement = &disp;
+    view.maxGridEdge = maxGrid;
+    view.cullX0 = view.cullY0 = -1e9f, view.cullX1 = view.cullY1 = 1e9f;
+    SplitStats stats;
+    const std::vector<Piece> pieces = splitPatches(view, scene, 0.f, nullptr, stats);
+    std::vector<DicedVertex> out;
+    const Projector& pr = view.projector;
+    for (const Piece& piece : pieces) {
+        const PatchAttributes& a = scene.attributes[piece.patch];
+        ShadeInputs in{a.kind,  &scene.materials[a.material], a.twoSided, a.flipNormal, frame.lights,
+                       a.object};
+        Grid g;
+        diceAndShade(view, piece, in, g);
+        for (int v = 0; v < g.vertexCount(); ++v) {
+            const float rx = g.X[v] / kSubpixelScale, ry = g.Y[v] / kSubpixelScale;
+            const float eps = 1.f / kSubpixelScale;
+            out.push_back({Vec3{(rx - pr.ox) / pr.sx, (ry - pr.oy) / pr.sy, g.Z[v]}, piece.patch,
+                           rx >= piece.x0 - eps && rx <= piece.x1 + eps && ry >= piece.y0 - eps &&
+                               ry <= piece.y1 + eps});
+        }
+    }
+    return out;
+}
+
+std::string orthoRib(int res, const std::string& body, float window = 1.f) {
+    const std::string w = std::to_string(window);
+    return "Format " + std::to_string(res) + " " + std::to_string(res) +
+           " 1\nProjection \"orthographic\"\nScreenWindow -" + w + " " + w + " -" + w + " " + w +
+           "\nWorldBegin\nLightSource \"ambientlight\" 1\nTranslate 0 0 5\n" + body + "\nWorldEnd\n";
+}
+
+// The distance from P to the patch's surface: fine sampling, then Newton-free refinement by bisection of
+// the parameter step around the nearest sample.
+float distanceToPatch(const BezierPatch& p, Vec3 P) {
+    float best = 1e30f, bu = 0, bv = 0;
+    const int n = 64;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i) {
+            const float d = length(evalPatch(p, float(i) / n, float(j) / n) - P);
+            if (d < best) best = d, bu = float(i) / n, bv = float(j) / n;
+        }
+    for (float h = 1.f / n; h > 1e-7f; h *= 0.5f) {
+        bool moved = true;
+        while (moved) {
+            moved = false;
+            for (int k = 0; k < 4; ++k) {
+                const float u = std::clamp(bu + (k == 0 ? h : k == 1 ? -h : 0.f), 0.f, 1.f);
+                const float v = std::clamp(bv + (k == 2 ? h : k == 3 ? -h : 0.f), 0.f, 1.f);
+                const float d = length(evalPatch(p, u, v) - P);
+                if (d < best) best = d, bu = u, bv = v, moved = true;
+            }
+        }
+    }
+    return best;
+}
+
+}  // namespace
+
+// A constant displacement d ("offset") of a plane: every diced point is at distance d from the plane, on the
+// side of the patch's normal, and its shading normal is the plane's.
+TEST(Displacement, ConstantOffsetOfAPlaneIsTheOffsetPlane) {
+    const float d = 0.125f;
+    Loaded l = load(orthoRib(256, "Displacement \"offset\" \"Km\" " + std::to_string(d) +
+                                      "\nPatch \"bilinear\" \"P\" [-1 -1 0  1 -1 0  -1 1 0  1 1 0]"));
+    const std::vector<DicedVertex> vs = diceAll(l.scene);
+    ASSERT_GT(vs.size(), 100u);
+    for (const DicedVertex& v : vs) {
+        EXPECT_NEAR(std::fabs(v.P.z - 5.f), d, 1e-5f);
+        EXPECT_NEAR(v.P.z, vs[0].P.z, 1e-5f);  // all on one side
+        EXPECT_TRUE(v.insideBound);
+    }
+}
+
+// The same on a strongly curved bicubic (a dome, like a patch of a sphere): every displaced point lies at
+// distance d from the undisplaced surface (closest-point distance, an independent check of the exact normal),
+// within the dicing tolerance; two such patches sharing an edge move its points identically.
+TEST(Displacement, ConstantOffsetOfACurvedBicubicIsTheOffsetSurface) {
+    const float d = 0.1f;
+    std::string P;
+    for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+            const float x = -1 + 2 * i / 3.f, y = -1 + 2 * j / 3.f;
+            P += std::to_string(x) + " " + std::to_string(y) + " " +
+                 std::to_string(-0.8f * (2 - x * x - y * y)) + " ";
+        }
+    Loaded l = load(orthoRib(
+        256, "Displacement \"offset\" \"Km\" " + std::to_string(d) + "\nPatch \"bicubic\" \"P\" [" + P + "]",
+        1.5f));
+    std::vector<BezierPatch> cam = patchesInCameraSpace(l.scene, l.scene.camera.cameraFromWorld);
+    const std::vector<DicedVertex> vs = diceAll(l.scene);
+    ASSERT_GT(vs.size(), 100u);
+    float worst = 0;
+    for (size_t i = 0; i < vs.size(); i += 7)
+        worst = std::max(worst, std::fabs(distanceToPatch(cam[0], vs[i].P) - d));
+    EXPECT_LT(worst, 2e-4f);
+    for (const DicedVertex& v : vs) EXPECT_TRUE(v.insideBound);
+}
+
+// The bound contains every displaced point: random bicubic patches with random noise textures and random
+// amplitudes, diced finely, every vertex inside its piece's (grown) raster bound.
+TEST(Displacement, TheBoundContainsEveryDisplacedPoint) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> U(-1.f, 1.f);
+    for (int trial = 0; trial < 4; ++trial) {
+        std::vector<float> px(32 * 32);
+        for (float& p : px) p = U(rng) * 2.f;  // values in [-2, 2]
+        const std::string tex = "noise" + std::to_string(trial) + ".exr";
+        writeGrey(tex, 32, px);
+        std::string P;
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i)
+                P += std::to_string(-1 + 2 * i / 3.f + 0.3f * U(rng)) + " " +
+                     std::to_string(-1 + 2 * j / 3.f + 0.3f * U(rng)) + " " + std::to_string(0.8f * U(rng)) +
+                     " ";
+        Loaded l = load(orthoRib(128,
+                                 "Displacement \"bumpy\" \"Km\" " + std::to_string(0.2f * U(rng)) +
+                                     " \"texturename\" \"" + tex + "\"\nPatch \"bicubic\" \"P\" [" + P + "]",
+                                 2.f));
+        const std::vector<DicedVertex> vs = diceAll(l.scene, 4);
+        ASSERT_GT(vs.size(), 50u);
+        size_t outside = 0;
+        for (const DicedVertex& v : vs) outside += !v.insideBound;
+        EXPECT_EQ(outside, 0u) << "trial " << trial;
+    }
+}
+
+TEST(Displacement, BadBoundsAndUnknownShadersAreErrors) {
+    const std::string patch = "\nPatch \"bilinear\" \"P\" [-1 -1 0  1 -1 0  -1 1 0  1 1 0]";
+    std::string msg = expectError(orthoRib(8, "Displacement \"wobbly\" \"Km\" 1" + patch), 7);
+    EXPECT_TRUE(contains(msg, "unknown displacement shader \"wobbly\"")) << msg;
+    msg = expectError(orthoRib(8, "Attribute \"displacementbound\" \"sphere\" -1" + patch), 7);
+    EXPECT_TRUE(contains(msg, "\"sphere\" must be a number >= 0")) << msg;
+    msg = expectError(
+        orthoRib(8, "Attribute \"displacementbound\" \"sphere\" 1 \"coordinatesystem\" \"nowhere\"" + patch),
+        7);
+    EXPECT_TRUE(contains(msg, "unknown coordinate system \"nowhere\"")) << msg;
+    msg =
+        expectError(orthoRib(8, "Attribute \"displacementbound\" \"coordinatesystem\" \"world\"" + patch), 7);
+    EXPECT_TRUE(contains(msg, "missing \"sphere\"")) << msg;
+    msg = expectError(orthoRib(8, "Displacement \"bumpy\" \"texturename\" \"none.tx\"" + patch), 7);
+    EXPECT_TRUE(contains(msg, "\"none.tx\" not found")) << msg;
+    // The bound converts to world units by the space's scale.
+    Loaded l = load(
+        orthoRib(8,
+                 "Scale 3 3 3\nAttribute \"displacementbound\" \"sphere\" 2 \"coordinatesystem\" \"object\"\n"
+                 "Displacement \"offset\" \"Km\" 0.1" +
+                     patch));
+    EXPECT_NEAR(l.scene.attributes[0].displacementBound, 6.f, 1e-5f);
+}
+
+TEST(Displacement, TheRayTracerSaysItIgnoresDisplacement) {
+    Loaded l = load(orthoRib(
+        8, "Displacement \"offset\" \"Km\" 0.1\nPatch \"bilinear\" \"P\" [-1 -1 0  1 -1 0  -1 1 0  1 1 0]"));
+    RenderSettings rs;
+    rs.engine = "rt";
+    const RenderResult r = render(l.scene, rs);
+    bool said = false;
+    for (const std::string& w : r.warnings) said = said || contains(w, "--engine rt ignores displacement");
+    EXPECT_TRUE(said);
+    rs.engine = "reyes";
+    for (const std::string& w : render(l.scene, rs).warnings)
+        EXPECT_FALSE(contains(w, "ignores displacement"));
+}
+
+// A displaced teapot has no pinholes: with a constant offset (the normals of neighbouring patches averaged
+// at creases and poles) and with a texture that jumps across patch edges (tiles.png: each patch sees other
+// tiles at its two sides, so each side alone would move a shared point differently), every pixel well inside
+// the undisplaced teapot's silhouette is fully covered, by every sample (alpha exactly 1).
+TEST(Displacement, DisplacedTeapotHasNoPinholes) {
+    const std::string scenes = std::string(TESSERA_SOURCE_DIR) + "/scenes/";
+    auto teapot = [&](const std::string& displacement) {
+        return writeRib(
+            "Format 160 120 1\nPixelSamples 2 2\nPixelFilter \"box\" 1 1\n"
+            "Projection \"perspective\" \"fov\" 32\nTranslate 0 0 10\nRotate -115 1 0 0\n"
+            "Rotate 19 0 0 1\nTranslate -0.625 0 -1.25\nWorldBegin\n"
+            "Option \"searchpath\" \"texture\" \"" +
+                scenes + "textures\"\nSurface \"constant\"\n" + displacement +
+                "\nScale 0.025 0.025 0.025\nReadArchive \"" + scenes +
+                "archives/teapot_geometry.rib\"\nWorldEnd\n",
+            "teapot" + std::to_string(displacement.size()) + ".rib");
+    };
+    auto renderAlpha = [&](const std::string& path) {
+        const Scene s = loadScene(path, [](const std::string&) {});
+        RenderSettings rs;
+        rs.threads = 2;
+        return render(s, rs).image;
+    };
+    const Image plain = renderAlpha(teapot(""));
+    // Inside: the undisplaced teapot covers the pixel and every pixel within 2 of it.
+    std::vector<uint8_t> inside(size_t(plain.width) * plain.height, 0);
+    int insideCount = 0;
+    for (int y = 2; y < plain.height - 2; ++y)
+        for (int x = 2; x < plain.width - 2; ++x) {
+            bool all = true;
+            for (int dy = -2; dy <= 2; ++dy)
+                for (int dx = -2; dx <= 2; ++dx) all = all && plain.pixel(x + dx, y + dy)[3] == 1.f;
+            inside[size_t(y) * plain.width + x] = all;
+            insideCount += all;
+        }
+    ASSERT_GT(insideCount, 3000);
+    for (const std::string& d :
+         {std::string("Displacement \"offset\" \"Km\" 0.04"),
+          std::string("Displacement \"bumpy\" \"Km\" 0.08 \"texturename\" \"tiles.png\"")}) {
+        const Image img = renderAlpha(teapot(d));
+        int holes = 0;
+        for (int y = 0; y < img.height; ++y)
+            for (int x = 0; x < img.width; ++x)
+                if (inside[size_t(y) * img.width + x] && img.pixel(x, y)[3] != 1.f) ++holes;
+        EXPECT_EQ(holes, 0) << d;
+    }
+}
+
+// Two patches meeting at a ridge (a 90-degree crease) seen from the front: displaced by a constant along
+// their own normals alone, the ridge would open a gap of sqrt(2) d (or overlap, for the other sign). The
+// shared edge moves along the canonical (averaged) normal from both sides, so every pixel stays covered.
+TEST(Displacement, ACreaseStaysClosed) {
+    for (const char* km : {"0.1", "-0.1"}) {
+        Loaded l = load(orthoRib(64,
+                                 std::string("Surface \"constant\"\nDisplacement \"offset\" \"Km\" ") + km +
+                                     "\nPatch \"bilinear\" \"P\" [-1 -1 0  0 -1 -1  -1 1 0  0 1 -1]"
+                                     "\nPatch \"bilinear\" \"P\" [0 -1 -1  1 -1 0  0 1 -1  1 1 0]",
+                                 0.7f));
+        RenderSettings rs;
+        rs.threads = 2;
+        const Image img = render(l.scene, rs).image;
+        int holes = 0;
+        for (int y = 0; y < img.height; ++y)
+            for (int x = 0; x < img.width; ++x) holes += img.pixel(x, y)[3] < 1.f - 1e-4f;  // filter rounding
+        EXPECT_EQ(holes, 0) << "Km " << km;
+    }
+}
