@@ -709,7 +709,7 @@ class RibReader {
     }
     // Displacement (RI spec 3.2, sec. 4.2.3 and appendix A): "bumpy" "Km" k "texturename" "file" (P += Km *
     // texture * normalize(N)), Tessera's "offset" "Km" d (a constant amplitude; RI has no standard shader for
-    // it), "null" (none). Any other name is an error: rendering a different shape silently would be worse.
+    // it), "null" (none). Any other name is warned about once and renders undisplaced.
     void displacement(const Request& r, const Arguments& args) {
         args.atLeast(1, "name ...parameterlist...");
         const std::string& name = args.string(0);
@@ -720,11 +720,16 @@ class RibReader {
         }
         const DisplacementShaderInfo* info = tessera::findDisplacementShader(name);
         if (!info) {
+            // As an unknown Surface: said once, not silently (RIB files from elsewhere name their own
+            // shaders, e.g. the Killeroo's "disp_textured"); the surface is rendered undisplaced.
             std::string known;
             for (const DisplacementShaderInfo& d : displacementShaders())
                 known += " \"" + std::string(d.name) + "\"";
-            diag_.fail(r.line, "Displacement: unknown displacement shader \"" + printable(name) +
-                                   "\" (Tessera has" + known + " and \"null\")");
+            diag_.warnOnce("displacement:" + name, r.line,
+                           "displacement shader \"" + printable(name) + "\" is not supported (Tessera has" +
+                               known + "); the surfaces that follow are rendered undisplaced");
+            state_.attributes().displacement = -1;
+            return;
         }
         DisplacementShader d;
         d.type = info->type;
