@@ -73,6 +73,11 @@ struct RenderArgs {
     int aoSamples = 64;
     double aoDistance = 0;  // 0: unlimited
     std::string aovs;       // --aov z,N,id,...
+    // Selective and adaptive supersampling (docs/adaptive.md).
+    bool adaptive = false;
+    double adaptiveThreshold = 0;
+    bool adaptiveThresholdGiven = false;
+    std::string adaptiveMap;
 };
 
 // The comma-separated parts of a list ("a,,b" has an empty middle part).
@@ -299,6 +304,22 @@ class Progress {
     cli::PercentSteps steps_;
 };
 
+// --adaptive-map: the refined subpixels (2 x 2 per pixel) in white over the image at a quarter of its
+// brightness, for looking at where the samples went.
+void writeAdaptiveMap(const std::string& path, const RenderResult& result) {
+    const Image& img = result.image;
+    Image map(2 * img.width, 2 * img.height);
+    for (int y = 0; y < map.height; ++y)
+        for (int x = 0; x < map.width; ++x) {
+            const float* c = img.pixel(img.x0 + x / 2, img.y0 + y / 2);
+            float* m = map.pixel(x, y);
+            const bool refined = result.refinedSubpixels[size_t(y) * size_t(map.width) + size_t(x)] != 0;
+            for (int k = 0; k < 3; ++k) m[k] = refined ? 1.f : 0.25f * std::clamp(c[k], 0.f, 1.f);
+            m[3] = 1.f;
+        }
+    writeImage(path, map, OutputEncoding{});
+}
+
 int runRender(const RenderArgs& a) {
     // Mistakes first, before anything is loaded: options, then the files the render will write.
     if (a.spp < 0 || a.spp > kMaxSpp) fail(fmt::format("error: --spp must be between 1 and {}", kMaxSpp));
@@ -318,6 +339,26 @@ int runRender(const RenderArgs& a) {
         fail(fmt::format("error: --shadows must be on, off or scene, got '{}'", a.shadows));
     if (a.reyesShadows != "map" && a.reyesShadows != "raytrace")
         fail(fmt::format("error: --reyes-shadows must be map or raytrace, got '{}'", a.reyesShadows));
+    if (!a.adaptive && (a.adaptiveThresholdGiven || !a.adaptiveMap.empty()))
+        fail("error: --adaptive-threshold and --adaptive-map need --adaptive");
+    if (a.adaptive) {
+        if (a.engine != "rt") fail("error: --adaptive is ray traced: use it with --engine rt");
+        if (a.spp > 0) fail("error: --adaptive chooses the samples per pixel itself: drop --spp");
+        if (a.adaptiveThresholdGiven && !(a.adaptiveThreshold >= 0 && std::isfinite(a.adaptiveThreshold)))
+            fail(
+                fmt::format("error: --adaptive-threshold must be a number >= 0 (0: refine every subpixel, "
+                            ">= 1: none by colour), got {}",
+                            a.adaptiveThreshold));
+        if (!a.adaptiveMap.empty()) {
+            if (fs::path(a.adaptiveMap).extension() != ".png")
+                fail(fmt::format("{}: error: --adaptive-map writes a PNG: name it .png", a.adaptiveMap));
+            checkWritableOrFail(a.adaptiveMap, "adaptive map");
+            std::error_code ec;
+            if (!a.output.empty() &&
+                fs::weakly_canonical(a.adaptiveMap, ec) == fs::weakly_canonical(a.output, ec))
+                fail(fmt::format("{}: error: --adaptive-map and -o name the same file", a.adaptiveMap));
+        }
+    }
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
         char x = 0, extra = 0;
@@ -406,6 +447,8 @@ int runRender(const RenderArgs& a) {
     settings.ao.samples = a.aoSamples;
     if (a.aoDistance > 0) settings.ao.maxDistance = float(a.aoDistance);
     settings.ao.paperWeighting = a.aoWeighting == "paper";
+    settings.adaptive.enabled = a.adaptive;
+    if (a.adaptiveThresholdGiven) settings.adaptive.thresholds.color = float(a.adaptiveThreshold);
     settings.output.channels = aovs->channels;
     settings.output.aovs = aovs->planes;
     settings.shadows = a.shadows == "on"    ? ShadowOverride::On
@@ -497,6 +540,7 @@ int runRender(const RenderArgs& a) {
         OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput,
                            &meta};
         writeImage(output, result.image, enc);
+        if (!a.adaptiveMap.empty()) writeAdaptiveMap(a.adaptiveMap, result);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);
     } catch (const std::exception& e) {
         std::error_code ec;
@@ -723,6 +767,14 @@ int main(int argc, char** argv) {
     render->add_option("--aov", ra.aovs,
                        std::string("Further channels of an .exr output, comma-separated: ") + kAovNames +
                            " (depth and id unfiltered, the rest filtered like colour)");
+    render->add_flag("--adaptive", ra.adaptive,
+                     "rt: selective adaptive supersampling (paper 004): 1 ray per pixel, 4 more per subpixel "
+                     "whose colour or primary-hit attributes differ from its neighbours' (docs/adaptive.md)");
+    CLI::Option* adaptiveThreshold =
+        render->add_option("--adaptive-threshold", ra.adaptiveThreshold,
+                           "--adaptive: colour threshold tau_col (default 0.3; 0 refines everything)");
+    render->add_option("--adaptive-map", ra.adaptiveMap,
+                       "--adaptive: write the refined subpixels as a PNG of twice the resolution");
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
     render
         ->add_option("--shadows", ra.shadows,
@@ -783,6 +835,7 @@ int main(int argc, char** argv) {
         app.exit(e);
         return 2;
     }
+    ra.adaptiveThresholdGiven = adaptiveThreshold->count() > 0;
     try {
         if (*render) {
             checkUpApplies(ra.scene, ra.format, ra.up);

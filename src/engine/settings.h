@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "film/adaptive.h"
 #include "film/blur_pattern.h"
 #include "film/film.h"
 #include "scene/scene.h"
@@ -60,6 +61,15 @@ struct AmbientOcclusionSettings {
     bool paperWeighting = false;
 };
 
+// Selective and adaptive supersampling (paper 004; docs/adaptive.md), ray tracer only: one presample ray
+// per pixel centre, the subpixel test on its colour and primary-hit attributes, four stratified rays per
+// active subpixel. Replaces the scene's PixelSamples and pixel filter for the colour (the paper's box
+// weighting per pixel); the attribute planes come from the presample.
+struct AdaptiveSettings {
+    bool enabled = false;  // --adaptive
+    AdaptiveThresholds thresholds;
+};
+
 // Which lights cast shadows (--shadows): each light's own choice (Light::castsShadows, from the RIB's
 // Attribute "light" "shadows"), or all of them, or none. The same rule for both engines.
 enum class ShadowOverride { Scene, On, Off };
@@ -89,6 +99,7 @@ struct RenderSettings {
     // Ray tracer
     Integrator integrator = Integrator::Direct;
     AmbientOcclusionSettings ao;
+    AdaptiveSettings adaptive;
     int subpatchDepth = 6;
     int maxDepth = 4;
     bool cullBackfaces = false;
@@ -114,6 +125,8 @@ struct RenderResult {
     nlohmann::json stats;  // engine counters; the CLI adds timing and memory
     bool cancelled = false;
     std::vector<std::string> warnings;  // said once per render (e.g. effects an engine does not render)
+    // --adaptive: the refined subpixels of the image, (2 width) x (2 height), row-major, 1 = refined.
+    std::vector<uint8_t> refinedSubpixels;
 };
 
 // The camera a render uses: the view's, else the scene's.

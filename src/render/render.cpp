@@ -43,6 +43,8 @@ bool anyLightCastsShadows(const Scene& scene, const RenderSettings& settings) {
 }  // namespace
 
 RenderResult render(const Scene& scene, const RenderSettings& settings) {
+    if (settings.adaptive.enabled && settings.engine != "rt")
+        throw std::invalid_argument("--adaptive is ray traced: use it with --engine rt");
     int threads = settings.threads > 0 ? settings.threads : tbb::info::default_concurrency();
     tbb::task_arena arena(threads);
     RenderResult result;

@@ -43,6 +43,11 @@ struct Workspace {
     CameraSamples camera;
     std::vector<ShadowRun> shadowRuns;
     std::vector<RayHit> occlusionHits;  // ambient occlusion with distance-weighted shades
+    // --adaptive: the presample tile (one ray per pixel centre), the target's active subpixels (4 per
+    // pixel) and, per sample of the 16-sample tile, whether it is traced.
+    SampleTile presample;
+    std::vector<uint8_t> activeSubpixels, tracedSamples;
+    uint64_t adaptivePixels = 0, adaptiveActive = 0;
     double shadeMs = 0, filterMs = 0;
 };
 
@@ -285,9 +290,11 @@ SceneRect sceneRect(const RtAccel& acc, const Projector& proj) {
     return sr;
 }
 
-// The tile's camera rays, one per sample inside the scene's rectangle (written in place: this runs for
-// every sample of the frame), and the per-sample arrays of the camera-ray binning.
-void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
+// The tile's camera rays, one per sample inside the scene's rectangle (and, with `traced`, only for the
+// samples it marks: --adaptive's compacted list of extra samples), written in place: this runs for every
+// sample of the frame; and the per-sample arrays of the camera-ray binning.
+void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws,
+                    const std::vector<uint8_t>* traced = nullptr) {
     const size_t ns = ws.tile.sampleCount();
     RayList& rl = ws.rays;
     rl.resize(ns);
@@ -303,7 +310,8 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws) {
     for (size_t i = 0; i < ns + 4; ++i) {
         const float x = i < ns ? float(ws.tile.sx[i]) / kSubpixelScale : NAN;
         const float y = i < ns ? float(ws.tile.sy[i]) / kSubpixelScale : NAN;
-        if (!(x >= sr.x0 && x <= sr.x1 && y >= sr.y0 && y <= sr.y1)) {  // sure miss: no ray
+        const bool skipped = traced && i < ns && !(*traced)[i];
+        if (skipped || !(x >= sr.x0 && x <= sr.x1 && y >= sr.y0 && y <= sr.y1)) {  // sure miss: no ray
             cs.rayOfSample[i] = kNone;
             cs.sampleX[i] = cs.sampleY[i] = NAN;  // never inside a rectangle
             cs.originX[i] = cs.originY[i] = cs.invX[i] = cs.invY[i] = cs.invZ[i] = 0.f;
@@ -379,6 +387,133 @@ std::vector<uint64_t> tileWork(const RtAccel& acc, const Projector& proj, const 
     return work;
 }
 
+// Traces the camera samples of `ws.tile` (all, or those `traced` marks) to the end: camera rays, then the
+// integrator's generations; colour, alpha, depth and attributes land in the tile.
+void traceTile(const Frame& fr, const RenderSettings& settings, const Projector& proj, const SceneRect& sr,
+               Workspace& ws, const std::vector<uint8_t>* traced = nullptr) {
+    auto ts = EngineClock::now();
+    makeCameraRays(proj, sr, ws, traced);
+    ws.shadeMs += msSince(ts);
+    if (settings.integrator == Integrator::AmbientOcclusion) {
+        ws.trace.trace(ws.rays, ws.hits, &ws.camera);
+        shadeOcclusion(fr, settings.ao, settings.seed, ws);
+    } else {
+        for (bool camera = true; ws.rays.size() > 0; camera = false) {
+            ws.trace.trace(ws.rays, ws.hits, camera ? &ws.camera : nullptr);
+            shadeGeneration(fr, ws);
+            std::swap(ws.rays, ws.next);
+        }
+    }
+}
+
+// The attribute channels the subpixel test reads from the presample.
+constexpr uint32_t kAdaptiveChannels =
+    kChannelObjectId | kChannelNormal | kChannelShadowCount | kChannelHasTexture;
+
+// --adaptive, one tile (paper 004, sec. 4): `presamplePixels` is `target` grown by the neighbours the test
+// reads (and the filter radius where attribute planes are filtered from the presample).
+//  1. Presample: one ray through each pixel centre (the paper's start), colour and attributes.
+//  2. Subpixel test (film/adaptive.h) for the target's 4 subpixels per pixel; neighbours outside the image
+//     are clamped to the edge (the paper reads its maps as clamped textures).
+//  3. Extra samples: a 4x4-stratified tile of the shared sampler over the target; an active subpixel owns
+//     the 2x2 strata in its quadrant (4 stratified jittered rays), only those samples are traced, as one
+//     compacted ray list per generation through the trace service.
+//  4. pixel = centre x (4 - n) / 4 + sum of the extra samples / 16 (colour and alpha).
+void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const Projector& proj,
+                        const SceneRect& sr, const PixelFilter& filter, Rect whole, Rect target,
+                        Rect presamplePixels, Workspace& ws, RenderResult& result) {
+    // 1. Presample at the pixel centres (sample index 0 of each pixel for the other dimensions).
+    ws.tile.reset(presamplePixels, 1, 1, settings.seed, std::numeric_limits<float>::infinity(),
+                  settings.sampler, settings.output.channels | kAdaptiveChannels, settings.output.aovs);
+    for (int py = presamplePixels.y0, i = 0; py < presamplePixels.y1; ++py)
+        for (int px = presamplePixels.x0; px < presamplePixels.x1; ++px, ++i) {
+            ws.tile.sx[size_t(i)] = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+            ws.tile.sy[size_t(i)] = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+        }
+    traceTile(fr, settings, proj, sr, ws);
+    if (!result.image.planes.empty()) {  // the attribute planes (and a filtered colour, replaced below)
+        auto tf = EngineClock::now();
+        reconstruct(ws.tile, filter, target, result.image);
+        ws.filterMs += msSince(tf);
+    }
+    std::swap(ws.tile, ws.presample);
+
+    // 2. The subpixel test.
+    const SampleTile& pre = ws.presample;
+    const int pw = presamplePixels.width();
+    auto attributes = [&](int px, int py) {
+        px = std::clamp(px, whole.x0, whole.x1 - 1), py = std::clamp(py, whole.y0, whole.y1 - 1);
+        const size_t i = size_t(py - presamplePixels.y0) * size_t(pw) + size_t(px - presamplePixels.x0);
+        PresampleAttributes a;
+        a.color = Color{pre.r[i], pre.g[i], pre.b[i]};
+        a.object = pre.objectId[i];
+        a.normal = Vec3{pre.normalX[i], pre.normalY[i], pre.normalZ[i]};
+        a.shadowCount = pre.shadowCount[i];
+        a.textured = pre.hasTexture[i];
+        return a;
+    };
+    const int tw = target.width(), th = target.height();
+    ws.activeSubpixels.assign(size_t(tw) * th * 4, 0);
+    const AdaptiveThresholds& thr = settings.adaptive.thresholds;
+    uint64_t active = 0;
+    for (int py = target.y0; py < target.y1; ++py)
+        for (int px = target.x0; px < target.x1; ++px) {
+            const PresampleAttributes c = attributes(px, py);
+            for (int q = 0; q < 4; ++q) {
+                PresampleAttributes nb[3];
+                const PresampleAttributes* n[3];
+                for (int k = 0; k < 3; ++k) {
+                    int dx, dy;
+                    subpixelNeighbour(q, k, dx, dy);
+                    nb[k] = attributes(px + dx, py + dy);
+                    n[k] = &nb[k];
+                }
+                const bool on = subpixelActive(thr, c, n);
+                ws.activeSubpixels[(size_t(py - target.y0) * tw + (px - target.x0)) * 4 + size_t(q)] = on;
+                active += on;
+            }
+        }
+    ws.adaptivePixels += uint64_t(tw) * uint64_t(th);
+    ws.adaptiveActive += active;
+
+    // 3. Extra samples: slot s of a 4x4 tile lies in stratum (s % 4, s / 4), i.e. in quadrant
+    // ((s % 4) / 2, (s / 4) / 2) of its pixel.
+    ws.tile.reset(target, 4, 4, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler, 0,
+                  {});
+    ws.tracedSamples.assign(ws.tile.sampleCount(), 0);
+    for (size_t p = 0; p < size_t(tw) * th; ++p)
+        for (int slot = 0; slot < 16; ++slot) {
+            const int q = ((slot % 4) / 2) + 2 * ((slot / 4) / 2);
+            ws.tracedSamples[p * 16 + size_t(slot)] = ws.activeSubpixels[p * 4 + size_t(q)];
+        }
+    if (active > 0) traceTile(fr, settings, proj, sr, ws, &ws.tracedSamples);
+
+    // 4. The paper's weighting, and the map of refined subpixels.
+    const Image& img = result.image;
+    const int mapWidth = 2 * img.width;
+    for (int py = target.y0; py < target.y1; ++py)
+        for (int px = target.x0; px < target.x1; ++px) {
+            const size_t p = size_t(py - target.y0) * tw + size_t(px - target.x0);
+            const size_t c = size_t(py - presamplePixels.y0) * size_t(pw) + size_t(px - presamplePixels.x0);
+            int n = 0;
+            for (int q = 0; q < 4; ++q) n += ws.activeSubpixels[p * 4 + size_t(q)];
+            const float wc = float(4 - n) / 4.f;
+            float rgba[4] = {pre.r[c] * wc, pre.g[c] * wc, pre.b[c] * wc, pre.a[c] * wc};
+            for (int slot = 0; slot < 16; ++slot) {
+                const size_t s = p * 16 + size_t(slot);
+                if (!ws.tracedSamples[s]) continue;
+                rgba[0] += ws.tile.r[s] / 16.f, rgba[1] += ws.tile.g[s] / 16.f;
+                rgba[2] += ws.tile.b[s] / 16.f, rgba[3] += ws.tile.a[s] / 16.f;
+            }
+            float* out = result.image.pixel(px, py);
+            for (int k = 0; k < 4; ++k) out[k] = rgba[k];
+            for (int q = 0; q < 4; ++q) {
+                const size_t mx = size_t(2 * (px - img.x0) + (q & 1)), my = size_t(2 * (py - img.y0) + q / 2);
+                result.refinedSubpixels[my * size_t(mapWidth) + mx] = ws.activeSubpixels[p * 4 + size_t(q)];
+            }
+        }
+}
+
 }  // namespace
 
 RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
@@ -413,7 +548,9 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory; at 1
     // spp 64 px measured faster than 128 px (the per-tile arrays stay in cache) despite twice the share
     // of duplicated filter-margin rays (6% instead of 3%).
-    const int spp = nx * ny;
+    const bool adaptive = settings.adaptive.enabled;
+    // --adaptive: tiles sized for its 16-sample tile of extra samples, work as for about 2 samples.
+    const int spp = adaptive ? 16 : nx * ny;
     const int bs =
         std::clamp(int(std::lround(128.0 / std::sqrt(double(spp)))), 16, std::max(settings.bucketSize, 64));
     const SceneRect sr = sceneRect(acc, proj);
@@ -421,27 +558,29 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     const BucketLayout layout(frame.region, bs);
     const bool occlusion = settings.integrator == Integrator::AmbientOcclusion;
     const std::vector<uint64_t> work =
-        tileWork(acc, proj, sr, layout, spp,
+        tileWork(acc, proj, sr, layout, adaptive ? 2 : spp,
                  occlusion ? size_t(std::max(1, settings.ao.samples)) : frame.lights.size());
 
     // std::cref: the per-thread workspaces refer to the one accel (ETS keeps its arguments by value).
     tbb::enumerable_thread_specific<Workspace> workspaces(std::cref(acc), traceOpt);
+    if (adaptive) {
+        result.refinedSubpixels.assign(size_t(result.image.width) * result.image.height * 4, 0);
+        if (frame.blurred())
+            result.warnings.push_back(
+                "--adaptive renders without motion blur and depth of field (at shutter open, pinhole)");
+    }
+    // The presample's margin: the neighbours of the subpixel test, and the filter's reach where the
+    // attribute planes are reconstructed from it.
+    const int margin = result.image.planes.empty() ? 1 : std::max({1, rx, ry});
     auto renderTile = [&](int b, Workspace& ws) {
         const Rect target = layout.target(b);
-        frame.resetTile(ws.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
-        auto ts = EngineClock::now();
-        makeCameraRays(proj, sr, ws);
-        ws.shadeMs += msSince(ts);
-        if (settings.integrator == Integrator::AmbientOcclusion) {
-            ws.trace.trace(ws.rays, ws.hits, &ws.camera);
-            shadeOcclusion(fr, settings.ao, settings.seed, ws);
-        } else {
-            for (bool camera = true; ws.rays.size() > 0; camera = false) {
-                ws.trace.trace(ws.rays, ws.hits, camera ? &ws.camera : nullptr);
-                shadeGeneration(fr, ws);
-                std::swap(ws.rays, ws.next);
-            }
+        if (adaptive) {
+            renderAdaptiveTile(fr, settings, proj, sr, frame.filter, Rect{0, 0, cam.width, cam.height},
+                               target, layout.samples(b, margin, margin, cam.width, cam.height), ws, result);
+            return;
         }
+        frame.resetTile(ws.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
+        traceTile(fr, settings, proj, sr, ws);
         auto tf = EngineClock::now();
         reconstruct(ws.tile, frame.filter, target, result.image);
         ws.filterMs += msSince(tf);
@@ -507,6 +646,26 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["leaves_per_sample"] = leavesPerSample;
     s["max_depth"] = fr.maxDepth;
     s["integrator"] = integratorName(settings.integrator);
+    if (adaptive) {
+        uint64_t pixels = 0, active = 0;
+        for (const Workspace& w : workspaces) pixels += w.adaptivePixels, active += w.adaptiveActive;
+        const AdaptiveThresholds& t = settings.adaptive.thresholds;
+        const double px = double(std::max<uint64_t>(1, pixels));
+        // Camera rays as the paper counts them: one presample per pixel plus 4 per active subpixel (the
+        // presample margins that neighbouring tiles both trace are in rays.primary).
+        s["adaptive"] = {{"pixels", pixels},
+                         {"active_subpixels", active},
+                         {"active_fraction", double(active) / (4.0 * px)},
+                         {"camera_rays_per_pixel", (double(pixels) + 4.0 * double(active)) / px},
+                         {"rays_per_pixel", double(totalRays) / px},
+                         {"thresholds",
+                          {{"color", t.color},
+                           {"object_id", t.objectId},
+                           {"normal", t.normal},
+                           {"shadow", t.shadow},
+                           {"texture", t.texture < 0.f ? t.color : t.texture},
+                           {"normal_cosine", t.normalCosine}}}};
+    }
     if (occlusion)
         s["ao"] = {
             {"samples", std::max(1, settings.ao.samples)},
