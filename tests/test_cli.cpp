@@ -417,3 +417,44 @@ TEST(Cli, AmbientOcclusionRendersAGreyImageAndChecksItsOptions) {
     EXPECT_FALSE(fs::exists(dir / "never.png"));
     fs::remove_all(dir);
 }
+
+TEST(Cli, AdaptiveWritesItsMapAndRejectsBadOptions) {
+    fs::path dir = tempDir();
+    const std::string out = (dir / "a.png").string(), map = (dir / "map.png").string(),
+                      stats = (dir / "a.json").string();
+    CommandResult r =
+        run("render " + kTeapot + " --engine rt --adaptive --adaptive-threshold 0.5 --res 64x48 -o " + out +
+            " --adaptive-map " + map + " --stats " + stats + " --quiet");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const Image m = readPng(map);
+    EXPECT_EQ(m.width, 128);
+    EXPECT_EQ(m.height, 96);
+    std::ifstream sf(stats);
+    const nlohmann::json s = nlohmann::json::parse(sf);
+    EXPECT_GT(s["adaptive"]["active_fraction"].get<double>(), 0.0);
+    EXPECT_FLOAT_EQ(s["adaptive"]["thresholds"]["color"].get<float>(), 0.5f);
+    fs::remove(out);
+    fs::remove(map);
+    const std::string base = "render " + kTeapot + " --res 64x48 -o " + out + " ";
+    struct Bad {
+        std::string args, message;
+    };
+    const Bad bad[] = {
+        {"--adaptive", "--engine rt"},
+        {"--engine rt --adaptive-threshold 0.3", "need --adaptive"},
+        {"--engine rt --adaptive-map " + map, "need --adaptive"},
+        {"--engine rt --adaptive --adaptive-threshold -1", "--adaptive-threshold must be"},
+        {"--engine rt --adaptive --adaptive-threshold inf", "--adaptive-threshold must be"},
+        {"--engine rt --adaptive --adaptive-map " + (dir / "m.exr").string(), "name it .png"},
+        {"--engine rt --adaptive --adaptive-map " + out, "name the same file"},
+        {"--engine rt --adaptive --spp 4", "drop --spp"},
+    };
+    for (const Bad& b : bad) {
+        r = run(base + b.args);
+        EXPECT_EQ(r.exitCode, 2) << b.args << ": " << r.output;
+        EXPECT_NE(r.output.find(b.message), std::string::npos) << b.args << ": " << r.output;
+    }
+    EXPECT_FALSE(fs::exists(out));
+    EXPECT_FALSE(fs::exists(map));
+    fs::remove_all(dir);
+}

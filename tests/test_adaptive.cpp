@@ -1,0 +1,221 @@
+// Selective and adaptive supersampling (--adaptive, paper 004; docs/adaptive.md): which subpixels the
+// presample's test refines, against analytic edges, and the weighting against fixed 16 spp.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "film/adaptive.h"
+#include "render/render.h"
+#include "test_util.h"
+
+using namespace tessera;
+using namespace tessera::test;
+
+namespace {
+
+// A flat parallelogram origin + s eu + t ev.
+BezierPatch flatRect(Vec3 origin, Vec3 eu, Vec3 ev) {
+    BezierPatch p;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 4; ++u) p.at(u, v) = origin + eu * (u / 3.f) + ev * (v / 3.f);
+    return p;
+}
+
+AdaptiveThresholds allThresholds(float t) {
+    AdaptiveThresholds a;
+    a.color = a.objectId = a.normal = a.shadow = a.texture = t;
+    return a;
+}
+
+RenderResult renderAdaptive(const Scene& s, const AdaptiveThresholds& t, int threads = 2) {
+    RenderSettings rs;
+    rs.engine = "rt";
+    rs.threads = threads;
+    rs.adaptive.enabled = true;
+    rs.adaptive.thresholds = t;
+    return render(s, rs);
+}
+
+bool refined(const RenderResult& r, int x, int y, int q) {
+    const int w = 2 * r.image.width;
+    return r.refinedSubpixels[size_t(2 * y + q / 2) * size_t(w) + size_t(2 * x + (q & 1))] != 0;
+}
+
+size_t refinedCount(const RenderResult& r) {
+    size_t n = 0;
+    for (uint8_t v : r.refinedSubpixels) n += v;
+    return n;
+}
+
+}  // namespace
+
+TEST(Adaptive, EachSubpixelIsComparedWithTheThreeNeighboursTowardsItsCorner) {
+    // Paper 004, Fig. 4: the upper-left subpixel with W, NW, N; the lower-right with E, SE, S (y down).
+    const int expect[4][3][2] = {{{-1, 0}, {-1, -1}, {0, -1}},
+                                 {{1, 0}, {1, -1}, {0, -1}},
+                                 {{-1, 0}, {-1, 1}, {0, 1}},
+                                 {{1, 0}, {1, 1}, {0, 1}}};
+    for (int q = 0; q < 4; ++q)
+        for (int k = 0; k < 3; ++k) {
+            int dx, dy;
+            subpixelNeighbour(q, k, dx, dy);
+            EXPECT_EQ(dx, expect[q][k][0]) << q << " " << k;
+            EXPECT_EQ(dy, expect[q][k][1]) << q << " " << k;
+        }
+    // Mitchell's contrast: (0.5 - 0.25) / 0.75 = 1/3 against 1.02 tau in green.
+    EXPECT_FLOAT_EQ(mitchellContrast(0.5f, 0.25f), 1.f / 3.f);
+    EXPECT_TRUE(contrastExceeds({1, 0.5f, 1}, {1, 0.25f, 1}, 0.3f));    // 1/3 >= 0.306
+    EXPECT_FALSE(contrastExceeds({1, 0.5f, 1}, {1, 0.25f, 1}, 0.35f));  // 1/3 < 0.357
+}
+
+TEST(Adaptive, AFlatColouredPatchRefinesNothing) {
+    Scene s = cameraSpaceScene(24, 24, 40.f);
+    addPatch(s, flatSquare(100.f, 10.f));  // fills the view: one colour (distant light, flat, one object)
+    const RenderResult r = renderAdaptive(s, AdaptiveThresholds{});
+    ASSERT_EQ(r.refinedSubpixels.size(), size_t(48 * 48));
+    EXPECT_EQ(refinedCount(r), 0u);
+    EXPECT_EQ(r.stats["adaptive"]["active_subpixels"].get<uint64_t>(), 0u);
+    EXPECT_DOUBLE_EQ(r.stats["adaptive"]["camera_rays_per_pixel"].get<double>(), 1.0);
+    const float* c = r.image.pixel(12, 12);
+    EXPECT_GT(c[0], 0.1f);
+    EXPECT_FLOAT_EQ(c[3], 1.f);
+}
+
+TEST(Adaptive, AnObjectIdEdgeRefinesExactlyAlongTheEdge) {
+    // Two flat squares of the same material meet at x = 0, the boundary between pixel columns 11 and 12:
+    // the same colour on both sides, so only the object-id path (tau_poid = 0) can refine, and exactly the
+    // subpixels of columns 11 (right half) and 12 (left half) whose neighbours lie across the edge.
+    Scene s = cameraSpaceScene(24, 16, 40.f);
+    addPatch(s, flatRect({-50, -50, 10}, {50, 0, 0}, {0, 100, 0}), 0);
+    addPatch(s, flatRect({0, -50, 10}, {50, 0, 0}, {0, 100, 0}), 1);
+    AdaptiveThresholds t = allThresholds(1.f);
+    t.objectId = 0.f;
+    const RenderResult r = renderAdaptive(s, t);
+    for (int y = 0; y < 16; ++y)
+        for (int x = 0; x < 24; ++x)
+            for (int q = 0; q < 4; ++q) {
+                const bool expect = (x == 11 && (q & 1)) || (x == 12 && !(q & 1));
+                EXPECT_EQ(refined(r, x, y, q), expect) << x << "," << y << " q" << q;
+            }
+    // The colour alone (the default tau_col, object ids ignored) sees no edge.
+    t = AdaptiveThresholds{};
+    t.objectId = 1.f;
+    EXPECT_EQ(refinedCount(renderAdaptive(s, t)), 0u);
+}
+
+TEST(Adaptive, AShadowBoundaryRefinesEvenWhereTheColoursMatch) {
+    // A black floor (Kd = 0, no ambient light) at z = 10 under a unit square at z = 8 lit by a point light
+    // at (2, 0, 4): in shadow and lit, the floor has the same colour (0), but the shadow count differs
+    // across the shadow's outline x in [-1.75, -0.25], y in [-0.75, 0.75] (the square scaled by 6/4).
+    Scene s = cameraSpaceScene(100, 100, 40.f);
+    s.lights = {{LightType::Point, {36, 36, 36}, {2, 0, 4}, {0, 0, 0}}};
+    s.lights[0].castsShadows = true;
+    Material black = defaultMaterial(MaterialType::Matte);
+    black.Kd = 0.f, black.Ks = 0.f;
+    s.materials.push_back(black);
+    addPatch(s, flatRect({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}), 0);
+    s.attributes.back().material = 1;
+    addPatch(s, flatRect({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}), 1);
+    AdaptiveThresholds t = allThresholds(1.f);
+    t.shadow = 0.f;  // only the shadow-count path refines
+    const RenderResult r = renderAdaptive(s, t);
+    const Projector pr(s.camera);
+    // Raster distance of pixel (x, y)'s centre to the shadow's outline on the floor and to the square's
+    // silhouette (both lines of the outline; the floor is at z = 10, the square at z = 8).
+    auto rasterX = [&](float cx) { return pr.ox + pr.sx * cx; };
+    auto rasterY = [&](float cy) { return pr.oy + pr.sy * cy; };
+    auto nearOutline = [&](float px, float py, float x0, float x1, float y0, float y1, float z, float m) {
+        const float rx0 = rasterX(x0 / z), rx1 = rasterX(x1 / z);
+        const float ry0 = std::min(rasterY(y0 / z), rasterY(y1 / z)),
+                    ry1 = std::max(rasterY(y0 / z), rasterY(y1 / z));
+        const bool inY = py > ry0 - m && py<ry1 + m, inX = px> rx0 - m && px < rx1 + m;
+        return (inY && (std::fabs(px - rx0) < m || std::fabs(px - rx1) < m)) ||
+               (inX && (std::fabs(py - ry0) < m || std::fabs(py - ry1) < m));
+    };
+    int edgeRows = 0;
+    const float leftEdge = rasterX(-1.75f / 10.f);
+    for (int y = 0; y < 100; ++y) {
+        const float py = y + 0.5f;
+        bool rowHasEdgeRefined = false;
+        for (int x = 0; x < 100; ++x) {
+            const float px = x + 0.5f;
+            const bool nearShadow = nearOutline(px, py, -1.75f, -0.25f, -0.75f, 0.75f, 10.f, 1.5f);
+            const bool nearSquare = nearOutline(px, py, -0.5f, 0.5f, -0.5f, 0.5f, 8.f, 1.5f);
+            for (int q = 0; q < 4; ++q) {
+                if (!refined(r, x, y, q)) continue;
+                EXPECT_TRUE(nearShadow || nearSquare) << "refined away from any boundary: " << x << "," << y;
+                if (std::fabs(px - leftEdge) < 1.5f) rowHasEdgeRefined = true;
+            }
+        }
+        // Rows well inside the shadow's height: its left edge (far from the square) is refined.
+        const float fy = (py - pr.oy) / pr.sy * 10.f;
+        if (std::fabs(fy) < 0.6f) {
+            ++edgeRows;
+            EXPECT_TRUE(rowHasEdgeRefined) << "row " << y;
+        }
+    }
+    EXPECT_GT(edgeRows, 5);
+    // The colours there do match: left of the edge (lit) and right of it (in shadow) both black.
+    const int yMid = int(pr.oy);
+    EXPECT_EQ(r.image.pixel(int(leftEdge) - 3, yMid)[0], 0.f);
+    EXPECT_EQ(r.image.pixel(int(leftEdge) + 3, yMid)[0], 0.f);
+    // With the shadow count ignored nothing on the floor's shadow edge refines.
+    const RenderResult off = renderAdaptive(s, allThresholds(1.f));
+    EXPECT_EQ(refinedCount(off), 0u);
+}
+
+namespace {
+// Two spheres of different objects, one partly hiding the other, in front of a floor.
+Scene twoSpheres(int w, int h) {
+    Scene s = cameraSpaceScene(w, h, 40.f);
+    s.lights.push_back({LightType::Point, {20, 20, 20}, {3, 3, 2}, {0, 0, 0}});
+    s.lights.back().castsShadows = true;
+    for (const BezierPatch& p : octantSphere(1.f, {-0.5f, 0.f, 6.f})) addPatch(s, p, 0);
+    for (const BezierPatch& p : octantSphere(0.8f, {0.7f, 0.3f, 7.f})) addPatch(s, p, 1);
+    addPatch(s, flatRect({-10, -1, 4}, {20, 0, 0}, {0, 0, 20}), 2);  // floor y = -1
+    return s;
+}
+}  // namespace
+
+TEST(Adaptive, ThresholdZeroRefinesEverythingAndEqualsFixed16WithABoxFilter) {
+    // Every subpixel active: the centre's weight is 0 and the pixel is the mean of its 16 stratified samples,
+    // which is what the fixed 4x4 render at the same seed computes with a one-pixel box filter.
+    Scene s = twoSpheres(32, 24);
+    const RenderResult a = renderAdaptive(s, allThresholds(0.f));
+    EXPECT_EQ(refinedCount(a), size_t(4 * 32 * 24));
+    EXPECT_DOUBLE_EQ(a.stats["adaptive"]["active_fraction"].get<double>(), 1.0);
+    s.image.pixelSamplesX = s.image.pixelSamplesY = 4;
+    RenderSettings rs;
+    rs.engine = "rt";
+    rs.threads = 2;
+    const RenderResult f = render(s, rs);
+    ASSERT_EQ(f.image.rgba.size(), a.image.rgba.size());
+    double maxDiff = 0;
+    for (size_t i = 0; i < a.image.rgba.size(); ++i)
+        maxDiff = std::max(maxDiff, double(std::fabs(a.image.rgba[i] - f.image.rgba[i])));
+    EXPECT_LT(maxDiff, 1e-5);
+}
+
+TEST(Adaptive, HugeThresholdsRefineNothingAndGiveThePresample) {
+    const Scene s = twoSpheres(32, 24);
+    const RenderResult r = renderAdaptive(s, allThresholds(10.f));
+    EXPECT_EQ(refinedCount(r), 0u);
+    EXPECT_DOUBLE_EQ(r.stats["adaptive"]["camera_rays_per_pixel"].get<double>(), 1.0);
+    // The default thresholds do refine this scene (silhouettes, shadow edges), but not most of it.
+    const RenderResult d = renderAdaptive(s, AdaptiveThresholds{});
+    const double fraction = d.stats["adaptive"]["active_fraction"].get<double>();
+    EXPECT_GT(fraction, 0.02);
+    EXPECT_LT(fraction, 0.6);
+}
+
+TEST(Adaptive, SameImageForAnyThreadCount) {
+    const Scene s = twoSpheres(48, 32);
+    const RenderResult one = renderAdaptive(s, AdaptiveThresholds{}, 1);
+    const RenderResult two = renderAdaptive(s, AdaptiveThresholds{}, 2);
+    const RenderResult four = renderAdaptive(s, AdaptiveThresholds{}, 4);
+    EXPECT_GT(refinedCount(one), 0u);
+    EXPECT_EQ(one.image.rgba, two.image.rgba);
+    EXPECT_EQ(one.image.rgba, four.image.rgba);
+    EXPECT_EQ(one.refinedSubpixels, two.refinedSubpixels);
+    EXPECT_EQ(one.refinedSubpixels, four.refinedSubpixels);
+}
