@@ -17,6 +17,8 @@ cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBI
   -DTESSERA_SANITIZE=address,undefined,float-cast-overflow -DTESSERA_BENCH=OFF >/dev/null
 cmake --build $B -j"$(nproc)"
 
-export ASAN_OPTIONS=abort_on_error=1:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1
+# new_delete_type_mismatch=0: OpenImageIO 2.4's TextureSystem::destroy deletes its implementation through
+# the base type (inside the library; every texture test trips it), so the check reports only that.
+export ASAN_OPTIONS=abort_on_error=1:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:new_delete_type_mismatch=0
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 ctest --test-dir $B --output-on-failure -j"$(nproc)" --timeout 900 "$@"
