@@ -37,4 +37,12 @@ void FrameSetup::resetTile(SampleTile& tile, Rect pixels, const RenderSettings& 
     tile.setBlur(blurred() ? &blur : nullptr);
 }
 
+nlohmann::json surfaceKindStats(const Scene& scene) {
+    nlohmann::json kinds = nlohmann::json::object();
+    const auto kindCount = surfaceKindCounts(scene);
+    for (int k = 0; k < kSurfaceKinds; ++k)
+        if (kindCount[k]) kinds[surfaceKindName(SurfaceKind(k))] = kindCount[k];
+    return kinds;
+}
+
 }  // namespace tessera

@@ -36,4 +36,7 @@ struct FrameSetup {
     void resetTile(SampleTile& tile, Rect pixels, const RenderSettings& settings) const;
 };
 
+// The "surfaces" statistic both engines report: the number of surfaces of each kind present, by name.
+nlohmann::json surfaceKindStats(const Scene& scene);
+
 }  // namespace tessera

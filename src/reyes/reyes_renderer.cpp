@@ -188,11 +188,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     nlohmann::json& s = result.stats;
     s["engine"] = "reyes";
     s["patches_in"] = scene.patches.size();  // surfaces of every kind
-    nlohmann::json kinds = nlohmann::json::object();
-    const auto kindCount = surfaceKindCounts(scene);
-    for (int k = 0; k < kSurfaceKinds; ++k)
-        if (kindCount[k]) kinds[surfaceKindName(SurfaceKind(k))] = kindCount[k];
-    s["surfaces"] = kinds;
+    s["surfaces"] = surfaceKindStats(scene);
     s["patches_culled"] = splitStats.patchesCulled;
     s["pieces_culled"] = splitStats.pieceCulls;
     s["splits"] = splitStats.splits;

@@ -600,11 +600,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     nlohmann::json& s = result.stats;
     s["engine"] = "rt";
     s["patches_in"] = scene.patches.size();  // surfaces of every kind
-    nlohmann::json kinds = nlohmann::json::object();
-    const auto kindCount = surfaceKindCounts(scene);
-    for (int k = 0; k < kSurfaceKinds; ++k)
-        if (kindCount[k]) kinds[surfaceKindName(SurfaceKind(k))] = kindCount[k];
-    s["surfaces"] = kinds;
+    s["surfaces"] = surfaceKindStats(scene);
     nlohmann::json rays, hits;
     uint64_t totalRays = 0;
     for (int k = 0; k < kKinds; ++k) {
