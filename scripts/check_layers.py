@@ -29,7 +29,7 @@ def main() -> int:
     for name in sorted(unknown):
         violations.append(f"{src / name}: error: folder is not a known layer (add it to scripts/check_layers.py)")
     for layer in sorted(layers & set(ALLOWED)):
-        for f in sorted((src / layer).iterdir()):
+        for f in sorted((src / layer).rglob("*")):
             if f.suffix not in (".h", ".cpp"):
                 continue
             for n, line in enumerate(f.read_text().splitlines(), 1):

@@ -25,10 +25,11 @@ struct CommandResult {
     std::string output;  // stdout + stderr
 };
 
-CommandResult run(const std::string& args, const std::string& cwd = "") {
+// Runs tessera with `args` in `cwd` (when given), with `env` ("NAME=value ...") prefixed.
+CommandResult run(const std::string& args, const std::string& cwd = "", const std::string& env = "") {
     fs::path log = fs::temp_directory_path() / ("tessera_cli_" + std::to_string(getpid()) + ".log");
-    std::string cmd = (cwd.empty() ? "" : "cd '" + cwd + "' && ") + std::string(TESSERA_BINARY) + " " + args +
-                      " > '" + log.string() + "' 2>&1";
+    std::string cmd = (cwd.empty() ? "" : "cd '" + cwd + "' && ") + env + (env.empty() ? "" : " ") +
+                      std::string(TESSERA_BINARY) + " " + args + " > '" + log.string() + "' 2>&1";
     int status = std::system(cmd.c_str());
     std::ifstream f(log);
     std::stringstream ss;
@@ -456,5 +457,49 @@ TEST(Cli, AdaptiveWritesItsMapAndRejectsBadOptions) {
     }
     EXPECT_FALSE(fs::exists(out));
     EXPECT_FALSE(fs::exists(map));
+    fs::remove_all(dir);
+}
+
+// OpenImageIO lives in a module loaded on first use (shading/texture_module.h): the executable does not
+// link it (so a run without textures does not pay for its ~260 libraries), a textured scene loads it, and
+// a missing or wrong module is a clear input error (exit 2, no image) rather than a crash.
+TEST(Cli, TexturesLoadTheOpenImageIOModuleOnlyWhenNeeded) {
+    CommandResult r = run("--version");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    // The executable's own dynamic dependencies (ldd lists their dependencies too).
+    const std::string deps = std::string("readelf -d ") + TESSERA_BINARY + " > /tmp/tessera_needed_" +
+                             std::to_string(getpid()) + " 2>&1";
+    ASSERT_EQ(std::system(deps.c_str()), 0);
+    std::ifstream f("/tmp/tessera_needed_" + std::to_string(getpid()));
+    std::stringstream needed;
+    needed << f.rdbuf();
+    fs::remove("/tmp/tessera_needed_" + std::to_string(getpid()));
+    EXPECT_NE(needed.str().find("NEEDED"), std::string::npos) << needed.str();
+    EXPECT_EQ(needed.str().find("OpenImageIO"), std::string::npos) << needed.str();
+
+    fs::path dir = tempDir();
+    const std::string out = (dir / "t.png").string();
+    const std::string textured = "render " + std::string(TESSERA_SOURCE_DIR) +
+                                 "/scenes/textured_teapot.rib --res 64x48 --quiet -o " + out;
+    r = run(textured);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const Image img = readPng(out);
+    EXPECT_EQ(img.width, 64);
+    fs::remove(out);
+    // A module that is not there, and a file that is not a shared library: exit 2 naming the scene's
+    // line, the module and why, and no image.
+    const std::string notALibrary = (dir / "not_a_module.so").string();
+    std::ofstream(notALibrary) << "not an ELF file\n";
+    for (const std::string& module : {(dir / "absent.so").string(), notALibrary}) {
+        r = run(textured, "", "TESSERA_TEXTURE_MODULE='" + module + "'");
+        EXPECT_EQ(r.exitCode, 2) << r.output;
+        EXPECT_NE(r.output.find("textured_teapot.rib:"), std::string::npos) << r.output;
+        EXPECT_NE(r.output.find("OpenImageIO module"), std::string::npos) << r.output;
+        EXPECT_NE(r.output.find(module + ": "), std::string::npos) << r.output;
+        EXPECT_FALSE(fs::exists(out));
+    }
+    EXPECT_NE(run(textured, "", "TESSERA_TEXTURE_MODULE='" + (dir / "absent.so").string() + "'")
+                  .output.find("absent.so: not found"),
+              std::string::npos);
     fs::remove_all(dir);
 }

@@ -1,131 +1,129 @@
 #include "shading/texture.h"
 
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
-#include <OpenImageIO/imageio.h>
-#include <OpenImageIO/texture.h>
+#include <dlfcn.h>
 
-#include <algorithm>
-#include <cmath>
-#include <mutex>
+#include <cstdlib>
+#include <filesystem>
 #include <stdexcept>
+
+#include "shading/texture_module.h"
 
 namespace tessera {
 
 namespace {
-// OIIO's error text without trailing newlines, or `fallback` when it has none.
-std::string oiioError(const std::string& fallback) {
-    std::string e = OIIO::geterror();
-    while (!e.empty() && (e.back() == '\n' || e.back() == ' ')) e.pop_back();
-    return e.empty() ? fallback : e;
+constexpr const char* kModuleFile = "libtessera_texture_oiio.so";
+
+// The directory of the running executable ("" when /proc is not mounted).
+std::string executableDir() {
+    std::error_code ec;
+    const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+    return ec ? std::string() : exe.parent_path().string();
+}
+
+struct LoadedModule {
+    const TextureModuleApi* api = nullptr;
+    std::string error;  // why it could not be loaded (when api is nullptr)
+};
+
+// Loads the OpenImageIO module once per process: $TESSERA_TEXTURE_MODULE (a path) when set, otherwise
+// in turn the executable's directory (the build tree's top, where tessera is), ../lib/tessera beside it (an
+// install) and the path the build tree put it at (tests and tools in subdirectories). Never unloaded: OIIO
+// keeps threads and statics that outlive any one render.
+LoadedModule loadModule() {
+    std::vector<std::string> candidates;
+    if (const char* env = std::getenv("TESSERA_TEXTURE_MODULE"); env && *env) {
+        candidates.emplace_back(env);  // the user's choice, and the only one
+    } else if (const std::string dir = executableDir(); !dir.empty()) {
+        candidates.push_back(dir + "/" + kModuleFile);
+        candidates.push_back(dir + "/../lib/tessera/" + kModuleFile);
+    }
+#ifdef TESSERA_TEXTURE_MODULE_PATH
+    if (candidates.size() != 1 || !std::getenv("TESSERA_TEXTURE_MODULE"))
+        candidates.emplace_back(TESSERA_TEXTURE_MODULE_PATH);
+#endif
+    LoadedModule m;
+    std::string tried;
+    for (const std::string& path : candidates) {
+        std::error_code ec;
+        if (!std::filesystem::exists(path, ec)) {
+            tried += "\n  " + path + ": not found";
+            continue;
+        }
+        void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+        if (!handle) {
+            const char* why = dlerror();
+            tried += "\n  " + path + ": " + (why ? why : "dlopen failed");
+            continue;
+        }
+        using Entry = const TextureModuleApi* (*)();
+        auto entry = reinterpret_cast<Entry>(dlsym(handle, kTextureModuleEntry));
+        const TextureModuleApi* api = entry ? entry() : nullptr;
+        if (!api || api->version != kTextureModuleVersion) {
+            tried += "\n  " + path + ": not a texture module of this version of Tessera";
+            dlclose(handle);
+            continue;
+        }
+        m.api = api;
+        return m;
+    }
+    m.error = std::string("textures need Tessera's OpenImageIO module (") + kModuleFile +
+              "), which could not be loaded; tried:" + tried;
+    return m;
+}
+
+const LoadedModule& textureModule() {
+    static const LoadedModule module = loadModule();
+    return module;
+}
+
+const TextureModuleApi& requireTextureModule() {
+    const LoadedModule& m = textureModule();
+    if (!m.api) throw std::runtime_error(m.error);
+    return *m.api;
 }
 }  // namespace
 
-struct Textures::Impl {
-    struct Entry {
-        std::string path;
-        OIIO::TextureSystem::TextureHandle* handle = nullptr;
-        int channels = 3;
-        OIIO::TextureOpt::Wrap wrap = OIIO::TextureOpt::WrapPeriodic;  // the file's own when it names them
-        std::once_flag rangeOnce;
-        float lo = 0, hi = 0;
-    };
-    OIIO::TextureSystem* ts = nullptr;
-    std::vector<std::unique_ptr<Entry>> entries;
-
-    float lookup(const Entry& e, const TextureLookup& q, int nchannels, float* out, float* dds = nullptr,
-                 float* ddt = nullptr) const {
-        OIIO::TextureOpt opt;
-        opt.swrap = opt.twrap = e.wrap;
-        opt.fill = 0.f;
-        // The per-thread info of the calling thread (OIIO keeps one per thread and texture system).
-        OIIO::TextureSystem::Perthread* thread = ts->get_perthread_info();
-        const bool ok = ts->texture(e.handle, thread, opt, q.s, q.t, q.dsdx, q.dtdx, q.dsdy, q.dtdy,
-                                    nchannels, out, dds, ddt);
-        if (!ok) {
-            std::fill(out, out + nchannels, 0.f);
-            if (dds) std::fill(dds, dds + nchannels, 0.f);
-            if (ddt) std::fill(ddt, ddt + nchannels, 0.f);
-        }
-        return out[0];
-    }
-};
-
-Textures::Textures(std::span<const std::string> files) : impl_(std::make_unique<Impl>()) {
-    impl_->ts = OIIO::TextureSystem::create(/*shared=*/false);
-    OIIO::TextureSystem* ts = impl_->ts;
-    // Plain images are tiled and mip-mapped in the cache when first read, so they filter like .tx files.
-    ts->attribute("automip", 1);
-    ts->attribute("autotile", 64);
-    ts->attribute("max_memory_MB", 512.f);
-    for (const std::string& f : files) {
-        auto e = std::make_unique<Impl::Entry>();
-        e->path = f;
-        e->handle = ts->get_texture_handle(OIIO::ustring(f));
-        if (!e->handle || !ts->good(e->handle)) {
-            const std::string why = ts->geterror();
-            OIIO::TextureSystem::destroy(ts);
-            impl_->ts = nullptr;
-            throw std::runtime_error("cannot read texture \"" + f + "\"" + (why.empty() ? "" : ": " + why));
-        }
-        int nch = 0;
-        if (ts->get_texture_info(e->handle, nullptr, 0, OIIO::ustring("channels"), OIIO::TypeInt, &nch) &&
-            nch > 0)
-            e->channels = nch;
-        // A texture made by MakeTexture carries its wrap modes; a plain image repeats (periodic).
-        OIIO::ustring modes;
-        if (ts->get_texture_info(e->handle, nullptr, 0, OIIO::ustring("wrapmodes"), OIIO::TypeString,
-                                 &modes) &&
-            !modes.empty())
-            e->wrap = OIIO::TextureOpt::WrapDefault;
-        impl_->entries.push_back(std::move(e));
-    }
+Textures::Textures(std::span<const std::string> files) : count_(files.size()) {
+    if (files.empty()) return;  // nothing to look up: OIIO stays unloaded
+    api_ = &requireTextureModule();
+    std::string error;
+    set_ = api_->open(files, error);
+    if (!set_) throw std::runtime_error(error);
 }
 
 Textures::~Textures() {
-    if (impl_ && impl_->ts) OIIO::TextureSystem::destroy(impl_->ts);
+    if (set_) api_->close(set_);
 }
 
 size_t Textures::size() const {
-    return impl_->entries.size();
+    return count_;
 }
 
 Color Textures::color(uint32_t texture, const TextureLookup& q) const {
-    const Impl::Entry& e = *impl_->entries[texture];
     float c[3] = {0, 0, 0};
-    if (e.channels >= 3) {
-        impl_->lookup(e, q, 3, c);
+    if (api_->channels(set_, texture) >= 3) {
+        api_->lookup(set_, texture, q, 3, c, nullptr, nullptr);
         return {c[0], c[1], c[2]};
     }
-    const float g = impl_->lookup(e, q, 1, c);  // grey (and grey + alpha): the first channel
-    return {g, g, g};
+    api_->lookup(set_, texture, q, 1, c, nullptr, nullptr);  // grey (and grey + alpha): the first channel
+    return {c[0], c[0], c[0]};
 }
 
 float Textures::value(uint32_t texture, const TextureLookup& q) const {
     float c[1];
-    return impl_->lookup(*impl_->entries[texture], q, 1, c);
+    api_->lookup(set_, texture, q, 1, c, nullptr, nullptr);
+    return c[0];
 }
 
 float Textures::value(uint32_t texture, const TextureLookup& q, float& dds, float& ddt) const {
     float c[1], ds[1], dt[1];
-    const float v = impl_->lookup(*impl_->entries[texture], q, 1, c, ds, dt);
+    api_->lookup(set_, texture, q, 1, c, ds, dt);
     dds = ds[0], ddt = dt[0];
-    return v;
+    return c[0];
 }
 
 void Textures::range(uint32_t texture, float& lo, float& hi) const {
-    Impl::Entry& e = *impl_->entries[texture];
-    std::call_once(e.rangeOnce, [&] {
-        OIIO::ImageBuf buf(e.path);
-        OIIO::ImageBufAlgo::PixelStats stats;
-        if (buf.read(0, 0, 0, 1, true, OIIO::TypeFloat) &&
-            (stats = OIIO::ImageBufAlgo::computePixelStats(buf), !stats.min.empty())) {
-            e.lo = stats.min[0], e.hi = stats.max[0];
-        } else {
-            e.lo = e.hi = 0.f;
-        }
-    });
-    lo = e.lo, hi = e.hi;
+    api_->range(set_, texture, lo, hi);
 }
 
 Color surfaceTextureColor(const Textures& textures, const Material& m, const Projector& pr,
@@ -139,22 +137,14 @@ Color surfaceTextureColor(const Textures& textures, const Material& m, const Pro
 }
 
 std::string textureReadError(const std::string& path) {
-    auto in = OIIO::ImageInput::open(path);
-    if (!in) return oiioError("not an image OpenImageIO can read");
-    const OIIO::ImageSpec& spec = in->spec();
-    if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1) return "the image is empty";
-    return "";
+    const LoadedModule& m = textureModule();
+    return m.api ? m.api->readError(path) : m.error;
 }
 
 std::string makeTexture(const std::string& picture, const std::string& texture, const std::string& swrap,
                         const std::string& twrap) {
-    OIIO::ImageSpec config;
-    config.attribute("wrapmodes", swrap + "," + twrap);
-    config.tile_width = config.tile_height = 64;
-    config.attribute("maketx:highlightcomp", 0);
-    if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, picture, texture, config))
-        return oiioError("OpenImageIO's make_texture failed");
-    return "";
+    const LoadedModule& m = textureModule();
+    return m.api ? m.api->makeTexture(picture, texture, swrap, twrap) : m.error;
 }
 
 }  // namespace tessera

@@ -76,12 +76,15 @@ TESSERA_HD TextureLookup textureLookup(const Projector& pr, Vec3 P, Vec3 dPdu, V
     return q;
 }
 
+struct TextureModuleApi;
+
 // The textures of a scene (Scene::textures), opened once per render. Lookups are thread-safe: each
-// thread uses OIIO's per-thread info and the shared tile cache.
+// thread uses OIIO's per-thread info and the shared tile cache. OIIO itself is loaded on first use
+// (texture_module.h): a scene without textures never loads it.
 class Textures {
   public:
     // Opens every file (already resolved to a path by the reader); throws std::runtime_error naming the
-    // file when one cannot be read.
+    // file when one cannot be read, or saying why the OpenImageIO module could not be loaded.
     explicit Textures(std::span<const std::string> files);
     ~Textures();
     Textures(const Textures&) = delete;
@@ -98,8 +101,9 @@ class Textures {
     void range(uint32_t texture, float& lo, float& hi) const;
 
   private:
-    struct Impl;
-    std::unique_ptr<Impl> impl_;
+    const TextureModuleApi* api_ = nullptr;  // the OpenImageIO module (texture_module.h)
+    void* set_ = nullptr;                    // its open textures
+    size_t count_ = 0;
 };
 
 // The texture colour of a point of a surface with material `m`: Cs's multiplier in paintedplastic (RI
@@ -108,7 +112,8 @@ class Textures {
 Color surfaceTextureColor(const Textures& textures, const Material& m, const Projector& pr,
                           const PatchTexCoords& tc, Vec3 P, Vec3 dPdu, Vec3 dPdv, Vec2 uv, float scale = 1.f);
 
-// Whether OIIO can read `path` as an image; "" when it can, otherwise OIIO's reason.
+// Whether OIIO can read `path` as an image; "" when it can, otherwise OIIO's reason (or why the
+// OpenImageIO module could not be loaded).
 std::string textureReadError(const std::string& path);
 
 // RI MakeTexture (RI spec 3.2, sec. 8.3): converts `picture` to a tiled, mip-mapped texture `texture`
