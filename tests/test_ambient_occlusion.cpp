@@ -14,18 +14,11 @@
 #include <cmath>
 #include <vector>
 
+#include "floor_scenes.h"
 #include "test_util.h"
 
 namespace tessera::test {
 namespace {
-
-// A bilinear-flat patch o + a du + b dv, a, b in [0, 1], as a bicubic.
-BezierPatch planarPatch(Vec3 o, Vec3 du, Vec3 dv) {
-    BezierPatch p;
-    for (int v = 0; v < 4; ++v)
-        for (int u = 0; u < 4; ++u) p.at(u, v) = o + du * (u / 3.f) + dv * (v / 3.f);
-    return p;
-}
 
 void samplesPerPixel(Scene& s, int nx, int ny) {
     s.image.pixelSamplesX = nx;
@@ -43,31 +36,12 @@ Scene floorScene(int size) {
 // and past the eye, beside the camera rays of the image half x > 0 (y > 0). `half`: only its part y >= 0
 // (x >= 0), so that two walls meet in an inside corner and, seen from the quadrant x, y > 0, never
 // overlap or hide each other.
-struct Wall {
-    Vec3 corner[4];
-};
 Wall addWall(Scene& s, bool alongX, bool half = false) {
     const Vec3 up{0, 0, -400}, side = alongX ? Vec3{200, 0, 0} : Vec3{0, 200, 0};
     const Vec3 o = Vec3{0, 0, 5} - (half ? Vec3{0, 0, 0} : side);
     const Vec3 across = half ? side : side * 2.f;
     addPatch(s, planarPatch(o, across, up));
     return {{o, o + across, o + across + up, o + up}};
-}
-
-// The exact occlusion of a wall seen whole from floor point p with normal n: the cosine-weighted solid
-// angle of a polygon over pi, i.e. the point-to-polygon form factor, by Lambert's formula
-// F = (1 / 2 pi) sum over edges of (angle the edge subtends) x (n . unit normal of the plane through p and
-// the edge). The walls are finite (200 and 400 units), which this accounts for.
-double wallFormFactor(const Wall& w, Vec3 p, Vec3 n) {
-    double f = 0;
-    for (int i = 0; i < 4; ++i) {
-        const Vec3 a = normalize(w.corner[i] - p), b = normalize(w.corner[(i + 1) % 4] - p);
-        const Vec3 c = cross(a, b);
-        const double len = length(c);
-        if (len < 1e-12) continue;
-        f += std::acos(std::clamp(double(dot(a, b)), -1.0, 1.0)) * double(dot(n, c)) / len;
-    }
-    return std::abs(f) / (2.0 * 3.14159265358979);
 }
 
 RenderSettings aoSettings(int samples, float maxDistance = INFINITY, bool paper = false) {
@@ -81,51 +55,6 @@ RenderSettings aoSettings(int samples, float maxDistance = INFINITY, bool paper 
     return rs;
 }
 
-// The floor point a pixel centre sees (the floor z = 5, 40-degree view of a square image).
-Vec3 floorPointOf(int px, int py, int size) {
-    const float half = std::tan(20.f * 3.14159265f / 180.f);
-    const float x = (2.f * (px + 0.5f) / size - 1.f) * half, y = (1.f - 2.f * (py + 0.5f) / size) * half;
-    return {x * 5.f, y * 5.f, 5.f};
-}
-
-struct Estimate {
-    double mean = 0, standardError = 0;
-    size_t n = 0;
-};
-// Mean of (grey value - truth(floor point)) over the pixels whose floor point passes `keep`.
-template <class Keep, class Truth>
-Estimate errorOver(const Image& img, int size, Keep&& keep, Truth&& truth) {
-    std::vector<double> v;
-    for (int py = 0; py < size; ++py)
-        for (int px = 0; px < size; ++px) {
-            const Vec3 p = floorPointOf(px, py, size);
-            if (keep(p)) v.push_back(double(img.pixel(px, py)[0]) - truth(p));
-        }
-    Estimate e;
-    e.n = v.size();
-    for (double x : v) e.mean += x;
-    e.mean /= double(e.n);
-    double ss = 0;
-    for (double x : v) ss += (x - e.mean) * (x - e.mean);
-    e.standardError = std::sqrt(ss / double(e.n - 1) / double(e.n));
-    return e;
-}
-template <class Keep>
-Estimate meanOver(const Image& img, int size, Keep&& keep) {
-    return errorOver(img, size, keep, [](Vec3) { return 0.0; });
-}
-
-// |t| of the mean against the analytic value; 4 standard errors is the bound (a fixed seed: the test is
-// deterministic, the bound only says the estimate is consistent with the closed form).
-void expectMean(const Estimate& e, double truth, const char* what) {
-    const double t = (e.mean - truth) / std::max(e.standardError, 1e-12);
-    ::testing::Test::RecordProperty(std::string("mean_") + what, std::to_string(e.mean));
-    ::testing::Test::RecordProperty(std::string("t_") + what, std::to_string(t));
-    EXPECT_GT(e.n, 100u) << what;
-    EXPECT_LT(std::abs(t), 4.0) << what << ": mean " << e.mean << " vs " << truth << " (se "
-                                << e.standardError << ")";
-    EXPECT_NEAR(e.mean, truth, 0.01) << what;
-}
 // Only near: against a value the scene approximates (infinite walls).
 void expectNear(const Estimate& e, double value, double tolerance, const char* what) {
     EXPECT_NEAR(e.mean, value, tolerance) << what;
@@ -157,7 +86,7 @@ TEST(AmbientOcclusion, WallHalvesAndCornerQuartersTheHemisphere) {
     const Wall a = addWall(one, false);  // the plane x = 0
     samplesPerPixel(one, 1, 1);
     const RenderResult r1 = render(one, aoSettings(64));
-    auto oneWall = [&](Vec3 p) { return 1.0 - wallFormFactor(a, p, n); };
+    auto oneWall = [&](Vec3 p) { return 1.0 - polygonFormFactor(a, p, n); };
     expectMean(errorOver(
                    r1.image, size, [](Vec3 p) { return std::abs(p.x) > 0.1f; }, oneWall),
                0.0, "one_wall");
@@ -169,7 +98,7 @@ TEST(AmbientOcclusion, WallHalvesAndCornerQuartersTheHemisphere) {
                c = addWall(two, true, true);  // x = 0, y >= 0 and y = 0, x >= 0
     samplesPerPixel(two, 1, 1);
     const RenderResult r2 = render(two, aoSettings(64));
-    auto corner = [&](Vec3 p) { return 1.0 - wallFormFactor(b, p, n) - wallFormFactor(c, p, n); };
+    auto corner = [&](Vec3 p) { return 1.0 - polygonFormFactor(b, p, n) - polygonFormFactor(c, p, n); };
     auto inQuadrant = [](Vec3 p) { return p.x > 0.1f && p.y > 0.1f; };
     expectMean(errorOver(r2.image, size, inQuadrant, corner), 0.0, "corner");
     expectNear(meanOver(r2.image, size, inQuadrant), 0.25, 0.005, "corner_vs_quarter");
@@ -220,7 +149,7 @@ TEST(AmbientOcclusion, ErrorFallsAtLeastAsOneOverSqrtRays) {
             for (int px = 0; px < size; ++px) {
                 const Vec3 p = floorPointOf(px, py, size);
                 if (std::abs(p.x) < 0.1f) continue;
-                const double e = r.image.pixel(px, py)[0] - (1.0 - wallFormFactor(w, p, {0, 0, -1}));
+                const double e = r.image.pixel(px, py)[0] - (1.0 - polygonFormFactor(w, p, {0, 0, -1}));
                 sum += e * e, ++n;
             }
         const double rmse = std::sqrt(sum / double(n));

@@ -60,7 +60,8 @@ struct RenderArgs {
     std::string sampler = "sobol";
     std::string shadows = "scene";     // which lights cast shadows: on, off, scene (each light's attribute)
     std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
-    int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = 4, maxGridEdge = 16;
+    int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = -1, maxGridEdge = 16;
+    int lightSamples = 0;  // 0: each area light's own "samples"
     double shadingRate = 0;
     unsigned seed = 0;
     bool quiet = false, cullBackfaces = false, noRayBinning = false, progressLines = false;
@@ -439,11 +440,16 @@ int runRender(const RenderArgs& a) {
     settings.sampler = a.sampler == "jittered" ? SamplerKind::Jittered : SamplerKind::Sobol;
     settings.bucketSize = a.bucketSize;
     settings.subpatchDepth = a.subpatchDepth;
-    settings.maxDepth = a.maxDepth;
+    // Bounces: 4 traced lobes for the direct integrator; 16 for the path tracer, whose Russian roulette
+    // ends most paths far earlier (the cap only bounds mirror-and-glass chains).
+    settings.maxDepth = a.maxDepth >= 0 ? a.maxDepth : a.integrator == "path" ? 16 : 4;
+    settings.lightSamples = a.lightSamples;
     settings.cullBackfaces = a.cullBackfaces;
     settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
-    settings.integrator = a.integrator == "ao" ? Integrator::AmbientOcclusion : Integrator::Direct;
+    settings.integrator = a.integrator == "ao"     ? Integrator::AmbientOcclusion
+                          : a.integrator == "path" ? Integrator::Path
+                                                   : Integrator::Direct;
     settings.ao.samples = a.aoSamples;
     if (a.aoDistance > 0) settings.ao.maxDistance = float(a.aoDistance);
     settings.ao.paperWeighting = a.aoWeighting == "paper";
@@ -744,12 +750,22 @@ int main(int argc, char** argv) {
         ->check(intRange(1, 256));
     render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
         ->check(intRange(0, 12));
-    render->add_option("--max-depth", ra.maxDepth, "rt: ray bounces")->check(intRange(0, 64));
+    render
+        ->add_option("--max-depth", ra.maxDepth,
+                     "rt: ray bounces; default 4 (direct: mirror and glass lobes), 16 (path, with Russian "
+                     "roulette from the third)")
+        ->check(intRange(0, 64));
     render
         ->add_option("--integrator", ra.integrator,
-                     "rt: direct (lights, shadows, mirror, glass) or ao (ambient occlusion, a grey image)")
-        ->check(CLI::IsMember({"direct", "ao"}))
+                     "rt: direct (lights, soft shadows of area lights, mirror, glass), path (path tracing: "
+                     "diffuse and glossy interreflection, caustics) or ao (ambient occlusion, a grey image)")
+        ->check(CLI::IsMember({"direct", "path", "ao"}))
         ->capture_default_str();
+    render
+        ->add_option("--light-samples", ra.lightSamples,
+                     "rt, --integrator direct: shadow rays per shading point for every area light (default: "
+                     "each light's \"samples\", 16 unless the RIB says)")
+        ->check(intRange(1, 65536));
     render->add_option("--ao-samples", ra.aoSamples, "rt, --integrator ao: hemisphere rays per camera hit")
         ->check(intRange(1, 65536))
         ->capture_default_str();

@@ -45,10 +45,11 @@ struct BlurSettings {
 
 // What the ray tracer computes for a camera sample (docs/light_transport.md): `Direct` is the
 // Whitted-style integrator (lights with shadow rays, mirror and glass lobes); `AmbientOcclusion` the
-// unoccluded fraction of the hemisphere at the first hit, as a grey image.
-enum class Integrator : uint8_t { Direct, AmbientOcclusion };
+// unoccluded fraction of the hemisphere at the first hit, as a grey image; `Path` the unidirectional path
+// tracer (next-event estimation with multiple importance sampling at every bounce, Russian roulette).
+enum class Integrator : uint8_t { Direct, AmbientOcclusion, Path };
 inline const char* integratorName(Integrator i) {
-    return i == Integrator::AmbientOcclusion ? "ao" : "direct";
+    return i == Integrator::AmbientOcclusion ? "ao" : i == Integrator::Path ? "path" : "direct";
 }
 
 // Ambient occlusion (paper 002, sec. 5.3.1): O = (1/pi) integral of V(w) cos(theta) over the hemisphere.
@@ -101,7 +102,11 @@ struct RenderSettings {
     AmbientOcclusionSettings ao;
     AdaptiveSettings adaptive;
     int subpatchDepth = 6;
-    int maxDepth = 4;
+    int maxDepth = 4;  // direct: traced lobes per path; path: bounces
+    // Area lights: shadow rays per shading point of the direct integrator (0: each light's own "samples").
+    int lightSamples = 0;
+    // Path tracer: Russian roulette from this bounce on (survival by the path's throughput).
+    int rouletteDepth = 3;
     bool cullBackfaces = false;
     // Camera and shadow rays may find their candidates by binning the boxes in a projection plane instead
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves

@@ -795,6 +795,7 @@ PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& 
     a.focusFactor = c.state.attributes().focusFactor;
     a.displacement = c.state.attributes().displacement;
     a.displacementBound = c.state.attributes().displacementBound;
+    a.areaLight = c.state.attributes().areaLight;
     const bool mirrored = (scene.camera.cameraFromWorld * ctm.at(scene.camera.shutterOpen)).det3() < 0;
     a.flipNormal = c.state.attributes().rightHanded != mirrored;
     return a;

@@ -87,6 +87,9 @@ struct Attributes {
     // "displacementbound" "sphere" r "coordinatesystem" space, r converted to world units (0: not given).
     int32_t displacement = -1;
     float displacementBound = 0.f;
+    // AreaLightSource (RI spec 3.2, sec. 4.2.2): the area light (index into Scene::lights) that the
+    // surfaces declared from here to the end of the attribute block belong to; -1: none.
+    int32_t areaLight = -1;
 };
 
 enum class Block { Frame, World, Attribute, Transform };

@@ -758,7 +758,11 @@ class RibReader {
     }
 
     // LightSource (RI spec 3.2, sec. 4.2.2): the light's "shader space" is the current object space.
-    void lightSource(const Request& r, const Arguments& args) {
+    void lightSource(const Request& r, const Arguments& args) { declareLight(r, args, false); }
+    // AreaLightSource (RI spec 3.2, sec. 4.2.2): a light whose geometry is the surfaces declared after it
+    // up to the end of the current attribute block; they emit its intensity * lightcolor as radiance.
+    void areaLightSource(const Request& r, const Arguments& args) { declareLight(r, args, true); }
+    void declareLight(const Request& r, const Arguments& args, bool area) {
         args.atLeast(2, "shadername handle ...parameterlist...");
         const std::string& name = args.string(0);
         if (r.args[1].isArray())
@@ -774,8 +778,20 @@ class RibReader {
                            "light shader \"" + name + "\" is not supported; light ignored");
             return;
         }
+        if ((shader->type == LightType::Area) != area) {
+            diag_.warn(r.line,
+                       area ? "AreaLightSource \"" + name +
+                                  "\" is not an area light shader (the standard one is \"arealight\"); "
+                                  "light ignored"
+                            : "LightSource \"" + name +
+                                  "\": an area light is declared with AreaLightSource; light ignored");
+            return;
+        }
         LightShaderParams params;
-        applyShaderParams(shader->params, r, ps, params, "LightSource \"" + name + "\"", diag_);
+        applyShaderParams(shader->params, r, ps, params,
+                          std::string(area ? "AreaLightSource" : "LightSource") + " \"" + name + "\"", diag_);
+        if (area && !(params.samples >= 1 && params.samples <= 65536))
+            diag_.fail(r.line, "AreaLightSource: \"samples\" must be between 1 and 65536");
         Light light;
         light.type = shader->type;
         light.color = params.lightcolor * params.intensity;
@@ -792,6 +808,12 @@ class RibReader {
         light.beamDistribution = params.beamdistribution;
         light.castsShadows = state_.attributes().lightShadows && light.type != LightType::Ambient;
         light.shadowMap = state_.attributes().shadowMap;
+        light.samples = int(params.samples);
+        if (area) {
+            light.castsShadows =
+                true;  // soft shadows are what an area light is for (--shadows off still rules)
+            state_.attributes().areaLight = int32_t(scene_.lights.size());
+        }
         if (!isFinite(light.color) || !isFinite(light.from) || !isFinite(light.to))
             diag_.fail(
                 r.line,
@@ -1143,6 +1165,7 @@ class RibReader {
             {"Surface", &RibReader::surface},
             {"Displacement", &RibReader::displacement},
             {"LightSource", &RibReader::lightSource},
+            {"AreaLightSource", &RibReader::areaLightSource},
             {"Illuminate", &RibReader::illuminate},
             {"Basis", &RibReader::basis},
             {"Declare", &RibReader::declare},

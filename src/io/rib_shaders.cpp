@@ -67,11 +67,16 @@ constexpr LightParam kBeamDistribution{"beamdistribution", &LightShaderParams::b
 constexpr LightParam kSpotParams[] = {kIntensity,      kLightColor,      kFrom, kTo, kConeAngle,
                                       kConeDeltaAngle, kBeamDistribution};
 
+// RI arealight (RI spec 3.2, appendix A) with the sample count of BMRT's and PRMan's area lights.
+constexpr LightParam kSamples{"samples", &LightShaderParams::samples};
+constexpr LightParam kAreaParams[] = {kIntensity, kLightColor, kSamples};
+
 constexpr LightShader kLightShaders[] = {
     {"ambientlight", LightType::Ambient, kAmbientParams},
     {"distantlight", LightType::Distant, kDistantParams},
     {"pointlight", LightType::Point, kPointParams},
     {"spotlight", LightType::Spot, kSpotParams},
+    {"arealight", LightType::Area, kAreaParams},
 };
 
 template <class Shader>

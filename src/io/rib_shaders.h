@@ -48,6 +48,7 @@ struct LightShaderParams {
     Vec3 to{0, 0, 1};
     // spotlight: radians(30), radians(5), 2
     float coneangle = 0.5235988f, conedeltaangle = 0.0872665f, beamdistribution = 2.f;
+    float samples = 16;  // arealight: shadow rays per shading point (Light::samples)
 };
 
 struct LightShader {

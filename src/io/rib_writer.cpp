@@ -236,6 +236,8 @@ void writeRib(const Scene& scene, std::ostream& o) {
                   << "] \"coneangle\" [" << num(l.coneAngle) << "] \"conedeltaangle\" ["
                   << num(l.coneDeltaAngle) << "] \"beamdistribution\" [" << num(l.beamDistribution) << "]\n";
                 break;
+            case LightType::Area:  // not written yet: its surfaces would need their AreaLightSource blocks
+                break;
         }
     }
     // RI spec 4.2.4: our reader flips a patch when Orientation disagrees with the handedness of the

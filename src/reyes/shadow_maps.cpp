@@ -156,6 +156,7 @@ ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const
     for (size_t l = 0; l < lights.size() && l < scene.lights.size(); ++l) {
         if (!lights[l].castsShadows || bounds.empty()) continue;
         const Light& light = scene.lights[l];
+        if (light.type == LightType::Area) continue;  // ray traced only (rt/area_lights.h)
         auto map = std::make_unique<Map>();
         map->type = light.type;
         map->params = light.shadowMap;

@@ -12,10 +12,12 @@
 
 #include "engine/frame.h"
 #include "engine/tile_loop.h"
+#include "rt/area_lights.h"
 #include "rt/binning.h"
 #include "rt/ray_list.h"
 #include "rt/shadow_rays.h"
 #include "shading/hemisphere.h"
+#include "shading/path_bsdf.h"
 #include "shading/surface.h"
 #include "shading/texture.h"
 
@@ -48,6 +50,16 @@ struct Workspace {
     SampleTile presample;
     std::vector<uint8_t> activeSubpixels, tracedSamples;
     uint64_t adaptivePixels = 0, adaptiveActive = 0;
+    // Area lights (direct integrator): per hit its samples [hit * areaSlots + slot], each slot's shadow
+    // ray (kNone: none) and whether it was blocked.
+    std::vector<LightSample> areaSamples;
+    std::vector<uint32_t> areaRay;
+    RayList areaShadow;
+    std::vector<uint8_t> areaBlocked;
+    // Path tracer: per ray of `rays` / `next` the solid-angle density of the BSDF sample that made it (0:
+    // a camera ray or a delta lobe, whose emission hits count fully); per shadow ray its hit.
+    std::vector<float> rayPdf, nextPdf;
+    std::vector<uint32_t> shadowHit;
     double shadeMs = 0, filterMs = 0;
 };
 
@@ -58,7 +70,31 @@ struct Frame {
     int maxDepth;
     const Projector& projector;
     const Textures* textures;  // nullptr: the scene has none
+    const AreaLights& areaLights;
+    uint32_t seed;
+    int lightSamples;  // --light-samples (0: each area light's own)
+    int rouletteDepth;
 };
+
+// The per-pixel seed and sample index of tile sample s (the shared sampler's coordinates, film/sampler.h).
+void sampleCoordinates(const SampleTile& tile, uint32_t s, uint32_t seed, uint32_t& pseed, uint32_t& index) {
+    const size_t pixel = s / size_t(tile.spp);
+    const int tw = tile.region.width();
+    pseed =
+        pixelSeed(tile.region.x0 + int(pixel % size_t(tw)), tile.region.y0 + int(pixel / size_t(tw)), seed);
+    index = tile.sampleIndex[s];
+}
+
+// Radiance an area light's surface sends along a ray that hit it at `rh` from direction d: Le on the
+// front side, 0 behind; `cosine` receives |cos| at the light (for the density conversions).
+Color areaEmission(const Frame& fr, const RayHit& rh, Vec3 d, float& cosine, int& light) {
+    light = fr.areaLights.lightOfSurface(rh.patch);
+    cosine = 0.f;
+    if (light < 0) return Color{0, 0, 0};
+    const Vec3 n = normalize(orientedGeometricNormal(fr.acc, rh.patch, rh.h));
+    cosine = -dot(n, normalize(d));
+    return cosine > 0.f ? fr.areaLights.light(size_t(light)).Le : Color{0, 0, 0};
+}
 
 // ---- Shading through src/shading: hits -> light samples -> shadow rays -> radiance + traced lobes ------
 
@@ -122,6 +158,94 @@ void applyVisibility(const SurfacePoints& pts, Workspace& ws) {
     applyShadowRays(ws.shadowIdx, ws.shadowBlocked, ws.lightSamples, pts.count, ws.shadowedLights.data());
 }
 
+// Area lights in the direct integrator (docs/light_transport.md): per hit and area light, `samples`
+// points over the light from the sampler's light pair (index sample x N + j: for a power-of-two N an
+// aligned block of a (0,2)-sequence, so stratified), each a LightSample with Cl = Le cos_l / (pi d^2 pdf
+// N). RI's diffuse() sum over them is then E / pi, which is the Lambertian response of the path tracer, so
+// the two integrators agree on matte surfaces. Shadow rays answer their visibility; the surface's RI
+// response over the samples, and the emission of a light surface hit from its front, add to the hit's
+// radiance.
+void addAreaLighting(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
+    const AreaLights& al = fr.areaLights;
+    const RayList& rays = ws.rays;
+    const size_t n = pts.count;
+    if (al.empty()) return;
+    for (size_t k = 0; k < n; ++k) {  // emission (no MIS here: the direct integrator has no diffuse bounce)
+        const uint32_t r = ws.hitRay[k];
+        float cosine;
+        int light;
+        ws.radiance[k] += areaEmission(fr, ws.hits[r], rays.d[r], cosine, light);
+    }
+    std::vector<uint32_t> count(al.size()), offset(al.size());
+    size_t slots = 0;
+    for (size_t a = 0; a < al.size(); ++a) {
+        count[a] = uint32_t(fr.lightSamples > 0 ? fr.lightSamples : al.light(a).samples);
+        offset[a] = uint32_t(slots);
+        slots += count[a];
+    }
+    ws.areaSamples.assign(n * slots, LightSample{});
+    ws.areaRay.assign(n * slots, kNone);
+    ws.areaShadow.clear();
+    const SampleTile& tile = ws.tile;
+    for (size_t k = 0; k < n; ++k) {
+        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        if (!surfaceUsesLights(m.type)) continue;
+        const uint32_t r = ws.hitRay[k], s = rays.owner[r];
+        const RayHit& rh = ws.hits[r];
+        uint32_t pseed, index;
+        sampleCoordinates(tile, s, fr.seed, pseed, index);
+        const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
+        const Vec3 o = pts.P[k] + Nf * fr.acc.offset;
+        for (size_t a = 0; a < al.size(); ++a) {
+            const AreaLights::Light& light = al.light(a);
+            const uint32_t N = count[a];
+            const uint32_t lightSeed = hash32(pseed + 0x632be5abu * uint32_t(a + 1));  // lights decorrelated
+            for (uint32_t j = 0; j < N; ++j) {
+                const Sample2D uv = sample2D(lightSeed, index * N + j, kDimLightU);
+                const AreaLightSample ls = al.sample(fr.acc, a, uv.u, uv.v);
+                if (!(ls.pdfArea > 0.f)) continue;
+                const Vec3 toLight = ls.p - o;
+                const float d2 = dot(toLight, toLight), d = std::sqrt(d2);
+                if (!(d > 0.f)) continue;
+                const Vec3 L = toLight / d;
+                const float cosLight = -dot(ls.n, L);
+                if (!(cosLight > 0.f) || !(dot(Nf, L) > 0.f)) continue;
+                const size_t slot = k * slots + offset[a] + j;
+                LightSample& sample = ws.areaSamples[slot];
+                sample.L = L, sample.dist = d, sample.valid = true;
+                sample.Cl = light.Le * (cosLight / (3.14159265f * d2 * ls.pdfArea * float(N)));
+                if (!light.castsShadows) continue;
+                // Ends short of the light's surface, which must not shadow its own samples.
+                const float tmax = d - std::max(4.f * fr.acc.offset, 1e-3f * d);
+                ws.areaRay[slot] = uint32_t(ws.areaShadow.size());
+                ws.areaShadow.push(o, L, 0.f, tmax, s, Color{}, rh.patch, kShadow, 0, Vec2{rh.h.u, rh.h.v},
+                                   Nf, rays.time[r]);
+            }
+        }
+    }
+    ws.trace.occluded(ws.areaShadow, ws.areaBlocked);
+    for (size_t k = 0; k < n; ++k) {
+        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        if (!surfaceUsesLights(m.type)) continue;
+        const LightSample* samples = ws.areaSamples.data() + k * slots;
+        const uint32_t* ray = ws.areaRay.data() + k * slots;
+        ws.radiance[k] += shadeSurfaceLights(
+            m, pts.N[k], pts.I[k], slots, [&](size_t l) -> const LightSample& { return samples[l]; },
+            [&](size_t l) { return ray[l] != kNone && ws.areaBlocked[ray[l]] ? 0.f : 1.f; },
+            pts.textureOf(k));
+        // The shadow-count channel: an area light counts as one light in shadow where most of its
+        // samples are blocked.
+        for (size_t a = 0; a < al.size(); ++a) {
+            uint32_t blocked = 0;
+            for (uint32_t j = 0; j < count[a]; ++j) {
+                const uint32_t rr = ray[offset[a] + j];
+                blocked += rr != kNone && ws.areaBlocked[rr];
+            }
+            if (2 * blocked > count[a]) ++ws.shadowedLights[k];
+        }
+    }
+}
+
 // ---- end of shading ----------------------------------------------------------------------------------
 
 // Accumulates the hits' radiance into the tile in ray order (deterministic), writes the film's attributes
@@ -180,7 +304,170 @@ void shadeGeneration(const Frame& fr, Workspace& ws) {
                           shadeSurfaces(fr.scene.materials, pts, ws.lightSamples, range.begin(), range.end(),
                                         ws.radiance.data());
                       });
+    ws.shadeMs += msSince(ts);
+    addAreaLighting(fr, pts, ws);  // traces its own shadow rays
+    ts = EngineClock::now();
     accumulate(fr, pts, ws);
+    ws.shadeMs += msSince(ts);
+}
+
+// ---- Path tracing ----------------------------------------------------------------------------------------
+
+// Sampler dimensions of a path vertex at `depth`: four (0,2) pairs per bounce from kDimFirstFree: the area
+// light point, the BSDF direction, (light choice, lobe choice), (Russian roulette, unused).
+constexpr uint32_t kPathDimsPerBounce = 8;
+
+// One wavefront generation of the path tracer (--integrator path, docs/light_transport.md), for the hits
+// of `ws.rays`:
+//  1. emission the rays see: an area light's front side (weighted by the power heuristic against light
+//     sampling when the ray came from a smooth lobe: Veach 1997, ch. 9) and constant surfaces;
+//  2. next-event estimation at every vertex with a smooth lobe: a shadow ray to every delta light (point,
+//     spot, distant: RI Cl as irradiance x pi, so that a Lambertian surface gets RI diffuse()'s Kd Cs Cl
+//     cos), and to one point of one area light picked by power (MIS with the BSDF's density);
+//  3. the BSDF's sample continues the path (`ws.next`, its density in `ws.nextPdf`), with Russian roulette
+//     by throughput from Frame::rouletteDepth on; none past --max-depth bounces.
+// Ambient lights add nothing: the path tracer computes the indirect light they stand in for.
+void shadePathGeneration(const Frame& fr, Workspace& ws) {
+    auto ts = EngineClock::now();
+    const SurfacePoints pts = hitBatch(fr, ws);
+    const RayList& rays = ws.rays;
+    SampleTile& tile = ws.tile;
+    const AreaLights& al = fr.areaLights;
+    const RtAccel& acc = fr.acc;
+    constexpr float kPi = 3.14159265f;
+    ws.next.clear();
+    ws.nextPdf.clear();
+    ws.shadow.clear();
+    ws.shadowHit.clear();
+    ws.shadowedLights.assign(pts.count, 0);
+    auto add = [&](uint32_t s, Color c) {
+        if (!(isFinite(c))) return;  // a degenerate density: drop the sample rather than poison the pixel
+        tile.r[s] += c.x, tile.g[s] += c.y, tile.b[s] += c.z;
+    };
+    for (size_t k = 0; k < pts.count; ++k) {
+        const uint32_t r = ws.hitRay[k], s = rays.owner[r];
+        const RayHit& rh = ws.hits[r];
+        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        const int depth = rays.depth[r];
+        const Color w = rays.weight[r];
+        const Vec3 I = pts.I[k], N = pts.N[k], Nf = faceForward(N, I), wo = -I;
+        if (rays.kind[r] == kPrimary) {
+            tile.a[s] = 1.f;
+            tile.z[s] = rh.h.t;
+            tile.pixelHit[s / size_t(tile.spp)] = 1;
+        }
+        const PathBsdf b = pathBsdfOf(m, pts.textureOf(k));
+        // 1. Emission.
+        float cosE;
+        int li;
+        const Color Le = areaEmission(fr, rh, rays.d[r], cosE, li);
+        if (maxComponent(Le) > 0.f) {
+            float mis = 1.f;
+            if (ws.rayPdf[r] > 0.f) {
+                const float dist = rh.h.t * length(rays.d[r]);
+                const float pl = al.selectionProbability(size_t(li)) *
+                                 al.pdfArea(acc, size_t(li), rh.patch, rh.h.u, rh.h.v) * dist * dist / cosE;
+                mis = powerHeuristic(ws.rayPdf[r], pl);
+            }
+            add(s, w * Le * mis);
+        }
+        if (b.lobes == PathLobes::None) {
+            add(s, w * b.emission);
+            continue;
+        }
+        uint32_t pseed, index;
+        sampleCoordinates(tile, s, fr.seed, pseed, index);
+        const uint32_t base = kDimFirstFree + kPathDimsPerBounce * uint32_t(depth);
+        const Vec3 o = pts.P[k] + Nf * acc.offset;
+        auto shadowRay = [&](Vec3 L, float tmax, Color c, uint32_t light) {
+            if (!(maxComponent(c) > 0.f)) return;
+            if (!fr.lights[light].castsShadows) {
+                add(s, c);
+                return;
+            }
+            ws.shadow.push(o, L, 0.f, tmax, s, c, rh.patch, kShadow, 0, Vec2{rh.h.u, rh.h.v}, Nf,
+                           rays.time[r]);
+            ws.shadowHit.push_back(uint32_t(k));
+        };
+        // 2. Next-event estimation.
+        if (pathHasSmoothLobes(b)) {
+            for (size_t l = 0; l < fr.lights.size(); ++l) {
+                const ShadingLight& light = fr.lights[l];
+                if (light.type == LightType::Ambient || light.type == LightType::Area) continue;
+                const LightSample ls = sampleLight(light, pts.P[k]);
+                if (!ls.valid) continue;
+                Vec3 L = ls.L;
+                float tmax = ls.dist;
+                if (isPositional(light.type)) {  // aimed from the offset origin (as makeShadowRays)
+                    const Vec3 toLight = light.position - o;
+                    const float len = length(toLight);
+                    if (!(len > 0.f) || !std::isfinite(len)) continue;
+                    L = toLight / len, tmax = len - acc.offset;
+                }
+                const float cosR = dot(Nf, L);
+                if (!(cosR > 0.f)) continue;
+                shadowRay(L, tmax, w * pathBsdfEval(b, Nf, wo, L) * ls.Cl * (cosR * kPi), uint32_t(l));
+            }
+            if (!al.empty()) {
+                float uSelect = sampleDimension(pseed, index, base + 4);
+                const size_t a = al.select(uSelect);
+                const Sample2D uv = sample2D(pseed, index, base);
+                const AreaLightSample ls = al.sample(acc, a, uv.u, uv.v);
+                const Vec3 toLight = ls.p - o;
+                const float d2 = dot(toLight, toLight), d = std::sqrt(d2);
+                if (ls.pdfArea > 0.f && d > 0.f) {
+                    const Vec3 L = toLight / d;
+                    const float cosL = -dot(ls.n, L), cosR = dot(Nf, L);
+                    if (cosL > 0.f && cosR > 0.f) {
+                        const float pl = al.selectionProbability(a) * ls.pdfArea * d2 / cosL;
+                        // At the last vertex no BSDF sample follows to complete the pair: the light
+                        // takes the whole share, so a truncated path stays a clean partial sum.
+                        const float mis =
+                            depth >= fr.maxDepth ? 1.f : powerHeuristic(pl, pathBsdfPdf(b, Nf, wo, L));
+                        const Color c = w * pathBsdfEval(b, Nf, wo, L) * al.light(a).Le * (cosR * mis / pl);
+                        shadowRay(L, d - std::max(4.f * acc.offset, 1e-3f * d), c, al.light(a).sceneLight);
+                    }
+                }
+            }
+        }
+        // 3. The next bounce.
+        if (depth >= fr.maxDepth) continue;
+        const Sample2D ub = sample2D(pseed, index, base + 2);
+        const PathBsdfSample bs =
+            pathBsdfSample(b, N, I, sampleDimension(pseed, index, base + 5), ub.u, ub.v);
+        if (!bs.valid) continue;
+        Color wn = w * bs.weight;
+        if (depth + 1 >= fr.rouletteDepth) {
+            const float q = std::min(0.95f, maxComponent(wn));
+            if (!(sampleDimension(pseed, index, base + 6) < q)) continue;
+            wn = wn / q;
+        }
+        const Vec3 side = bs.transmitted ? -Nf : Nf;
+        ws.next.push(pts.P[k] + side * acc.offset, bs.wi, 0.f, std::numeric_limits<float>::infinity(), s, wn,
+                     rh.patch, bs.transmitted ? kRefraction : kReflection, uint8_t(depth + 1),
+                     Vec2{rh.h.u, rh.h.v}, side, rays.time[r]);
+        ws.nextPdf.push_back(bs.delta ? 0.f : bs.pdf);
+    }
+    ws.shadeMs += msSince(ts);
+    ws.trace.occluded(ws.shadow, ws.shadowBlocked);
+    ts = EngineClock::now();
+    for (size_t j = 0; j < ws.shadow.size(); ++j) {
+        if (!ws.shadowBlocked[j])
+            add(ws.shadow.owner[j], ws.shadow.weight[j]);
+        else
+            ws.shadowedLights[ws.shadowHit[j]] =
+                uint8_t(std::min(255, ws.shadowedLights[ws.shadowHit[j]] + 1));
+    }
+    if (tile.channels)
+        for (size_t k = 0; k < pts.count; ++k) {
+            const uint32_t r = ws.hitRay[k];
+            if (rays.kind[r] != kPrimary) continue;
+            const RayHit& rh = ws.hits[r];
+            tile.setAttributes(rays.owner[r], fr.scene.attributes[rh.patch].object,
+                               faceForward(pts.N[k], pts.I[k]), ws.shadowedLights[k],
+                               fr.scene.materials[pts.materialOf(k)].texture >= 0 &&
+                                   fr.scene.attributes[rh.patch].kind == SurfaceKind::BicubicBezier);
+        }
     ws.shadeMs += msSince(ts);
 }
 
@@ -397,6 +684,14 @@ void traceTile(const Frame& fr, const RenderSettings& settings, const Projector&
     if (settings.integrator == Integrator::AmbientOcclusion) {
         ws.trace.trace(ws.rays, ws.hits, &ws.camera);
         shadeOcclusion(fr, settings.ao, settings.seed, ws);
+    } else if (settings.integrator == Integrator::Path) {
+        ws.rayPdf.assign(ws.rays.size(), 0.f);
+        for (bool camera = true; ws.rays.size() > 0; camera = false) {
+            ws.trace.trace(ws.rays, ws.hits, camera ? &ws.camera : nullptr);
+            shadePathGeneration(fr, ws);
+            std::swap(ws.rays, ws.next);
+            std::swap(ws.rayPdf, ws.nextPdf);
+        }
     } else {
         for (bool camera = true; ws.rays.size() > 0; camera = false) {
             ws.trace.trace(ws.rays, ws.hits, camera ? &ws.camera : nullptr);
@@ -542,7 +837,19 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         settings.rayBinning && TraceService::binningPays(leavesPerSample) && acc.forest.slabCount == 0;
     const TraceServiceOptions traceOpt{settings.cullBackfaces, binning};
     const Projector& proj = frame.projector;
-    const Frame fr{scene, acc, frame.lights, std::max(0, settings.maxDepth), proj, frame.textures.get()};
+    std::vector<uint8_t> castsShadows;
+    for (const ShadingLight& l : frame.lights) castsShadows.push_back(l.castsShadows);
+    const AreaLights areaLights(scene, acc, castsShadows);
+    const Frame fr{scene,
+                   acc,
+                   frame.lights,
+                   std::max(0, settings.maxDepth),
+                   proj,
+                   frame.textures.get(),
+                   areaLights,
+                   settings.seed,
+                   settings.lightSamples,
+                   std::max(1, settings.rouletteDepth)};
 
     // Tiles of at most 64x64 pixels and about 16k samples: the wavefront's ray and candidate lists scale
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory; at 1

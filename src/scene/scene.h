@@ -28,7 +28,9 @@ struct ImageOptions {
     int blurTileSize = 0, blurPermutations = 0;
 };
 
-enum class LightType { Ambient, Distant, Point, Spot };
+// Area: RI AreaLightSource "arealight" (docs/light_transport.md): the surfaces declared after it in its
+// attribute block (PatchAttributes::areaLight) emit radiance `color` from their front side.
+enum class LightType { Ambient, Distant, Point, Spot, Area };
 
 // The shadow map Reyes renders for a light that casts shadows (--reyes-shadows map, docs/shading.md).
 // RIB: Attribute "shadow" "resolution" / "shadingrate" / "bias" / "filterwidth", taken by each
@@ -55,6 +57,9 @@ struct Light {
     // The renderer's --shadows on|off overrides it (engine/settings.h). Ambient lights never do.
     bool castsShadows = false;
     ShadowMapParams shadowMap{};
+    // Area lights: shadow rays per shading point of the direct integrator (stratified over the light's
+    // surface; RIB "samples", the CLI's --light-samples overrides). The path tracer takes one per bounce.
+    int samples = 16;
 };
 
 enum class MaterialType { Matte, Plastic, Metal, ShinyMetal, PaintedPlastic, Constant, Mirror, Glass };
@@ -163,6 +168,9 @@ struct PatchAttributes {
     float motionFactor = 0.f, focusFactor = 0.f;
     bool twoSided = true;     // Sides 2
     bool flipNormal = false;  // orientation disagrees with dPdu x dPdv
+    // The area light (index into Scene::lights) this surface is part of, emitting from its front side (the
+    // side its oriented normal faces); -1: none.
+    int32_t areaLight = -1;
 };
 
 struct Scene {

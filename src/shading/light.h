@@ -11,7 +11,8 @@
 
 namespace tessera {
 
-// Whether a light is at a position (point, spot): its shadow rays end there.
+// Whether a light is at a position (point, spot): its shadow rays end there. Area lights are sampled
+// over their surfaces by the ray tracer (rt/area_lights.h); sampleLight() gives them nothing.
 TESSERA_HD bool isPositional(LightType t) {
     return t == LightType::Point || t == LightType::Spot;
 }
@@ -71,6 +72,8 @@ TESSERA_HD LightSample sampleLight(const ShadingLight& l, Vec3 P) {
         case LightType::Ambient:
             s.Cl = l.color;
             s.valid = s.ambient = true;
+            return s;
+        case LightType::Area:  // sampled over its surfaces by the ray tracer (rt/area_lights.h)
             return s;
         case LightType::Distant:
             s.L = -l.direction;

@@ -22,6 +22,7 @@ constexpr std::array kLights = {
     LightShaderInfo{"distantlight", LightType::Distant},
     LightShaderInfo{"pointlight", LightType::Point},
     LightShaderInfo{"spotlight", LightType::Spot},
+    LightShaderInfo{"arealight", LightType::Area},
 };
 
 constexpr std::array kDisplacements = {
