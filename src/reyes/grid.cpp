@@ -248,6 +248,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             grid.NX[v] = Nf.x, grid.NY[v] = Nf.y, grid.NZ[v] = Nf.z;
         }
     }
+    if (maxComponent(shade.emission) > 0.f)
+        for (int v = 0; v < count; ++v)
+            if (dot(Ns[v], Is[v]) < 0.f) Ci[v] += shade.emission;  // the front side faces the eye
     for (int v = 0; v < count; ++v) {
         grid.R[v] = Ci[v].x;
         grid.G[v] = Ci[v].y;

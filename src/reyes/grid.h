@@ -76,6 +76,9 @@ struct ShadeInputs {
     const Textures* textures = nullptr;
     PatchTexCoords texCoords{};
     float textureScale = 1.f;
+    // Part of an area light (RI AreaLightSource): the radiance its front side emits, added to what the
+    // surface reflects. Reyes shows it but does not light with it (area lights are ray traced).
+    Color emission{0, 0, 0};
 };
 
 // Dice `piece` into a grid with about one micropolygon per shading-rate area and shade every vertex.

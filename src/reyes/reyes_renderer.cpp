@@ -45,6 +45,14 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
             break;
         }
 
+    for (const Light& l : scene.lights)
+        if (l.type == LightType::Area) {
+            result.warnings.push_back(
+                "the scene has area lights: Reyes shows their surfaces but does not light with them; "
+                "their light and soft shadows need --engine rt");
+            break;
+        }
+
     // Shadows: the caller's answers (ray-traced), else a shadow map per light that casts shadows, rendered
     // now by this pipeline from the light (once per light and frame, before the frame's buckets).
     bool shadows = false;
@@ -157,6 +165,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                 in.textures = frame.textures.get();
                 in.texCoords = texCoordsOf(scene, piece.patch);
                 in.textureScale = std::max(1.f, std::sqrt(attr.shadingRate));
+                if (attr.areaLight >= 0 && size_t(attr.areaLight) < scene.lights.size())
+                    in.emission = scene.lights[size_t(attr.areaLight)].color;
                 diceAndShade(view, piece, in, g);
                 ++tc.grids;
                 tc.micropolygons += uint64_t(g.nu) * g.nv;

@@ -949,6 +949,18 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
     s["leaves_per_sample"] = leavesPerSample;
     s["max_depth"] = fr.maxDepth;
     s["integrator"] = integratorName(settings.integrator);
+    if (!areaLights.empty()) {
+        nlohmann::json al = nlohmann::json::array();
+        for (size_t i = 0; i < areaLights.size(); ++i) {
+            const AreaLights::Light& l = areaLights.light(i);
+            al.push_back({{"light", l.sceneLight},
+                          {"surfaces", l.count},
+                          {"area", l.area},
+                          {"samples", settings.lightSamples > 0 ? settings.lightSamples : l.samples}});
+        }
+        s["area_lights"] = al;
+    }
+    if (settings.integrator == Integrator::Path) s["roulette_depth"] = fr.rouletteDepth;
     if (adaptive) {
         uint64_t pixels = 0, active = 0;
         for (const Workspace& w : workspaces) pixels += w.adaptivePixels, active += w.adaptiveActive;
