@@ -13,14 +13,6 @@
 
 namespace tessera::test {
 
-// A bilinear-flat patch o + a du + b dv, a, b in [0, 1], as a bicubic.
-inline BezierPatch planarPatch(Vec3 o, Vec3 du, Vec3 dv) {
-    BezierPatch p;
-    for (int v = 0; v < 4; ++v)
-        for (int u = 0; u < 4; ++u) p.at(u, v) = o + du * (u / 3.f) + dv * (v / 3.f);
-    return p;
-}
-
 // A planar polygon (four corners in order).
 struct Wall {
     Vec3 corner[4];

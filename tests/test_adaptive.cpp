@@ -13,14 +13,6 @@ using namespace tessera::test;
 
 namespace {
 
-// A flat parallelogram origin + s eu + t ev.
-BezierPatch flatRect(Vec3 origin, Vec3 eu, Vec3 ev) {
-    BezierPatch p;
-    for (int v = 0; v < 4; ++v)
-        for (int u = 0; u < 4; ++u) p.at(u, v) = origin + eu * (u / 3.f) + ev * (v / 3.f);
-    return p;
-}
-
 AdaptiveThresholds allThresholds(float t) {
     AdaptiveThresholds a;
     a.color = a.objectId = a.normal = a.shadow = a.texture = t;
@@ -86,8 +78,8 @@ TEST(Adaptive, AnObjectIdEdgeRefinesExactlyAlongTheEdge) {
     // the same colour on both sides, so only the object-id path (tau_poid = 0) can refine, and exactly the
     // subpixels of columns 11 (right half) and 12 (left half) whose neighbours lie across the edge.
     Scene s = cameraSpaceScene(24, 16, 40.f);
-    addPatch(s, flatRect({-50, -50, 10}, {50, 0, 0}, {0, 100, 0}), 0);
-    addPatch(s, flatRect({0, -50, 10}, {50, 0, 0}, {0, 100, 0}), 1);
+    addPatch(s, planarPatch({-50, -50, 10}, {50, 0, 0}, {0, 100, 0}), 0);
+    addPatch(s, planarPatch({0, -50, 10}, {50, 0, 0}, {0, 100, 0}), 1);
     AdaptiveThresholds t = allThresholds(1.f);
     t.objectId = 0.f;
     const RenderResult r = renderAdaptive(s, t);
@@ -113,9 +105,9 @@ TEST(Adaptive, AShadowBoundaryRefinesEvenWhereTheColoursMatch) {
     Material black = defaultMaterial(MaterialType::Matte);
     black.Kd = 0.f, black.Ks = 0.f;
     s.materials.push_back(black);
-    addPatch(s, flatRect({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}), 0);
+    addPatch(s, planarPatch({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}), 0);
     s.attributes.back().material = 1;
-    addPatch(s, flatRect({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}), 1);
+    addPatch(s, planarPatch({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}), 1);
     AdaptiveThresholds t = allThresholds(1.f);
     t.shadow = 0.f;  // only the shadow-count path refines
     const RenderResult r = renderAdaptive(s, t);
@@ -172,7 +164,7 @@ Scene twoSpheres(int w, int h) {
     s.lights.back().castsShadows = true;
     for (const BezierPatch& p : octantSphere(1.f, {-0.5f, 0.f, 6.f})) addPatch(s, p, 0);
     for (const BezierPatch& p : octantSphere(0.8f, {0.7f, 0.3f, 7.f})) addPatch(s, p, 1);
-    addPatch(s, flatRect({-10, -1, 4}, {20, 0, 0}, {0, 0, 20}), 2);  // floor y = -1
+    addPatch(s, planarPatch({-10, -1, 4}, {20, 0, 0}, {0, 0, 20}), 2);  // floor y = -1
     return s;
 }
 }  // namespace

@@ -18,13 +18,6 @@ using namespace tessera::test;
 
 namespace {
 
-BezierPatch rect(Vec3 origin, Vec3 eu, Vec3 ev) {
-    BezierPatch p;
-    for (int v = 0; v < 4; ++v)
-        for (int u = 0; u < 4; ++u) p.at(u, v) = origin + eu * (u / 3.f) + ev * (v / 3.f);
-    return p;
-}
-
 BezierPatch moved(const BezierPatch& p, Vec3 delta) {
     BezierPatch q = p;
     for (Vec3& c : q.cp) c += delta;
@@ -73,7 +66,7 @@ TEST(RtMotion, SweepingSquareCoverageIsTheTimeAverage) {
     // the integral over t of |[px, px+1] n [a(t), b(t)]|, a and b moving linearly in raster space.
     Scene s = tallSquareScene(96, 8, 16);
     const float z = 10.f;
-    addPatch(s, rect({-1.0f, -5.f, z}, {1.2f, 0, 0}, {0, 10.f, 0}));
+    addPatch(s, planarPatch({-1.0f, -5.f, z}, {1.2f, 0, 0}, {0, 10.f, 0}));
     const Vec3 delta{1.5f, 0, 0};
     addLinearMotion(s, 0, delta);
     const RenderResult r = renderFrame(s);
@@ -108,8 +101,8 @@ TEST(RtMotion, IdenticalKeysRenderTheStaticImage) {
     // ray's time), and the image is bit-identical to the scene without keys.
     Scene s = cameraSpaceScene(64, 48, 40.f);
     s.camera.shutterOpen = 0.f, s.camera.shutterClose = 1.f;
-    addPatch(s, rect({-1.f, -1.f, 8.f}, {2.f, 0, 0.5f}, {0, 2.f, 0.3f}));
-    addPatch(s, rect({-6.f, -6.f, 12.f}, {12.f, 0, 0}, {0, 12.f, 0}));
+    addPatch(s, planarPatch({-1.f, -1.f, 8.f}, {2.f, 0, 0.5f}, {0, 2.f, 0.3f}));
+    addPatch(s, planarPatch({-6.f, -6.f, 12.f}, {12.f, 0, 0}, {0, 12.f, 0}));
     const RenderResult still = renderFrame(s);
     Scene keyed = s;
     addLinearMotion(keyed, 0, {0, 0, 0});
@@ -129,7 +122,7 @@ TEST(RtMotion, LensBlursAnEdgeByTheCircleOfConfusion) {
         s.camera.focalDistance = 5.f;
         s.camera.focalLength = 0.8f;
         s.camera.fStop = 1.f;  // lens radius 0.4
-        addPatch(s, rect({-0.3f * z / 10.f, -5.f, z}, {10.f, 0, 0}, {0, 10.f, 0}));
+        addPatch(s, planarPatch({-0.3f * z / 10.f, -5.f, z}, {10.f, 0, 0}, {0, 10.f, 0}));
         const RenderResult r = renderFrame(s);
         const Projector pr(s.camera);
         const double c = pr.circleOfConfusion(z), e = pr.toRaster({-0.3f * z / 10.f, 0, z}).x;
@@ -178,9 +171,9 @@ TEST(RtMotion, ShadowOfAMovingOccluderIsTheOccludedShutterFraction) {
     s.lights.clear();
     s.lights.push_back({LightType::Point, {36, 36, 36}, {0, 3, 4}, {0, 0, 0}});
     s.lights.back().castsShadows = true;
-    addPatch(s, rect({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}));
+    addPatch(s, planarPatch({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}));
     const RenderResult bare = renderFrame(s);
-    addPatch(s, rect({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}));
+    addPatch(s, planarPatch({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}));
     addLinearMotion(s, 1, {1.5f, 0, 0});
     const RenderResult r = renderFrame(s);
     const Projector pr(s.camera);
@@ -263,8 +256,8 @@ TEST(RtMotion, StaticPathsAreUnchanged) {
     // --no-blur on a scene with a lens and moving patches renders the pinhole, shutter-open image, bit for
     // bit the image of the same scene without lens and keys; so does a scene whose shutter is closed.
     Scene s = cameraSpaceScene(80, 60, 40.f);
-    addPatch(s, rect({-1.f, -1.f, 8.f}, {2.f, 0, 0.5f}, {0, 2.f, 0.3f}));
-    addPatch(s, rect({-6.f, -6.f, 12.f}, {12.f, 0, 0}, {0, 12.f, 0}));
+    addPatch(s, planarPatch({-1.f, -1.f, 8.f}, {2.f, 0, 0.5f}, {0, 2.f, 0.3f}));
+    addPatch(s, planarPatch({-6.f, -6.f, 12.f}, {12.f, 0, 0}, {0, 12.f, 0}));
     const RenderResult plain = renderFrame(s);
     Scene blurred = s;
     blurred.camera.shutterOpen = 0.f, blurred.camera.shutterClose = 1.f;

@@ -21,14 +21,6 @@ using namespace tessera::test;
 
 namespace {
 
-// A bilinear rectangle origin + s eu + t ev as a bicubic patch.
-BezierPatch flatRect(Vec3 origin, Vec3 eu, Vec3 ev) {
-    BezierPatch p;
-    for (int v = 0; v < 4; ++v)
-        for (int u = 0; u < 4; ++u) p.at(u, v) = origin + eu * (u / 3.f) + ev * (v / 3.f);
-    return p;
-}
-
 // Matte floor z = 10 facing the camera, a unit square occluder at z = 8 and a point light at (2, 0, 4),
 // no ambient light: the shadow is the square projected from the light onto the floor, scaled by
 // (10 - 4) / (8 - 4): x in [-1.75, -0.25], y in [-0.75, 0.75] (as RtShadow.SquareShadowMatches...).
@@ -36,8 +28,8 @@ Scene squareOverFloor(bool castsShadows) {
     Scene s = cameraSpaceScene(100, 100, 40.f);
     s.lights = {{LightType::Point, {36, 36, 36}, {2, 0, 4}, {0, 0, 0}}};
     s.lights[0].castsShadows = castsShadows;
-    addPatch(s, flatRect({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}));
-    addPatch(s, flatRect({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}));
+    addPatch(s, planarPatch({-20, -20, 10}, {40, 0, 0}, {0, 40, 0}));
+    addPatch(s, planarPatch({-0.5f, -0.5f, 8}, {1, 0, 0}, {0, 1, 0}));
     return s;
 }
 
@@ -309,7 +301,7 @@ TEST(ShadowMaps, ASpheresShadowOnTheFloorMatchesTheAnalyticProjectionWithinTheFi
         const Vec3 L = normalize(Vec3{0.4f, 1.f, 0.25f}), centre{0, 2, 0};
         s.lights = {distantLight(L)};
         s.lights[0].shadowMap.filterWidth = filterWidth;
-        addPatch(s, flatRect({-4, 0, -4}, {8, 0, 0}, {0, 0, 8}));
+        addPatch(s, planarPatch({-4, 0, -4}, {8, 0, 0}, {0, 0, 8}));
         for (const BezierPatch& p : octantSphere(1.f, centre)) addPatch(s, p);
         const ShadowMaps maps = mapsOf(s);
         const ShadowMapLookup* m = maps.lookup(0);
@@ -423,8 +415,8 @@ TEST(ShadowMaps, APlateLeaningOnTheFloorLeaksNoMoreLightThanItsBiasLifts) {
             s.lights = {distantLight(L)};
             const float defaultBias = s.lights[0].shadowMap.bias;
             s.lights[0].shadowMap.bias *= biasScale;
-            addPatch(s, flatRect({-3, 0, -3}, {0, 0, 6}, {6, 0, 0}));
-            addPatch(s, flatRect({0, 0, -0.5f}, {0, 0, 1}, {std::cos(a), std::sin(a), 0}));
+            addPatch(s, planarPatch({-3, 0, -3}, {0, 0, 6}, {6, 0, 0}));
+            addPatch(s, planarPatch({0, 0, -0.5f}, {0, 0, 1}, {std::cos(a), std::sin(a), 0}));
             const ShadowMaps maps = mapsOf(s);
             const float texel = orthoTexel(*maps.lookup(0));
             const ShadowMapParams& sm = s.lights[0].shadowMap;
@@ -483,7 +475,7 @@ Scene sphereOverFloor(const Light& light) {
     s.image.pixelSamplesX = s.image.pixelSamplesY = 4;
     s.materials.push_back(defaultMaterial(MaterialType::Matte));
     s.lights = {{LightType::Ambient, {0.1f, 0.1f, 0.1f}, {}, {}}, light};
-    addPatch(s, flatRect({-4, 0, -4}, {8, 0, 0}, {0, 0, 8}));
+    addPatch(s, planarPatch({-4, 0, -4}, {8, 0, 0}, {0, 0, 8}));
     for (const BezierPatch& p : octantSphere(1.f, {0, 1.5f, 0})) addPatch(s, p);
     return s;
 }

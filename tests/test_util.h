@@ -49,6 +49,15 @@ inline void addPatch(Scene& s, const BezierPatch& p, uint32_t object = 0) {
     s.objectCount = std::max(s.objectCount, object + 1);
 }
 
+// A flat parallelogram origin + s eu + t ev, s, t in [0, 1], as a bicubic patch (dP/du x dP/dv along
+// eu x ev).
+inline BezierPatch planarPatch(Vec3 origin, Vec3 eu, Vec3 ev) {
+    BezierPatch p;
+    for (int v = 0; v < 4; ++v)
+        for (int u = 0; u < 4; ++u) p.at(u, v) = origin + eu * (u / 3.f) + ev * (v / 3.f);
+    return p;
+}
+
 // A flat square in the plane z = depth, centred on the view axis, side `side`.
 inline BezierPatch flatSquare(float side, float depth, float cx = 0, float cy = 0) {
     BezierPatch p;
