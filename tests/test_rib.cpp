@@ -649,10 +649,12 @@ TEST(RibShaderTables, EveryLightRowSetsTheFieldItNames) {
     for (const rib::LightShader& shader : rib::lightShaders()) {
         for (size_t k = 0; k < shader.params.size(); ++k) {
             const rib::ShaderParam<rib::LightShaderParams>& row = shader.params[k];
-            const double v = 0.3 + 0.125 * double(k);
+            // "samples" (area lights) is a count of at least 1.
+            const double v = std::string(row.name) == "samples" ? 8.0 + double(k) : 0.3 + 0.125 * double(k);
             SCOPED_TRACE(std::string(shader.name) + " " + row.name);
-            Loaded l = load(scene("", std::string("LightSource \"") + shader.name + "\" 1 \"" + row.name +
-                                          "\" " + ribValue(row.type, v)));
+            const char* request = shader.type == LightType::Area ? "AreaLightSource \"" : "LightSource \"";
+            Loaded l = load(scene("", std::string(request) + shader.name + "\" 1 \"" + row.name + "\" " +
+                                          ribValue(row.type, v)));
             EXPECT_EQ(countWarnings(l.warnings, std::string("\"") + row.name + "\""), 0);
             rib::LightShaderParams expected;
             setField(row, v, expected);
@@ -663,6 +665,7 @@ TEST(RibShaderTables, EveryLightRowSetsTheFieldItNames) {
             EXPECT_EQ(got.color, expected.lightcolor * expected.intensity);
             EXPECT_EQ(got.from, expected.from);
             EXPECT_EQ(got.to, expected.to);
+            EXPECT_EQ(got.samples, int(expected.samples));
         }
     }
 }

@@ -51,8 +51,8 @@ TEST(Shading, PlasticFollowsTheRenderManSpecularConvention) {
     const Color got = shadeOne(m, N, I, lights);
     // RI plastic: Cs * (Ka ambient + Kd N.L Cl) + specularcolor * Ks * Cl * (N.H)^(1/(roughness/8)).
     const float spec = std::pow(std::cos(a / 2), 8.f / m.roughness);
-    const Color want = m.Cs * (amb.color * m.Ka + Color{1, 1, 1} * (m.Kd * std::cos(a))) +
-                       m.specularColor * (m.Ks * spec);
+    const Color want =
+        m.Cs * (amb.color * m.Ka + Color{1, 1, 1} * (m.Kd * std::cos(a))) + m.specularColor * (m.Ks * spec);
     EXPECT_NEAR(got.x, want.x, 1e-5f);
     EXPECT_NEAR(got.y, want.y, 1e-5f);
     EXPECT_NEAR(got.z, want.z, 1e-5f);
@@ -66,7 +66,7 @@ TEST(Shading, MatteAndMetalAndConstant) {
     Material matte = defaultMaterial(MaterialType::Matte);
     matte.Cs = {1, 0.5f, 0.25f};
     EXPECT_NEAR(shadeOne(matte, N, I, lights).y, 0.25f, 1e-6f);  // Kd N.L Cl Cs = 1 * 1 * 0.5 * 0.5
-    Material metal = defaultMaterial(MaterialType::Metal);  // L = V = N: H = N, lobe = 1
+    Material metal = defaultMaterial(MaterialType::Metal);       // L = V = N: H = N, lobe = 1
     EXPECT_NEAR(shadeOne(metal, N, I, lights).x, 0.5f, 1e-6f);
     Material c = defaultMaterial(MaterialType::Constant);
     c.Cs = {0.1f, 0.2f, 0.3f};
@@ -142,16 +142,18 @@ TEST(Shading, GlassSplitsTheWeightByFresnel) {
     EXPECT_NEAR(lobes[1].direction.z, 1.f, 1e-6f);
     // From inside beyond the critical angle: total internal reflection only.
     const float a = 60.f * float(M_PI) / 180.f;  // sin 60 * 1.5 > 1
-    const int tir = tracedLobes(g, Vec3{std::sin(a), 0, std::cos(a)}, Vec3{0, 0, 1}, Color{1, 1, 1}, 1e-4f, lobes);
+    const int tir =
+        tracedLobes(g, Vec3{std::sin(a), 0, std::cos(a)}, Vec3{0, 0, 1}, Color{1, 1, 1}, 1e-4f, lobes);
     ASSERT_EQ(tir, 1);
     EXPECT_NEAR(lobes[0].weight.x, 1.f, 1e-6f);
     // Snell's law for a refracted lobe at 30 degrees from outside.
     const float b = 30.f * float(M_PI) / 180.f;
-    ASSERT_EQ(tracedLobes(g, Vec3{std::sin(b), 0, std::cos(b)}, Vec3{0, 0, -1}, Color{1, 1, 1}, 0.f, lobes), 2);
+    ASSERT_EQ(tracedLobes(g, Vec3{std::sin(b), 0, std::cos(b)}, Vec3{0, 0, -1}, Color{1, 1, 1}, 0.f, lobes),
+              2);
     EXPECT_NEAR(lobes[1].direction.x, std::sin(b) / g.eta, 1e-5f);
     // Opaque surfaces have no traced lobes.
-    EXPECT_EQ(tracedLobes(defaultMaterial(MaterialType::Plastic), Vec3{0, 0, 1}, Vec3{0, 0, -1}, Color{1, 1, 1},
-                          0.f, lobes),
+    EXPECT_EQ(tracedLobes(defaultMaterial(MaterialType::Plastic), Vec3{0, 0, 1}, Vec3{0, 0, -1},
+                          Color{1, 1, 1}, 0.f, lobes),
               0);
 }
 
@@ -169,7 +171,8 @@ TEST(ShaderRegistry, EveryEntryRoundTrips) {
         EXPECT_EQ(defaultLight(l.type).type, l.type);
     }
     EXPECT_EQ(findSurfaceShader("wood2"), nullptr);
-    EXPECT_EQ(findLightShader("arealight"), nullptr);
+    EXPECT_EQ(findLightShader("glowlight"), nullptr);
+    EXPECT_EQ(findLightShader("arealight")->type, LightType::Area);
 }
 
 // ---- the same radiance in both engines -------------------------------------------------------------------
