@@ -66,7 +66,8 @@ Raw readRaw(const std::string& path) {
     for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it) {
         std::vector<uint32_t>& v = r.channels[it.name()];
         v.assign(size_t(r.width) * r.height, 0xffffffffu);
-        fb.insert(it.name(), Imf::Slice(it.channel().type, reinterpret_cast<char*>(v.data()), 4, 4 * size_t(r.width)));
+        fb.insert(it.name(),
+                  Imf::Slice(it.channel().type, reinterpret_cast<char*>(v.data()), 4, 4 * size_t(r.width)));
     }
     file.setFrameBuffer(fb);
     file.readPixels(data.min.y, data.max.y);
@@ -87,7 +88,8 @@ TEST(Tiles, CropWindowFollowsTheRiRoundingRule) {
     // Windows that share an edge at any fraction share no pixel and miss none.
     for (int res : {7, 64, 101})
         for (double cut : {0.1, 0.3333333, 0.5, 0.77}) {
-            const Rect a = cropWindowPixels(res, res, 0, cut, 0, 1), b = cropWindowPixels(res, res, cut, 1, 0, 1);
+            const Rect a = cropWindowPixels(res, res, 0, cut, 0, 1),
+                       b = cropWindowPixels(res, res, cut, 1, 0, 1);
             EXPECT_EQ(a.x0, 0);
             EXPECT_EQ(a.x1, b.x0) << res << " " << cut;
             EXPECT_EQ(b.x1, res);
@@ -130,9 +132,10 @@ TEST(Tiles, AssembledTilesEqualTheSingleRenderBitForBitInBothEngines) {
         std::string tiles;
         const int n = 6;  // 3 x 2 tiles of 21-22 x 24 pixels: uneven widths
         for (int i = 0; i < n; ++i) {
-            const std::string t = (dir / (std::string(engine) + "_tile" + std::to_string(i) + ".exr")).string();
-            ASSERT_EQ(runTessera("render " + common + " --tile " + std::to_string(i) + "/" + std::to_string(n) +
-                                     " -o " + t,
+            const std::string t =
+                (dir / (std::string(engine) + "_tile" + std::to_string(i) + ".exr")).string();
+            ASSERT_EQ(runTessera("render " + common + " --tile " + std::to_string(i) + "/" +
+                                     std::to_string(n) + " -o " + t,
                                  &out),
                       0)
                 << out;
@@ -211,6 +214,22 @@ TEST(Tiles, ACropEqualsTheSamePixelsOfTheFullRender) {
     EXPECT_EQ(img.height, 19);
 }
 
+TEST(Tiles, LocalFarmScriptEqualsTheSingleRender) {
+    // scripts/render_tiles.sh: N tiles in parallel (xargs -P), then assemble.
+    const std::string rib = writeScene("scene.rib");
+    const fs::path dir = test::testScratchDir();
+    const std::string full = (dir / "full.exr").string(), farm = (dir / "farm.exr").string();
+    std::string out;
+    ASSERT_EQ(runTessera("render " + rib + " -q --threads 1 --engine rt -o " + full, &out), 0) << out;
+    const std::string script = std::string(TESSERA_SOURCE_DIR) + "/scripts/render_tiles.sh";
+    const int status = std::system(("TESSERA='" + std::string(TESSERA_BINARY) + "' TESSERA_JOBS=2 " + script +
+                                    " " + rib + " 4 " + farm + " --engine rt > /dev/null 2>&1")
+                                       .c_str());
+    ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0);
+    const Raw a = readRaw(full), b = readRaw(farm);
+    for (const auto& [name, values] : a.channels) EXPECT_EQ(values, b.channels.at(name)) << name;
+}
+
 TEST(Tiles, AssembleAndTheOptionsRefuseBadInput) {
     const std::string rib = writeScene("scene.rib"), other = writeScene("other.rib", "Exposure 2 1\n");
     const fs::path dir = test::testScratchDir();
@@ -224,9 +243,9 @@ TEST(Tiles, AssembleAndTheOptionsRefuseBadInput) {
             << out;
         return path;
     };
-    const std::string t0 = tile(rib, 0, 4, "t0.exr"), t1 = tile(rib, 1, 4, "t1.exr"), t2 = tile(rib, 2, 4, "t2.exr"),
-                      t3 = tile(rib, 3, 4, "t3.exr"), x3 = tile(other, 3, 4, "x3.exr"),
-                      h1 = tile(rib, 1, 2, "h1.exr");
+    const std::string t0 = tile(rib, 0, 4, "t0.exr"), t1 = tile(rib, 1, 4, "t1.exr"),
+                      t2 = tile(rib, 2, 4, "t2.exr"), t3 = tile(rib, 3, 4, "t3.exr"),
+                      x3 = tile(other, 3, 4, "x3.exr"), h1 = tile(rib, 1, 2, "h1.exr");
     const std::string joined = (dir / "joined.exr").string();
     const std::pair<std::string, std::string> mistakes[] = {
         {t0 + " " + t1 + " " + t2, "tile 3 of 4 is missing"},
@@ -242,7 +261,8 @@ TEST(Tiles, AssembleAndTheOptionsRefuseBadInput) {
         EXPECT_NE(out.find(message), std::string::npos) << args << ": " << out;
     }
     EXPECT_FALSE(fs::exists(joined));
-    EXPECT_EQ(runTessera("assemble " + t0 + " " + t1 + " " + t2 + " " + t3 + " -o " + joined, &out), 0) << out;
+    EXPECT_EQ(runTessera("assemble " + t0 + " " + t1 + " " + t2 + " " + t3 + " -o " + joined, &out), 0)
+        << out;
     EXPECT_TRUE(fs::exists(joined));
     // Options: each a clear message and exit 2, no image written.
     const std::string never = (dir / "never.exr").string();

@@ -400,14 +400,15 @@ int runRender(const RenderArgs& a) {
         if (!crop) fail(fmt::format("error: --crop '{}' is not XMIN,XMAX,YMIN,YMAX (four numbers)", a.crop));
         const std::vector<double>& c = *crop;
         if (!(c[0] >= 0 && c[1] <= 1 && c[2] >= 0 && c[3] <= 1 && c[0] < c[1] && c[2] < c[3]))
-            fail(fmt::format("error: --crop '{}': needs 0 <= xmin < xmax <= 1 and 0 <= ymin < ymax <= 1 (NDC)",
-                             a.crop));
+            fail(fmt::format(
+                "error: --crop '{}': needs 0 <= xmin < xmax <= 1 and 0 <= ymin < ymax <= 1 (NDC)", a.crop));
     }
     std::optional<std::pair<int, int>> tile;
     if (!a.tile.empty()) {
         tile = parseTile(a.tile);
         if (!tile)
-            fail(fmt::format("error: --tile '{}' is not I/N with 0 <= I < N (tile I of an N-tile split)", a.tile));
+            fail(fmt::format("error: --tile '{}' is not I/N with 0 <= I < N (tile I of an N-tile split)",
+                             a.tile));
         if (a.adaptive) fail("error: --tile and --adaptive cannot be combined yet");
     }
     int resW = 0, resH = 0;
@@ -487,11 +488,13 @@ int runRender(const RenderArgs& a) {
     RenderSettings settings;
     {
         const double* cw = crop ? crop->data() : scene.image.cropWindow;
-        const Rect region = cropWindowPixels(scene.camera.width, scene.camera.height, cw[0], cw[1], cw[2], cw[3]);
+        const Rect region =
+            cropWindowPixels(scene.camera.width, scene.camera.height, cw[0], cw[1], cw[2], cw[3]);
         if (region.width() <= 0 || region.height() <= 0)
-            fail(fmt::format("{}: error: the crop window [{:g}, {:g}] x [{:g}, {:g}] holds no pixel of the {}x{} "
-                             "image",
-                             a.scene, cw[0], cw[1], cw[2], cw[3], scene.camera.width, scene.camera.height));
+            fail(fmt::format(
+                "{}: error: the crop window [{:g}, {:g}] x [{:g}, {:g}] holds no pixel of the {}x{} "
+                "image",
+                a.scene, cw[0], cw[1], cw[2], cw[3], scene.camera.width, scene.camera.height));
         settings.view.region = region;
         if (tile) {
             int cols, rows;
@@ -503,7 +506,8 @@ int runRender(const RenderArgs& a) {
     }
     const bool partial = settings.view.region.width() != scene.camera.width ||
                          settings.view.region.height() != scene.camera.height || tile;
-    if (a.adaptive && partial) fail("error: --adaptive renders whole images only (no --crop, --tile or CropWindow)");
+    if (a.adaptive && partial)
+        fail("error: --adaptive renders whole images only (no --crop, --tile or CropWindow)");
     settings.engine = a.engine;
     settings.threads = a.threads;
     settings.seed = a.seed;
@@ -679,7 +683,8 @@ int runConvert(const std::string& in, const std::string& out, const std::string&
 }
 
 int runAssemble(const std::vector<std::string>& tiles, const std::string& out) {
-    if (fs::path(out).extension() != ".exr") fail(fmt::format("{}: error: assemble writes OpenEXR: name it .exr", out));
+    if (fs::path(out).extension() != ".exr")
+        fail(fmt::format("{}: error: assemble writes OpenEXR: name it .exr", out));
     for (const std::string& t : tiles)
         if (!fs::exists(t)) fail(fmt::format("{}: error: no such tile file", t));
     checkWritableOrFail(out, "assembled image");
@@ -932,7 +937,8 @@ int main(int argc, char** argv) {
     std::vector<std::string> assembleTiles;
     std::string assembleOut;
     CLI::App* assemble = app.add_subcommand(
-        "assemble", "Join the .exr tiles of one render (--tile I/N) into one image, checking they belong together");
+        "assemble",
+        "Join the .exr tiles of one render (--tile I/N) into one image, checking they belong together");
     assemble->add_option("tiles", assembleTiles, "Tile images (.exr)")->required();
     assemble->add_option("-o,--output", assembleOut, "Output .exr")->required();
     std::string convertIn, convertOut, convertFormat = "auto", convertUp;

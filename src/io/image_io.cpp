@@ -18,8 +18,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <memory>
 #include <map>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 
@@ -192,10 +192,11 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
             for (const ImagePlane& plane : image.planes) {
                 if (plane.integer) {
                     header.channels().insert(plane.name, Imf::Channel(Imf::UINT));
-                    fb.insert(plane.name,
-                              Imf::Slice(Imf::UINT,
-                                         reinterpret_cast<char*>(const_cast<uint32_t*>(plane.ids.data() - origin)),
-                                         sizeof(uint32_t), sizeof(uint32_t) * w));
+                    fb.insert(
+                        plane.name,
+                        Imf::Slice(Imf::UINT,
+                                   reinterpret_cast<char*>(const_cast<uint32_t*>(plane.ids.data() - origin)),
+                                   sizeof(uint32_t), sizeof(uint32_t) * w));
                     continue;
                 }
                 const size_t comp = size_t(plane.components), stride = sizeof(float) * comp;
@@ -209,11 +210,11 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
                             name += std::to_string(c);
                     }
                     header.channels().insert(name, Imf::Channel(Imf::FLOAT));
-                    fb.insert(name,
-                              Imf::Slice(Imf::FLOAT,
-                                         reinterpret_cast<char*>(const_cast<float*>(plane.values.data() + c)) -
-                                             origin * ptrdiff_t(stride),
-                                         stride, stride * w));
+                    fb.insert(name, Imf::Slice(
+                                        Imf::FLOAT,
+                                        reinterpret_cast<char*>(const_cast<float*>(plane.values.data() + c)) -
+                                            origin * ptrdiff_t(stride),
+                                        stride, stride * w));
                 }
             }
             Imf::OutputFile file(tmp.c_str(), header);
@@ -280,9 +281,12 @@ ExrInfo infoOf(const Imf::Header& h) {
         c += pixelTypeName(it.channel().type);
         info.channels.push_back(c);
     }
-    if (const auto* a = h.findTypedAttribute<Imf::StringAttribute>("tesseraSceneHash")) info.sceneHash = a->value();
-    if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>("tesseraTileIndex")) info.tileIndex = a->value();
-    if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>("tesseraTileCount")) info.tileCount = a->value();
+    if (const auto* a = h.findTypedAttribute<Imf::StringAttribute>("tesseraSceneHash"))
+        info.sceneHash = a->value();
+    if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>("tesseraTileIndex"))
+        info.tileIndex = a->value();
+    if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>("tesseraTileCount"))
+        info.tileCount = a->value();
     return info;
 }
 
@@ -320,33 +324,37 @@ void assembleExrTiles(const std::vector<std::string>& tiles, const std::string& 
         if (t.sceneHash != first.sceneHash)
             throw InputError(f, 0,
                              "assemble: tile of another render (scene hash " +
-                                 (t.sceneHash.empty() ? std::string("missing") : t.sceneHash) + ", " + tiles[0] +
-                                 " has " + first.sceneHash + ")");
-        if (t.displayX0 != first.displayX0 || t.displayY0 != first.displayY0 || t.displayX1 != first.displayX1 ||
-            t.displayY1 != first.displayY1)
-            throw InputError(f, 0, "assemble: display window " +
-                                       windowText(t.displayX0, t.displayY0, t.displayX1, t.displayY1) +
-                                       " differs from " + tiles[0] + "'s " +
-                                       windowText(first.displayX0, first.displayY0, first.displayX1,
-                                                  first.displayY1));
+                                 (t.sceneHash.empty() ? std::string("missing") : t.sceneHash) + ", " +
+                                 tiles[0] + " has " + first.sceneHash + ")");
+        if (t.displayX0 != first.displayX0 || t.displayY0 != first.displayY0 ||
+            t.displayX1 != first.displayX1 || t.displayY1 != first.displayY1)
+            throw InputError(
+                f, 0,
+                "assemble: display window " + windowText(t.displayX0, t.displayY0, t.displayX1, t.displayY1) +
+                    " differs from " + tiles[0] + "'s " +
+                    windowText(first.displayX0, first.displayY0, first.displayX1, first.displayY1));
         if (t.channels != first.channels)
             throw InputError(f, 0, "assemble: its channels differ from " + tiles[0] + "'s");
         if ((t.tileCount > 0 ? t.tileCount : 1) != n)
-            throw InputError(f, 0, "assemble: tile of a " + std::to_string(std::max(1, t.tileCount)) +
-                                       "-tile split, " + tiles[0] + " is of a " + std::to_string(n) +
-                                       "-tile split");
+            throw InputError(f, 0,
+                             "assemble: tile of a " + std::to_string(std::max(1, t.tileCount)) +
+                                 "-tile split, " + tiles[0] + " is of a " + std::to_string(n) +
+                                 "-tile split");
         if (t.tileIndex < 0 || t.tileIndex >= n)
-            throw InputError(f, 0, "assemble: tile index " + std::to_string(t.tileIndex) + " outside 0.." +
-                                       std::to_string(n - 1));
+            throw InputError(f, 0,
+                             "assemble: tile index " + std::to_string(t.tileIndex) + " outside 0.." +
+                                 std::to_string(n - 1));
         if (seen[size_t(t.tileIndex)] >= 0)
-            throw InputError(f, 0, "assemble: tile " + std::to_string(t.tileIndex) + " given twice (also " +
-                                       tiles[size_t(seen[size_t(t.tileIndex)])] + ")");
+            throw InputError(f, 0,
+                             "assemble: tile " + std::to_string(t.tileIndex) + " given twice (also " +
+                                 tiles[size_t(seen[size_t(t.tileIndex)])] + ")");
         seen[size_t(t.tileIndex)] = int(i);
     }
     for (int k = 0; k < n; ++k)
         if (seen[size_t(k)] < 0)
-            throw InputError(output, 0, "assemble: tile " + std::to_string(k) + " of " + std::to_string(n) +
-                                            " is missing");
+            throw InputError(
+                output, 0,
+                "assemble: tile " + std::to_string(k) + " of " + std::to_string(n) + " is missing");
     // 2. Geometry: no two data windows overlap, and together they fill their bounding box (the crop
     // window the split covered, or the display window).
     int64_t area = 0;
@@ -359,17 +367,17 @@ void assembleExrTiles(const std::vector<std::string>& tiles, const std::string& 
         for (size_t j = 0; j < i; ++j) {
             const ExrInfo& b = infos[j];
             if (a.dataX0 <= b.dataX1 && b.dataX0 <= a.dataX1 && a.dataY0 <= b.dataY1 && b.dataY0 <= a.dataY1)
-                throw InputError(tiles[i], 0, "assemble: its pixels " +
-                                                  windowText(a.dataX0, a.dataY0, a.dataX1, a.dataY1) +
-                                                  " overlap " + tiles[j] + "'s " +
-                                                  windowText(b.dataX0, b.dataY0, b.dataX1, b.dataY1));
+                throw InputError(tiles[i], 0,
+                                 "assemble: its pixels " +
+                                     windowText(a.dataX0, a.dataY0, a.dataX1, a.dataY1) + " overlap " +
+                                     tiles[j] + "'s " + windowText(b.dataX0, b.dataY0, b.dataX1, b.dataY1));
         }
     }
     const int64_t boxArea = int64_t(box.max.x - box.min.x + 1) * (box.max.y - box.min.y + 1);
     if (area != boxArea)
-        throw InputError(output, 0, "assemble: the tiles leave " + std::to_string(boxArea - area) +
-                                        " pixels of " + windowText(box.min.x, box.min.y, box.max.x, box.max.y) +
-                                        " uncovered");
+        throw InputError(output, 0,
+                         "assemble: the tiles leave " + std::to_string(boxArea - area) + " pixels of " +
+                             windowText(box.min.x, box.min.y, box.max.x, box.max.y) + " uncovered");
     // 3. Pixels: every channel copied in its stored type (half stays half), so the result equals a single
     // render bit for bit.
     const int W = box.max.x - box.min.x + 1, H = box.max.y - box.min.y + 1;
