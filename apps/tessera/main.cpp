@@ -352,6 +352,7 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
                     a.subpatchDepth, a.maxGridEdge, a.cullBackfaces, a.shutter, a.dof, a.noBlur,
                     a.blurSampling, a.blurTile, a.blurPermutations, a.adaptive, a.adaptiveThreshold, a.format,
                     a.up));
+    mix(std::to_string(a.lightSamples));
     return fmt::format("{:016x}", h);
 }
 
