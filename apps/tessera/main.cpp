@@ -17,6 +17,7 @@
 #include <optional>
 #include <vector>
 
+#include "film/crop.h"
 #include "io/diagnostics.h"
 #include "io/image_io.h"
 #include "io/rib_writer.h"
@@ -79,6 +80,8 @@ struct RenderArgs {
     double adaptiveThreshold = 0;
     bool adaptiveThresholdGiven = false;
     std::string adaptiveMap;
+    // Crop windows and farm tiles (docs/inputs.md): --crop xmin,xmax,ymin,ymax in NDC, --tile I/N.
+    std::string crop, tile;
 };
 
 // The comma-separated parts of a list ("a,,b" has an empty middle part).
@@ -321,6 +324,38 @@ void writeAdaptiveMap(const std::string& path, const RenderResult& result) {
     writeImage(path, map, OutputEncoding{});
 }
 
+// --tile I/N: tile I (0-based) of an N-tile split; nullopt if the text is not that.
+std::optional<std::pair<int, int>> parseTile(const std::string& text) {
+    int index = -1, count = 0;
+    char slash = 0, extra = 0;
+    if (std::sscanf(text.c_str(), "%d%c%d%c", &index, &slash, &count, &extra) != 3 || slash != '/')
+        return std::nullopt;
+    if (count < 1 || index < 0 || index >= count) return std::nullopt;
+    return std::make_pair(index, count);
+}
+
+// What `tessera assemble` checks tiles by: FNV-1a (64 bit) over the scene file's bytes and every option
+// that changes pixels (not --crop/--tile, -o, --threads, --bucket-size, --stats or the progress flags).
+// Files the scene reads (ReadArchive, textures) are not hashed: keep them unchanged while a farm renders.
+std::string sceneHash(const RenderArgs& a, const Scene& scene) {
+    uint64_t h = 1469598103934665603ull;
+    auto mix = [&h](const std::string& bytes) {
+        for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
+        h = (h ^ 0xff) * 1099511628211ull;  // separator
+    };
+    std::ifstream f(a.scene, std::ios::binary);
+    mix(std::string(std::istreambuf_iterator<char>(f), {}));
+    mix(fmt::format("{}|{}x{}|{}x{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}|{}",
+                    a.engine, scene.camera.width, scene.camera.height, scene.image.pixelSamplesX,
+                    scene.image.pixelSamplesY, a.shadingRate, a.seed, a.sampler, a.shadows, a.reyesShadows,
+                    a.integrator, a.aoSamples, a.aoDistance, a.aoWeighting, a.aovs, a.maxDepth,
+                    a.subpatchDepth, a.maxGridEdge, a.cullBackfaces, a.shutter, a.dof, a.noBlur,
+                    a.blurSampling, a.blurTile, a.blurPermutations, a.adaptive, a.adaptiveThreshold, a.format,
+                    a.up));
+    mix(std::to_string(a.lightSamples));
+    return fmt::format("{:016x}", h);
+}
+
 int runRender(const RenderArgs& a) {
     // Mistakes first, before anything is loaded: options, then the files the render will write.
     if (a.spp < 0 || a.spp > kMaxSpp) fail(fmt::format("error: --spp must be between 1 and {}", kMaxSpp));
@@ -359,6 +394,23 @@ int runRender(const RenderArgs& a) {
                 fs::weakly_canonical(a.adaptiveMap, ec) == fs::weakly_canonical(a.output, ec))
                 fail(fmt::format("{}: error: --adaptive-map and -o name the same file", a.adaptiveMap));
         }
+    }
+    std::optional<std::vector<double>> crop;
+    if (!a.crop.empty()) {
+        crop = parseNumberList(a.crop, 4);
+        if (!crop) fail(fmt::format("error: --crop '{}' is not XMIN,XMAX,YMIN,YMAX (four numbers)", a.crop));
+        const std::vector<double>& c = *crop;
+        if (!(c[0] >= 0 && c[1] <= 1 && c[2] >= 0 && c[3] <= 1 && c[0] < c[1] && c[2] < c[3]))
+            fail(fmt::format(
+                "error: --crop '{}': needs 0 <= xmin < xmax <= 1 and 0 <= ymin < ymax <= 1 (NDC)", a.crop));
+    }
+    std::optional<std::pair<int, int>> tile;
+    if (!a.tile.empty()) {
+        tile = parseTile(a.tile);
+        if (!tile)
+            fail(fmt::format("error: --tile '{}' is not I/N with 0 <= I < N (tile I of an N-tile split)",
+                             a.tile));
+        if (a.adaptive) fail("error: --tile and --adaptive cannot be combined yet");
     }
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
@@ -433,7 +485,30 @@ int runRender(const RenderArgs& a) {
     if (!aovs->names.empty() && fs::path(output).extension() != ".exr")
         fail(fmt::format("error: --aov needs an OpenEXR output (-o NAME.exr): '{}' holds RGBA only", output));
 
+    // The film region: the crop window (--crop, else the RIB's CropWindow), then the tile of it.
     RenderSettings settings;
+    {
+        const double* cw = crop ? crop->data() : scene.image.cropWindow;
+        const Rect region =
+            cropWindowPixels(scene.camera.width, scene.camera.height, cw[0], cw[1], cw[2], cw[3]);
+        if (region.width() <= 0 || region.height() <= 0)
+            fail(fmt::format(
+                "{}: error: the crop window [{:g}, {:g}] x [{:g}, {:g}] holds no pixel of the {}x{} "
+                "image",
+                a.scene, cw[0], cw[1], cw[2], cw[3], scene.camera.width, scene.camera.height));
+        settings.view.region = region;
+        if (tile) {
+            int cols, rows;
+            if (!tileGrid(region.width(), region.height(), tile->second, cols, rows))
+                fail(fmt::format("{}: error: --tile {}: {} tiles do not fit a {}x{} region", a.scene, a.tile,
+                                 tile->second, region.width(), region.height()));
+            settings.view.region = tileOf(region, tile->first, tile->second);
+        }
+    }
+    const bool partial = settings.view.region.width() != scene.camera.width ||
+                         settings.view.region.height() != scene.camera.height || tile;
+    if (a.adaptive && partial)
+        fail("error: --adaptive renders whole images only (no --crop, --tile or CropWindow)");
     settings.engine = a.engine;
     settings.threads = a.threads;
     settings.seed = a.seed;
@@ -542,7 +617,13 @@ int runRender(const RenderArgs& a) {
     std::string statsTmp;
     try {
         if (!a.stats.empty()) statsTmp = writeTemporary(a.stats, s.dump(2) + "\n");
-        const ExrMetadata meta = exrMetadata(scene.camera, renderMs);
+        ExrMetadata meta = exrMetadata(scene.camera, renderMs);
+        meta.displayWidth = scene.camera.width, meta.displayHeight = scene.camera.height;
+        if (partial) {  // what `tessera assemble` checks
+            meta.sceneHash = sceneHash(a, scene);
+            meta.tileIndex = tile ? tile->first : 0;
+            meta.tileCount = tile ? tile->second : 1;
+        }
         OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput,
                            &meta};
         writeImage(output, result.image, enc);
@@ -599,6 +680,17 @@ int runConvert(const std::string& in, const std::string& out, const std::string&
     }
     fmt::print(stderr, "{}: {} patches{} written\n", out, scene.patches.size() - scene.quadrics.size(),
                scene.quadrics.empty() ? "" : fmt::format(" and {} quadrics", scene.quadrics.size()));
+    return 0;
+}
+
+int runAssemble(const std::vector<std::string>& tiles, const std::string& out) {
+    if (fs::path(out).extension() != ".exr")
+        fail(fmt::format("{}: error: assemble writes OpenEXR: name it .exr", out));
+    for (const std::string& t : tiles)
+        if (!fs::exists(t)) fail(fmt::format("{}: error: no such tile file", t));
+    checkWritableOrFail(out, "assembled image");
+    assembleExrTiles(tiles, out);  // InputError: exit 2 (main)
+    fmt::print(stderr, "{}: {} tiles assembled\n", out, tiles.size());
     return 0;
 }
 
@@ -697,7 +789,7 @@ size_t editDistance(const std::string& a, const std::string& b) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    const std::vector<std::string> commands = {"render", "info", "convert"};
+    const std::vector<std::string> commands = {"render", "info", "convert", "assemble"};
     // A first word that is not an option must be a command; name it when it is not one of ours.
     if (argc > 1 && argv[1][0] != '-' &&
         std::find(commands.begin(), commands.end(), std::string(argv[1])) == commands.end()) {
@@ -705,7 +797,7 @@ int main(int argc, char** argv) {
         for (const std::string& c : commands)
             if (editDistance(word, c) <= 2) hint = fmt::format(" (did you mean '{}'?)", c);
         fmt::print(stderr,
-                   "error: unknown command '{}'{}; the commands are render, info and convert (see "
+                   "error: unknown command '{}'{}; the commands are render, info, convert and assemble (see "
                    "tessera --help)\n",
                    word, hint);
         return 2;
@@ -828,6 +920,12 @@ int main(int argc, char** argv) {
             "Interleaved sampling: permutations P, 1..4096 (default: the RIB's \"blurpermutations\", "
             "else 64)")
         ->check(intRange(1, 4096));
+    render->add_option("--crop", ra.crop,
+                       "Render only the crop window XMIN,XMAX,YMIN,YMAX in NDC (0..1 from the top left; RI "
+                       "CropWindow, which it overrides); an .exr keeps the full display window");
+    render->add_option("--tile", ra.tile,
+                       "Render tile I (0-based) of an N-tile split I/N of the image (or crop window) into "
+                       "near-square tiles; join them with tessera assemble");
     render->add_flag("--progress", ra.progressLines,
                      "Print 'progress N%' on stderr, one line per whole percent (for logs and render farms)");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");
@@ -837,6 +935,13 @@ int main(int argc, char** argv) {
     info->add_option("--format", infoFormat, formatHelp)
         ->check(CLI::IsMember({"auto", "rib", "bpt", "obj", "micropolis"}, CLI::ignore_case));
     info->add_option("--up", infoUp, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
+    std::vector<std::string> assembleTiles;
+    std::string assembleOut;
+    CLI::App* assemble = app.add_subcommand(
+        "assemble",
+        "Join the .exr tiles of one render (--tile I/N) into one image, checking they belong together");
+    assemble->add_option("tiles", assembleTiles, "Tile images (.exr)")->required();
+    assemble->add_option("-o,--output", assembleOut, "Output .exr")->required();
     std::string convertIn, convertOut, convertFormat = "auto", convertUp;
     CLI::App* convert = app.add_subcommand("convert", "Write any supported input as a RIB of Bezier patches");
     convert->add_option("input", convertIn, sceneHelp)->required();
@@ -859,6 +964,7 @@ int main(int argc, char** argv) {
         }
         if (*info) return runInfo(infoPath, infoFormat, infoUp);
         if (*convert) return runConvert(convertIn, convertOut, convertFormat, convertUp);
+        if (*assemble) return runAssemble(assembleTiles, assembleOut);
     } catch (const InputError& e) {
         fail(e.what());
     } catch (const std::exception& e) {  // not the input's fault: out of memory, a failing disk, ...

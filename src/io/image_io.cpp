@@ -4,6 +4,8 @@
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
+#include <ImfInputFile.h>
+#include <ImfIntAttribute.h>
 #include <ImfMatrixAttribute.h>
 #include <ImfOutputFile.h>
 #include <ImfRgbaFile.h>
@@ -16,8 +18,12 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
+#include <optional>
 #include <stdexcept>
+
+#include "io/diagnostics.h"
 
 namespace tessera {
 namespace fs = std::filesystem;
@@ -138,9 +144,25 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
     writeAtomically(path, [&](const std::string& tmp) {
         try {
             const int w = image.width, h = image.height;
-            Imf::Header header(w, h);
+            // The data window is the image's raster rectangle; the display window the full image it
+            // belongs to (a crop window or farm tile lies inside it; OpenEXR's convention).
+            const Imath::Box2i dataWindow(Imath::V2i(image.x0, image.y0),
+                                          Imath::V2i(image.x0 + w - 1, image.y0 + h - 1));
+            Imath::Box2i displayWindow = dataWindow;
+            if (meta && meta->displayWidth > 0 && meta->displayHeight > 0)
+                displayWindow = Imath::Box2i(Imath::V2i(0, 0),
+                                             Imath::V2i(meta->displayWidth - 1, meta->displayHeight - 1));
+            else if (image.x0 != 0 || image.y0 != 0)
+                displayWindow = Imath::Box2i(Imath::V2i(0, 0), dataWindow.max);
+            Imf::Header header(displayWindow, dataWindow);
             header.compression() = Imf::ZIP_COMPRESSION;
             if (meta) {
+                if (!meta->sceneHash.empty())
+                    header.insert("tesseraSceneHash", Imf::StringAttribute(meta->sceneHash));
+                if (meta->tileCount > 0) {
+                    header.insert("tesseraTileIndex", Imf::IntAttribute(meta->tileIndex));
+                    header.insert("tesseraTileCount", Imf::IntAttribute(meta->tileCount));
+                }
                 if (!meta->software.empty()) header.insert("software", Imf::StringAttribute(meta->software));
                 if (meta->hasCamera) {
                     Imf::addWorldToCamera(header, toImath(meta->worldToCamera));
@@ -159,7 +181,9 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
                 }
             Imf::FrameBuffer fb;
             const size_t rgbaStride = sizeof(Imf::Rgba), rowStride = rgbaStride * size_t(w);
-            char* base = reinterpret_cast<char*>(&px[0][0]);
+            // OpenEXR addresses a slice by absolute pixel coordinates: shift the bases by the data window.
+            const ptrdiff_t origin = ptrdiff_t(image.y0) * w + image.x0;
+            char* base = reinterpret_cast<char*>(&px[0][0]) - origin * ptrdiff_t(rgbaStride);
             const char* names[4] = {"R", "G", "B", "A"};
             for (int c = 0; c < 4; ++c) {
                 header.channels().insert(names[c], Imf::Channel(Imf::HALF));
@@ -168,10 +192,11 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
             for (const ImagePlane& plane : image.planes) {
                 if (plane.integer) {
                     header.channels().insert(plane.name, Imf::Channel(Imf::UINT));
-                    fb.insert(plane.name,
-                              Imf::Slice(Imf::UINT,
-                                         reinterpret_cast<char*>(const_cast<uint32_t*>(plane.ids.data())),
-                                         sizeof(uint32_t), sizeof(uint32_t) * w));
+                    fb.insert(
+                        plane.name,
+                        Imf::Slice(Imf::UINT,
+                                   reinterpret_cast<char*>(const_cast<uint32_t*>(plane.ids.data() - origin)),
+                                   sizeof(uint32_t), sizeof(uint32_t) * w));
                     continue;
                 }
                 const size_t comp = size_t(plane.components), stride = sizeof(float) * comp;
@@ -185,10 +210,11 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
                             name += std::to_string(c);
                     }
                     header.channels().insert(name, Imf::Channel(Imf::FLOAT));
-                    fb.insert(name,
-                              Imf::Slice(Imf::FLOAT,
-                                         reinterpret_cast<char*>(const_cast<float*>(plane.values.data() + c)),
-                                         stride, stride * w));
+                    fb.insert(name, Imf::Slice(
+                                        Imf::FLOAT,
+                                        reinterpret_cast<char*>(const_cast<float*>(plane.values.data() + c)) -
+                                            origin * ptrdiff_t(stride),
+                                        stride, stride * w));
                 }
             }
             Imf::OutputFile file(tmp.c_str(), header);
@@ -221,15 +247,182 @@ Image readExr(const std::string& path) {
     file.setFrameBuffer(&px[0][0] - dw.min.x - dw.min.y * w, 1, w);
     file.readPixels(dw.min.y, dw.max.y);
     Image out(w, h);
+    out.x0 = dw.min.x, out.y0 = dw.min.y;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
-            float* p = out.pixel(x, y);
+            float* p = &out.rgba[(size_t(y) * w + x) * 4];
             p[0] = px[y][x].r;
             p[1] = px[y][x].g;
             p[2] = px[y][x].b;
             p[3] = px[y][x].a;
         }
     return out;
+}
+
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+const char* pixelTypeName(Imf::PixelType t) {
+    return t == Imf::HALF ? "half" : t == Imf::UINT ? "uint" : "float";
+}
+
+ExrInfo infoOf(const Imf::Header& h) {
+    ExrInfo info;
+    const Imath::Box2i& disp = h.displayWindow();
+    const Imath::Box2i& data = h.dataWindow();
+    info.displayX0 = disp.min.x, info.displayY0 = disp.min.y, info.displayX1 = disp.max.x,
+    info.displayY1 = disp.max.y;
+    info.dataX0 = data.min.x, info.dataY0 = data.min.y, info.dataX1 = data.max.x, info.dataY1 = data.max.y;
+    for (auto it = h.channels().begin(); it != h.channels().end(); ++it) {
+        std::string c = it.name();
+        c += ':';
+        c += pixelTypeName(it.channel().type);
+        info.channels.push_back(c);
+    }
+    if (const auto* a = h.findTypedAttribute<Imf::StringAttribute>("tesseraSceneHash"))
+        info.sceneHash = a->value();
+    if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>("tesseraTileIndex"))
+        info.tileIndex = a->value();
+    if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>("tesseraTileCount"))
+        info.tileCount = a->value();
+    return info;
+}
+
+std::string windowText(int x0, int y0, int x1, int y1) {
+    return "(" + std::to_string(x0) + "," + std::to_string(y0) + ")-(" + std::to_string(x1) + "," +
+           std::to_string(y1) + ")";
+}
+
+}  // namespace
+
+ExrInfo readExrInfo(const std::string& path) {
+    try {
+        Imf::InputFile file(path.c_str());
+        return infoOf(file.header());
+    } catch (const std::exception& e) {
+        throw InputError(path, 0, std::string("cannot read as OpenEXR: ") + e.what());
+    }
+}
+
+void assembleExrTiles(const std::vector<std::string>& tiles, const std::string& output) {
+    if (tiles.empty()) throw InputError(output, 0, "assemble: no tiles given");
+    // 1. Headers: every tile must come from the same render (hash, display window, channels, split).
+    std::vector<ExrInfo> infos;
+    for (const std::string& t : tiles) infos.push_back(readExrInfo(t));
+    const ExrInfo& first = infos[0];
+    if (first.sceneHash.empty())
+        throw InputError(tiles[0], 0,
+                         "assemble: not a tessera tile (no tesseraSceneHash attribute; render it with --tile "
+                         "I/N or --crop)");
+    const int n = first.tileCount > 0 ? first.tileCount : 1;
+    std::vector<int> seen(size_t(n), -1);
+    for (size_t i = 0; i < tiles.size(); ++i) {
+        const ExrInfo& t = infos[i];
+        const std::string& f = tiles[i];
+        if (t.sceneHash != first.sceneHash)
+            throw InputError(f, 0,
+                             "assemble: tile of another render (scene hash " +
+                                 (t.sceneHash.empty() ? std::string("missing") : t.sceneHash) + ", " +
+                                 tiles[0] + " has " + first.sceneHash + ")");
+        if (t.displayX0 != first.displayX0 || t.displayY0 != first.displayY0 ||
+            t.displayX1 != first.displayX1 || t.displayY1 != first.displayY1)
+            throw InputError(
+                f, 0,
+                "assemble: display window " + windowText(t.displayX0, t.displayY0, t.displayX1, t.displayY1) +
+                    " differs from " + tiles[0] + "'s " +
+                    windowText(first.displayX0, first.displayY0, first.displayX1, first.displayY1));
+        if (t.channels != first.channels)
+            throw InputError(f, 0, "assemble: its channels differ from " + tiles[0] + "'s");
+        if ((t.tileCount > 0 ? t.tileCount : 1) != n)
+            throw InputError(f, 0,
+                             "assemble: tile of a " + std::to_string(std::max(1, t.tileCount)) +
+                                 "-tile split, " + tiles[0] + " is of a " + std::to_string(n) +
+                                 "-tile split");
+        if (t.tileIndex < 0 || t.tileIndex >= n)
+            throw InputError(f, 0,
+                             "assemble: tile index " + std::to_string(t.tileIndex) + " outside 0.." +
+                                 std::to_string(n - 1));
+        if (seen[size_t(t.tileIndex)] >= 0)
+            throw InputError(f, 0,
+                             "assemble: tile " + std::to_string(t.tileIndex) + " given twice (also " +
+                                 tiles[size_t(seen[size_t(t.tileIndex)])] + ")");
+        seen[size_t(t.tileIndex)] = int(i);
+    }
+    for (int k = 0; k < n; ++k)
+        if (seen[size_t(k)] < 0)
+            throw InputError(
+                output, 0,
+                "assemble: tile " + std::to_string(k) + " of " + std::to_string(n) + " is missing");
+    // 2. Geometry: no two data windows overlap, and together they fill their bounding box (the crop
+    // window the split covered, or the display window).
+    int64_t area = 0;
+    Imath::Box2i box;
+    for (size_t i = 0; i < infos.size(); ++i) {
+        const ExrInfo& a = infos[i];
+        box.extendBy(Imath::V2i(a.dataX0, a.dataY0));
+        box.extendBy(Imath::V2i(a.dataX1, a.dataY1));
+        area += int64_t(a.dataX1 - a.dataX0 + 1) * (a.dataY1 - a.dataY0 + 1);
+        for (size_t j = 0; j < i; ++j) {
+            const ExrInfo& b = infos[j];
+            if (a.dataX0 <= b.dataX1 && b.dataX0 <= a.dataX1 && a.dataY0 <= b.dataY1 && b.dataY0 <= a.dataY1)
+                throw InputError(tiles[i], 0,
+                                 "assemble: its pixels " +
+                                     windowText(a.dataX0, a.dataY0, a.dataX1, a.dataY1) + " overlap " +
+                                     tiles[j] + "'s " + windowText(b.dataX0, b.dataY0, b.dataX1, b.dataY1));
+        }
+    }
+    const int64_t boxArea = int64_t(box.max.x - box.min.x + 1) * (box.max.y - box.min.y + 1);
+    if (area != boxArea)
+        throw InputError(output, 0,
+                         "assemble: the tiles leave " + std::to_string(boxArea - area) + " pixels of " +
+                             windowText(box.min.x, box.min.y, box.max.x, box.max.y) + " uncovered");
+    // 3. Pixels: every channel copied in its stored type (half stays half), so the result equals a single
+    // render bit for bit.
+    const int W = box.max.x - box.min.x + 1, H = box.max.y - box.min.y + 1;
+    std::vector<std::pair<std::string, Imf::PixelType>> channels;
+    {
+        Imf::InputFile file(tiles[0].c_str());
+        for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it)
+            channels.emplace_back(it.name(), it.channel().type);
+    }
+    std::vector<std::vector<char>> planes;  // one per channel, W x H of 4 bytes (half uses 2 of them)
+    planes.reserve(channels.size());
+    for (size_t c = 0; c < channels.size(); ++c) planes.emplace_back(size_t(W) * H * 4);
+    auto frameBuffer = [&](Imf::FrameBuffer& fb) {
+        const ptrdiff_t origin = ptrdiff_t(box.min.y) * W + box.min.x;
+        for (size_t c = 0; c < channels.size(); ++c)
+            fb.insert(channels[c].first,
+                      Imf::Slice(channels[c].second, planes[c].data() - origin * 4, 4, size_t(W) * 4));
+    };
+    std::optional<Imf::Header> header;
+    for (const std::string& t : tiles) {
+        try {
+            Imf::InputFile file(t.c_str());
+            if (!header) header = file.header();
+            Imf::FrameBuffer fb;
+            frameBuffer(fb);
+            file.setFrameBuffer(fb);
+            file.readPixels(file.header().dataWindow().min.y, file.header().dataWindow().max.y);
+        } catch (const std::exception& e) {
+            throw InputError(t, 0, std::string("assemble: cannot read its pixels: ") + e.what());
+        }
+    }
+    header->dataWindow() = box;
+    header->erase("tesseraTileIndex");
+    header->erase("tesseraTileCount");
+    writeAtomically(output, [&](const std::string& tmp) {
+        try {
+            Imf::OutputFile file(tmp.c_str(), *header);
+            Imf::FrameBuffer fb;
+            frameBuffer(fb);
+            file.setFrameBuffer(fb);
+            file.writePixels(H);
+        } catch (const std::exception& e) {
+            throw std::runtime_error(output + ": EXR write failed: " + e.what());
+        }
+    });
 }
 
 }  // namespace tessera

@@ -4,6 +4,7 @@
 // render never leaves a partial file and never clobbers a good one.
 #pragma once
 #include <string>
+#include <vector>
 
 #include "core/transform.h"
 #include "film/film.h"
@@ -17,6 +18,12 @@ struct ExrMetadata {
     Mat4 worldToCamera, worldToNDC;  // column vectors (our convention); written transposed for Imath
     std::string software;
     double renderMs = -1;  // < 0: not written
+    // Crop windows and farm tiles (docs/inputs.md): the full image the pixels belong to (the EXR display
+    // window; 0: the image itself), and what `tessera assemble` checks tiles by: a hash of the scene and
+    // the options that change pixels, and the tile's place in its split (count 0: not a tile).
+    int displayWidth = 0, displayHeight = 0;
+    std::string sceneHash;
+    int tileIndex = 0, tileCount = 0;
 };
 
 struct OutputEncoding {
@@ -36,6 +43,22 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
 // EXR returns the stored (premultiplied, linear) RGBA.
 Image readPng(const std::string& path);
 Image readExr(const std::string& path);
+
+// What an EXR header says about the image (tests and `tessera assemble`): the display and data windows
+// (inclusive corners, as OpenEXR stores them), the channels in the file's order and the tile attributes.
+struct ExrInfo {
+    int displayX0 = 0, displayY0 = 0, displayX1 = -1, displayY1 = -1;
+    int dataX0 = 0, dataY0 = 0, dataX1 = -1, dataY1 = -1;
+    std::vector<std::string> channels;  // "name:type" (type half, float, uint)
+    std::string sceneHash;              // "" when the file has none
+    int tileIndex = 0, tileCount = 0;
+};
+ExrInfo readExrInfo(const std::string& path);
+
+// `tessera assemble`: joins the EXR tiles of one render into `output`, after checking that they belong
+// together (same scene hash, display window and channels; every tile of the split present once; no
+// overlap). Throws InputError naming the offending file; the output is written only when all is well.
+void assembleExrTiles(const std::vector<std::string>& tiles, const std::string& output);
 
 // True if the extension is one writeImage understands (.png, .exr).
 bool isSupportedImageExtension(const std::string& path);

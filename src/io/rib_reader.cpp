@@ -225,6 +225,16 @@ class RibReader {
         if (!(a > 0)) diag_.fail(r.line, "FrameAspectRatio must be positive");
         scene_.camera.frameAspect = float(a);
     }
+    // CropWindow xmin xmax ymin ymax (RI spec 3.2, sec. 4.1.1): render only this part of the image, given
+    // in NDC (0..1 from the top-left corner); the pixels are chosen by film/crop.h.
+    void cropWindow(const Request& r, const Arguments& args) {
+        auto v = args.numbers(4, "xmin xmax ymin ymax");
+        for (double x : v)
+            if (!(x >= 0 && x <= 1)) diag_.fail(r.line, "CropWindow: the limits must lie in [0, 1]");
+        if (!(v[0] < v[1]) || !(v[2] < v[3]))
+            diag_.fail(r.line, "CropWindow: needs xmin < xmax and ymin < ymax");
+        for (int i = 0; i < 4; ++i) scene_.image.cropWindow[i] = v[i];
+    }
     void screenWindow(const Request& r, const Arguments& args) {
         auto v = args.numbers(4, "left right bottom top");
         if (v[0] == v[1] || v[2] == v[3]) diag_.fail(r.line, "ScreenWindow has zero width or height");
@@ -1147,6 +1157,7 @@ class RibReader {
             {"TransformEnd", &RibReader::transformEnd},
             {"Format", &RibReader::format},
             {"FrameAspectRatio", &RibReader::frameAspectRatio},
+            {"CropWindow", &RibReader::cropWindow},
             {"ScreenWindow", &RibReader::screenWindow},
             {"Clipping", &RibReader::clipping},
             {"Projection", &RibReader::projection},

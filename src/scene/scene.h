@@ -22,6 +22,9 @@ struct ImageOptions {
     float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
     bool srgbOutput = false;                        // used for scenes without a RIB (.bpt)
     std::string displayName;                        // RIB Display name ("" if none)
+    // RIB CropWindow xmin xmax ymin ymax in NDC (RI default 0 1 0 1: the whole image); film/crop.h maps it
+    // to pixels by the RI 3.2 rounding rule.
+    double cropWindow[4] = {0, 1, 0, 1};
     // RIB Hider "hidden" "string blursampling" (simple, interleaved, bbox; "" = the renderer's default)
     // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
     std::string blurSampling;
