@@ -22,6 +22,7 @@ struct ImageOptions {
     float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
     bool srgbOutput = false;                        // used for scenes without a RIB (.bpt)
     std::string displayName;                        // RIB Display name ("" if none)
+    std::string displayType;  // RIB Display type: "file", "zfile"/"shadow" (a depth map), ... ("" if none)
     // RIB Hider "hidden" "string blursampling" (simple, interleaved, bbox; "" = the renderer's default)
     // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
     std::string blurSampling;
