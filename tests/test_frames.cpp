@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -11,6 +13,7 @@
 #include "io/diagnostics.h"
 #include "io/image_io.h"
 #include "io/rib_reader.h"
+#include "shading/light.h"
 
 namespace fs = std::filesystem;
 using namespace tessera;
@@ -219,4 +222,36 @@ TEST(Frames, MakeShadowOfAMissingFileOrNotADepthMapIsAnInputError) {
         EXPECT_NE(std::string(e.what()).find("not a depth map"), std::string::npos) << e.what();
     }
     EXPECT_FALSE(fs::exists(dir / "plane.shad"));
+}
+
+// RI spec 3.2, appendix A, spotlight: Cl = intensity * lightcolor / (L.L) * cosangle^beamdistribution *
+// smoothstep(cos(coneangle), cos(coneangle - conedeltaangle), cosangle), evaluated here in double from
+// the formula, through the RIB reader's LightSource "spotlight" parameters.
+TEST(Frames, SpotlightConeFalloffFollowsTheRiFormula) {
+    const fs::path rib = writeFile(framesDir() / "spot.rib",
+                                   "Format 8 8 1\nWorldBegin\nLightSource \"spotlight\" 1 \"intensity\" 3 "
+                                   "\"from\" [0 0 0] \"to\" [0 0 1] "
+                                   "\"coneangle\" 0.5 \"conedeltaangle\" 0.2 \"beamdistribution\" 3\n"
+                                   "Patch \"bilinear\" \"P\" [-1 -1 2 1 -1 2 -1 1 2 1 1 2]\nWorldEnd\n");
+    Scene scene;
+    readRibFrame(rib.string(), 0, scene, kQuiet);
+    ASSERT_EQ(scene.lights.size(), 1u);
+    const ShadingLight light = prepareLight(scene.lights[0], Mat4::identity());
+    auto smooth = [](double e0, double e1, double x) {
+        const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+        return t * t * (3 - 2 * t);
+    };
+    int inside = 0, band = 0;
+    for (double angle = 0; angle < 0.6; angle += 0.01) {
+        const double r = 2.5;
+        const Vec3 P{float(r * std::sin(angle)), 0.f, float(r * std::cos(angle))};
+        const LightSample s = sampleLight(light, P);
+        const double c = std::cos(angle);
+        const double expected = 3.0 / (r * r) * std::pow(c, 3.0) * smooth(std::cos(0.5), std::cos(0.3), c);
+        EXPECT_NEAR(s.valid ? s.Cl.x : 0.f, expected, 2e-4 * 3.0 / (r * r)) << "angle " << angle;
+        inside += expected > 0;
+        band += expected > 0 && angle > 0.3;
+    }
+    EXPECT_GT(inside, 40);  // the cone and the smoothstep band are both sampled
+    EXPECT_GT(band, 10);
 }
