@@ -626,7 +626,7 @@ int runRender(const RenderArgs& a) {
     if (rib) try {
             frames = ribFrames(a.scene);
         } catch (const InputError&) {
-            // reported by loadOrFail
+            return renderFrame(a, std::nullopt);  // loadOrFail reports the unreadable file
         }
     if (a.frames.empty() && frames.size() <= 1) return renderFrame(a, std::nullopt);
     if (!rib) fail(fmt::format("{}: error: --frames picks frames of a multi-frame RIB file", a.scene));
