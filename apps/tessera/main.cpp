@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -20,6 +21,7 @@
 #include "film/crop.h"
 #include "io/diagnostics.h"
 #include "io/image_io.h"
+#include "io/rib_reader.h"
 #include "io/rib_writer.h"
 #include "io/scene_loader.h"
 #include "progress.h"
@@ -75,6 +77,7 @@ struct RenderArgs {
     int aoSamples = 64;
     double aoDistance = 0;  // 0: unlimited
     std::string aovs;       // --aov z,N,id,...
+    std::string frames;     // --frames N or A-B: RIB frame numbers (docs/inputs.md, multi-frame RIB)
     // Selective and adaptive supersampling (docs/adaptive.md).
     bool adaptive = false;
     double adaptiveThreshold = 0;
@@ -220,11 +223,18 @@ std::string writeTemporary(const std::string& path, const std::string& text) {
 }
 
 Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatName = "auto",
-                 std::optional<UpAxis> up = std::nullopt) {
+                 std::optional<UpAxis> up = std::nullopt, std::optional<int> ribFrameOrdinal = std::nullopt) {
     std::optional<SceneFormat> format = parseSceneFormat(formatName);
     if (!format)
         fail(fmt::format("error: unknown --format '{}' (auto, rib, bpt, obj, micropolis)", formatName));
     try {
+        if (ribFrameOrdinal) {
+            Scene scene;
+            readRibFrame(path, *ribFrameOrdinal, scene, [quiet](const std::string& w) {
+                if (!quiet) fmt::print(stderr, "{}\n", w);
+            });
+            return scene;
+        }
         return loadScene(
             path,
             [quiet](const std::string& w) {
@@ -236,6 +246,20 @@ Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatN
     } catch (const std::exception& e) {
         fail(path + ": error: " + e.what());
     }
+}
+
+// The depth plane of a render as a depth map (Display "zfile" / "shadow") seen from its camera.
+DepthMap depthMapOf(const Image& image, const ExrMetadata& camera, const std::string& kind) {
+    DepthMap map;
+    map.width = image.width;
+    map.height = image.height;
+    const ImagePlane* z = image.plane("z");
+    if (!z) throw std::runtime_error("the engine made no depth plane for the depth map");
+    map.depth = z->values;
+    map.worldToCamera = camera.worldToCamera;
+    map.worldToNDC = camera.worldToNDC;
+    map.kind = kind;
+    return map;
 }
 
 // Default output name: the RIB Display name (with a .png/.exr extension), else SCENE's stem + .png.
@@ -356,7 +380,7 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
     return fmt::format("{:016x}", h);
 }
 
-int runRender(const RenderArgs& a) {
+int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     // Mistakes first, before anything is loaded: options, then the files the render will write.
     if (a.spp < 0 || a.spp > kMaxSpp) fail(fmt::format("error: --spp must be between 1 and {}", kMaxSpp));
     if (a.threads < 0) fail("error: --threads must be >= 0 (0 = all cores)");
@@ -451,7 +475,7 @@ int runRender(const RenderArgs& a) {
 
     // Ctrl-C from here on: stop cleanly (no output written) and exit 130.
     std::signal(SIGINT, onSigint);
-    Scene scene = loadOrFail(a.scene, a.quiet, a.format, parseUp(a.up));
+    Scene scene = loadOrFail(a.scene, a.quiet, a.format, parseUp(a.up), ribFrameOrdinal);
     if (gCancel.load()) {
         fmt::print(stderr, "interrupted while loading {}: no image written\n", a.scene);
         return 130;
@@ -477,12 +501,18 @@ int runRender(const RenderArgs& a) {
         scene.camera.focalDistance = float((*dof)[2]);
     }
 
+    // Display "zfile" / "shadow" (RI spec 3.2, sec. 4.1.4): the frame writes a depth map, under the Display
+    // name as given (any extension), not an image.
+    const bool depthDisplay = scene.image.displayType == "zfile" || scene.image.displayType == "shadow";
     std::string output = a.output;
     if (output.empty()) {  // named by the scene: checked now, still before the render
-        output = defaultOutput(scene, a.scene);
+        output = depthDisplay ? scene.image.displayName : defaultOutput(scene, a.scene);
         checkWritableOrFail(output, "image");
     }
-    if (!aovs->names.empty() && fs::path(output).extension() != ".exr")
+    if (depthDisplay && !a.output.empty() && fs::path(output).extension() != ".exr")
+        fail(fmt::format("{}: error: this frame's Display \"{}\" writes a depth map (OpenEXR): name it .exr",
+                         output, scene.image.displayType));
+    if (!aovs->names.empty() && (depthDisplay || fs::path(output).extension() != ".exr"))
         fail(fmt::format("error: --aov needs an OpenEXR output (-o NAME.exr): '{}' holds RGBA only", output));
 
     // The film region: the crop window (--crop, else the RIB's CropWindow), then the tile of it.
@@ -530,7 +560,7 @@ int runRender(const RenderArgs& a) {
     settings.ao.paperWeighting = a.aoWeighting == "paper";
     settings.adaptive.enabled = a.adaptive;
     if (a.adaptiveThresholdGiven) settings.adaptive.thresholds.color = float(a.adaptiveThreshold);
-    settings.output.channels = aovs->channels;
+    settings.output.channels = aovs->channels | (depthDisplay ? kChannelDepth : 0u);
     settings.output.aovs = aovs->planes;
     settings.shadows = a.shadows == "on"    ? ShadowOverride::On
                        : a.shadows == "off" ? ShadowOverride::Off
@@ -626,7 +656,10 @@ int runRender(const RenderArgs& a) {
         }
         OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput,
                            &meta};
-        writeImage(output, result.image, enc);
+        if (depthDisplay)
+            writeDepthMap(output, depthMapOf(result.image, meta, scene.image.displayType));
+        else
+            writeImage(output, result.image, enc);
         if (!a.adaptiveMap.empty()) writeAdaptiveMap(a.adaptiveMap, result);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);
     } catch (const std::exception& e) {
@@ -644,6 +677,78 @@ int runRender(const RenderArgs& a) {
                 stderr, "  patches {} (culled {}), splits {}, grids {}, micropolygons {}, sample tests {}\n",
                 s.value("patches_in", 0), s.value("patches_culled", 0), s.value("splits", 0),
                 s.value("grids", 0), s.value("micropolygons", 0), s.value("sample_tests", uint64_t(0)));
+    }
+    return 0;
+}
+
+// "N" or "A-B" (A <= B): the frame numbers; nullopt if malformed.
+std::optional<std::pair<int, int>> parseFrameRange(const std::string& text) {
+    int first = 0, last = 0;
+    char dash = 0, extra = 0;
+    const int n = std::sscanf(text.c_str(), "%d%c%d%c", &first, &dash, &last, &extra);
+    if (n == 1) return std::pair{first, first};
+    if (n == 3 && dash == '-' && first <= last) return std::pair{first, last};
+    return std::nullopt;
+}
+
+// Multi-frame RIB (RI spec 3.2, sec. 4.1.1): every frame, or those --frames picks, rendered in file order,
+// each read afresh (the options outside frames before it, then its own) and written to its own Display
+// name. A frame number the file lacks is an input error once the frames before it are written.
+int runRender(const RenderArgs& a) {
+    std::optional<SceneFormat> format = parseSceneFormat(a.format);
+    bool rib = false;
+    try {
+        rib = format && (*format == SceneFormat::Rib ||
+                         (*format == SceneFormat::Auto && detectSceneFormat(a.scene) == SceneFormat::Rib));
+    } catch (const InputError&) {
+        // reported by loadOrFail
+    }
+    std::vector<RibFrame> frames;
+    if (rib) try {
+            frames = ribFrames(a.scene);
+        } catch (const InputError&) {
+            return renderFrame(a, std::nullopt);  // loadOrFail reports the unreadable file
+        }
+    if (a.frames.empty() && frames.size() <= 1) return renderFrame(a, std::nullopt);
+    if (!rib) fail(fmt::format("{}: error: --frames picks frames of a multi-frame RIB file", a.scene));
+    std::optional<std::pair<int, int>> range = parseFrameRange(a.frames);
+    if (!a.frames.empty() && !range)
+        fail(fmt::format("error: --frames '{}' is not N or A-B (frame numbers, A <= B)", a.frames));
+    if (frames.empty())
+        fail(fmt::format("{}: error: --frames {}: the file has no FrameBegin blocks", a.scene, a.frames));
+    // The frames to render, by position in the file; a wanted number missing is remembered.
+    std::vector<int> ordinals;
+    std::optional<int> missing;
+    if (!range) {
+        for (size_t i = 0; i < frames.size(); ++i) ordinals.push_back(int(i));
+    } else {
+        for (int n = range->first; n <= range->second && !missing; ++n) {
+            const size_t before = ordinals.size();
+            for (size_t i = 0; i < frames.size(); ++i)
+                if (frames[i].number == n) ordinals.push_back(int(i));
+            if (ordinals.size() == before) missing = n;
+        }
+        std::sort(ordinals.begin(), ordinals.end());  // file order, as RI renders them
+    }
+    if (ordinals.size() > 1 && (!a.output.empty() || !a.stats.empty()))
+        fail(fmt::format(
+            "error: -o and --stats name one file: with {} frames each frame writes its own Display name "
+            "(pick one with --frames N)",
+            ordinals.size()));
+    for (int ordinal : ordinals) {
+        if (!a.quiet)
+            fmt::print(stderr, "frame {} (line {})\n", frames[size_t(ordinal)].number,
+                       frames[size_t(ordinal)].line);
+        if (const int rc = renderFrame(a, ordinal); rc != 0) return rc;
+    }
+    if (missing) {
+        std::string numbers;
+        for (const RibFrame& f : frames) {
+            if (!numbers.empty()) numbers += ' ';
+            numbers += std::to_string(f.number);
+        }
+        fail(fmt::format("{}: error: --frames {}: the file has no frame {} (its frames: {})", a.scene,
+                         a.frames, *missing, numbers));
     }
     return 0;
 }
@@ -883,6 +988,8 @@ int main(int argc, char** argv) {
                            "--adaptive: colour threshold tau_col (default 0.3; 0 refines everything)");
     render->add_option("--adaptive-map", ra.adaptiveMap,
                        "--adaptive: write the refined subpixels as a PNG of twice the resolution");
+    render->add_option("--frames", ra.frames,
+                       "Multi-frame RIB: render frame N or frames A-B (FrameBegin numbers); default: all");
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
     render
         ->add_option("--shadows", ra.shadows,

@@ -239,6 +239,77 @@ Image readPng(const std::string& path) {
     return out;
 }
 
+namespace {
+Mat4 fromImath(const Imath::M44f& m) {
+    Mat4 out;
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) out.m[c][r] = m[r][c];
+    return out;
+}
+constexpr const char* kDepthMapAttribute = "tesseraDepthMap";
+}  // namespace
+
+void writeDepthMap(const std::string& path, const DepthMap& map) {
+    if (map.width < 1 || map.height < 1 || map.depth.size() != size_t(map.width) * map.height)
+        throw std::runtime_error(path + ": depth map of the wrong size");
+    writeAtomically(path, [&](const std::string& tmp) {
+        try {
+            Imf::Header header(map.width, map.height);
+            header.compression() = Imf::ZIP_COMPRESSION;
+            Imf::addWorldToCamera(header, toImath(map.worldToCamera));
+            Imf::addWorldToNDC(header, toImath(map.worldToNDC));
+            header.insert(kDepthMapAttribute, Imf::StringAttribute(map.kind));
+            header.channels().insert("Z", Imf::Channel(Imf::FLOAT));
+            Imf::FrameBuffer fb;
+            fb.insert("Z",
+                      Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(map.depth.data())),
+                                 sizeof(float), sizeof(float) * size_t(map.width)));
+            Imf::OutputFile file(tmp.c_str(), header);
+            file.setFrameBuffer(fb);
+            file.writePixels(map.height);
+        } catch (const std::exception& e) {
+            throw std::runtime_error(path + ": OpenEXR write failed: " + e.what());
+        }
+    });
+}
+
+DepthMap readDepthMap(const std::string& path) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) throw std::runtime_error(path + ": no such file");
+    try {
+        Imf::InputFile file(path.c_str());
+        const Imf::Header& header = file.header();
+        const Imf::ChannelList& channels = header.channels();
+        int count = 0;
+        for (auto it = channels.begin(); it != channels.end(); ++it) ++count;
+        if (count != 1 || !channels.findChannel("Z") || !Imf::hasWorldToCamera(header) ||
+            !Imf::hasWorldToNDC(header))
+            throw std::runtime_error(
+                "not a depth map (it needs exactly one channel Z and the worldToCamera and worldToNDC "
+                "matrices, as Display \"zfile\" writes)");
+        const Imath::Box2i dw = header.dataWindow();
+        DepthMap map;
+        map.width = dw.max.x - dw.min.x + 1;
+        map.height = dw.max.y - dw.min.y + 1;
+        map.depth.assign(size_t(map.width) * map.height, 0.f);
+        map.worldToCamera = fromImath(Imf::worldToCamera(header));
+        map.worldToNDC = fromImath(Imf::worldToNDC(header));
+        if (const auto* kind = header.findTypedAttribute<Imf::StringAttribute>(kDepthMapAttribute))
+            map.kind = kind->value();
+        Imf::FrameBuffer fb;
+        char* base = reinterpret_cast<char*>(map.depth.data()) -
+                     (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * map.width) * ptrdiff_t(sizeof(float));
+        fb.insert("Z", Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(map.width)));
+        file.setFrameBuffer(fb);
+        file.readPixels(dw.min.y, dw.max.y);
+        for (float& d : map.depth)
+            if (std::isnan(d)) throw std::runtime_error("not a depth map (NaN depth)");
+        return map;
+    } catch (const std::exception& e) {
+        throw std::runtime_error(path + ": " + e.what());
+    }
+}
+
 Image readExr(const std::string& path) {
     Imf::RgbaInputFile file(path.c_str());
     Imath::Box2i dw = file.dataWindow();

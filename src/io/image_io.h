@@ -60,6 +60,22 @@ ExrInfo readExrInfo(const std::string& path);
 // overlap). Throws InputError naming the offending file; the output is written only when all is well.
 void assembleExrTiles(const std::vector<std::string>& tiles, const std::string& output);
 
+// Depth maps (RIB Display "zfile" / "shadow", MakeShadow; docs/inputs.md): OpenEXR with one float channel Z,
+// camera-space depth (infinity where nothing was hit), row-major top row first, the standard worldToCamera
+// and worldToNDC attributes of the view that made it, and "tesseraDepthMap" saying what it is: "zfile"
+// (a Display's depth pass) or "shadow" (MakeShadow's output, what shadow lookups read).
+struct DepthMap {
+    int width = 0, height = 0;
+    std::vector<float> depth;  // width * height
+    Mat4 worldToCamera, worldToNDC;
+    std::string kind = "zfile";
+};
+// Written atomically (temporary file, rename); throws std::runtime_error naming the file.
+void writeDepthMap(const std::string& path, const DepthMap& map);
+// Throws std::runtime_error with a message naming the file: missing or unreadable, not OpenEXR, or an
+// OpenEXR that is not a depth map (no single Z channel or no camera matrices).
+DepthMap readDepthMap(const std::string& path);
+
 // True if the extension is one writeImage understands (.png, .exr).
 bool isSupportedImageExtension(const std::string& path);
 

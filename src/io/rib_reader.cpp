@@ -16,6 +16,7 @@
 #include <string_view>
 #include <unordered_map>
 
+#include "io/image_io.h"
 #include "io/rib_geometry.h"
 #include "io/rib_graphics_state.h"
 #include "io/rib_lexer.h"
@@ -32,10 +33,15 @@ namespace {
 using namespace rib;
 
 constexpr int kMaxArchiveDepth = 32;
+// A skipUntil_ target no request is named: skip to the end of the file.
+constexpr const char* kNeverARequest = "";
 
 class RibReader {
   public:
-    RibReader(Scene& scene, const WarningSink& warn) : scene_(scene), diag_(warn) {
+    // frameOrdinal: which FrameBegin block to load (0 = the first); nullopt: the first, warning that
+    // later frames are ignored.
+    RibReader(Scene& scene, const WarningSink& warn, std::optional<int> frameOrdinal = std::nullopt)
+        : scene_(scene), diag_(warn), frameOrdinal_(frameOrdinal) {
         declareShaderParams(decls_);
     }
 
@@ -167,16 +173,24 @@ class RibReader {
 
     // ---- structure (RI spec 3.2, sec. 4.1 and 4.3.2) ------------------------------------------
     void version(const Request&, const Arguments&) {}
+    // RI spec 3.2, sec. 4.1.1: the options before FrameBegin are the defaults of every frame, those
+    // inside a frame are local to it. One reader loads one frame: the requests outside frames up to
+    // it, then its own; other frames are skipped whole (the CLI reads the file once per frame).
     void frameBegin(const Request& r, const Arguments&) {
-        if (framesSeen_ > 0) {
-            diag_.warnOnce("frames", r.line, "more than one frame: only the first frame is loaded");
+        const int ordinal = framesSeen_++;
+        if (ordinal != frameOrdinal_.value_or(0)) {
+            if (!frameOrdinal_)
+                diag_.warnOnce("frames", r.line, "more than one frame: only the first frame is loaded");
             skipUntil_ = "FrameEnd";
             return;
         }
-        ++framesSeen_;
         state_.begin(Block::Frame, diag_.file(), r.line);
     }
-    void frameEnd(const Request& r, const Arguments&) { state_.end(Block::Frame, r, diag_); }
+    void frameEnd(const Request& r, const Arguments&) {
+        state_.end(Block::Frame, r, diag_);
+        // Requests after the chosen frame belong to later frames: not this one's options.
+        if (frameOrdinal_) skipUntil_ = std::string(kNeverARequest);
+    }
     void worldBegin(const Request& r, const Arguments&) {
         if (worldsSeen_ > 0) {
             diag_.warnOnce("worlds", r.line, "more than one world block: only the first is loaded");
@@ -312,7 +326,7 @@ class RibReader {
     void display(const Request& r, const Arguments& args) {
         args.atLeast(3, "name type mode ...parameterlist...");
         const std::string& name = args.string(0);
-        args.string(1);
+        const std::string& type = args.string(1);
         args.string(2);
         parseParams(r, 3, decls_, diag_);  // syntax check only; display parameters do not affect the scene
         // RI spec 4.1.4: a name starting with '+' adds a secondary display; we keep the primary.
@@ -321,6 +335,7 @@ class RibReader {
             return;
         }
         scene_.image.displayName = name;
+        scene_.image.displayType = type;
     }
     // Options that must come before WorldBegin (RI spec 3.2, sec. 4.1); false: ignore the request (after
     // the world block, warned).
@@ -511,6 +526,30 @@ class RibReader {
                        "MakeTexture: cannot read picture file \"" + printable(in, 200) + "\": " + why);
         if (const std::string why = makeTexture(in, out, swrap, twrap); !why.empty())
             diag_.fail(r.line, "MakeTexture: cannot write texture \"" + printable(out, 200) + "\": " + why);
+    }
+    // MakeShadow picturename texturename ...parameterlist... (RI spec 3.2, sec. 8.3): turns a depth map
+    // written by Display "zfile" (or "shadow") into a shadow map when the request is read, as RenderMan
+    // renderers do; the format stays OpenEXR (image_io.h, DepthMap), marked "shadow".
+    void makeShadowRequest(const Request& r, const Arguments& args) {
+        args.atLeast(2, "picturename texturename ...parameterlist...");
+        const std::string in = relativeToFile(args.string(0)), out = relativeToFile(args.string(1));
+        parseParams(r, 2, decls_, diag_);
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(in, ec))
+            diag_.fail(r.line, "MakeShadow: depth file \"" + printable(in, 200) +
+                                   "\" not found (made by Display \"zfile\" in an earlier frame?)");
+        DepthMap map;
+        try {
+            map = readDepthMap(in);
+        } catch (const std::exception& e) {
+            diag_.fail(r.line, std::string("MakeShadow: ") + e.what());
+        }
+        map.kind = "shadow";
+        try {
+            writeDepthMap(out, map);
+        } catch (const std::exception& e) {
+            diag_.fail(r.line, std::string("MakeShadow: cannot write the shadow map: ") + e.what());
+        }
     }
     // TextureCoordinates s1 t1 s2 t2 s3 t3 s4 t4 (RI spec 3.2, sec. 4.2.7).
     void textureCoordinates(const Request& r, const Arguments& args) {
@@ -1209,6 +1248,7 @@ class RibReader {
             {"Torus", &RibReader::quadric},
             {"ReadArchive", &RibReader::readArchive},
             {"MakeTexture", &RibReader::makeTextureRequest},
+            {"MakeShadow", &RibReader::makeShadowRequest},
             {"TextureCoordinates", &RibReader::textureCoordinates},
         };
         auto it = handlers.find(name);
@@ -1224,6 +1264,7 @@ class RibReader {
     std::optional<MotionBlock> motion_;      // the open motion block
     std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;
+    std::optional<int> frameOrdinal_;
     int archiveDepth_ = 0;  // ReadArchive nesting of the file being read
     // Option "searchpath" "texture" (empty: the directory of the file that names the texture).
     std::vector<std::string> textureSearchPath_;
@@ -1235,6 +1276,24 @@ void readRib(const std::string& path, Scene& scene, const WarningSink& warn) {
     scene.sourcePath = path;
     RibReader reader(scene, warn);
     reader.run(path);
+}
+
+void readRibFrame(const std::string& path, int frameOrdinal, Scene& scene, const WarningSink& warn) {
+    scene.sourcePath = path;
+    RibReader reader(scene, warn, frameOrdinal);
+    reader.run(path);
+}
+
+std::vector<RibFrame> ribFrames(const std::string& path) {
+    RibLexer lex(readInputFile(path), path);
+    std::vector<RibFrame> frames;
+    for (Token t = lex.next(); t.type != TokenType::End; t = lex.next()) {
+        if (t.type != TokenType::Request || t.text != "FrameBegin") continue;
+        RibFrame f{int(frames.size()) + 1, t.line};  // no number given: its position
+        if (lex.peek().type == TokenType::Number) f.number = int(lex.next().number);
+        frames.push_back(f);
+    }
+    return frames;
 }
 
 void readRibText(std::string text, const std::string& path, Scene& scene, const WarningSink& warn) {

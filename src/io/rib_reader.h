@@ -3,6 +3,7 @@
 // and surface shaders, Patch and PatchMesh in any basis, Declare and ReadArchive.
 #pragma once
 #include <string>
+#include <vector>
 
 #include "io/diagnostics.h"
 #include "scene/scene.h"
@@ -13,6 +14,19 @@ namespace tessera {
 // or a file without patches; unsupported requests and parameters are reported once each to `warn`.
 // Object ids: each Patch / PatchMesh request is one object (scene.objectCount counts them).
 void readRib(const std::string& path, Scene& scene, const WarningSink& warn);
+
+// Multi-frame RIB (RI spec 3.2, sec. 4.1.1): as readRib, loading the frame opened by the
+// `frameOrdinal`-th FrameBegin (0-based) with the options and attributes given outside frames before it;
+// the other frames and everything after this frame's FrameEnd are skipped.
+void readRibFrame(const std::string& path, int frameOrdinal, Scene& scene, const WarningSink& warn);
+
+// The FrameBegin blocks of a RIB file in order (lexed only, ReadArchive not followed): the frame number
+// each gives and its line. Throws InputError if the file cannot be read.
+struct RibFrame {
+    int number = 0;
+    int line = 0;
+};
+std::vector<RibFrame> ribFrames(const std::string& path);
 
 // As readRib, for RIB text already in memory (plain, not gzipped): `path` names it in errors and is the
 // base of relative ReadArchive names. Used by the fuzz targets.

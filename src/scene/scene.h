@@ -25,6 +25,7 @@ struct ImageOptions {
     // RIB CropWindow xmin xmax ymin ymax in NDC (RI default 0 1 0 1: the whole image); film/crop.h maps it
     // to pixels by the RI 3.2 rounding rule.
     double cropWindow[4] = {0, 1, 0, 1};
+    std::string displayType;  // RIB Display type: "file", "zfile"/"shadow" (a depth map), ... ("" if none)
     // RIB Hider "hidden" "string blursampling" (simple, interleaved, bbox; "" = the renderer's default)
     // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
     std::string blurSampling;
