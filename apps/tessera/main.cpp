@@ -951,7 +951,8 @@ int main(int argc, char** argv) {
         ->add_option("--max-depth", ra.maxDepth,
                      "rt: ray bounces; default 4 (direct: mirror and glass lobes), 16 (path, with Russian "
                      "roulette from the third)")
-        ->check(intRange(0, 64));
+        ->check(intRange(0, 64))
+        ->default_str("4|16");  // the sentinel -1 means "by integrator"
     render
         ->add_option("--integrator", ra.integrator,
                      "rt: direct (lights, soft shadows of area lights, mirror, glass), path (path tracing: "
