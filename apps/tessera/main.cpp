@@ -650,7 +650,9 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         ExrMetadata meta = exrMetadata(scene.camera, renderMs);
         meta.displayWidth = scene.camera.width, meta.displayHeight = scene.camera.height;
         if (partial) {  // what `tessera assemble` checks
-            meta.sceneHash = sceneHash(a, scene);
+            // The frame of a multi-frame RIB too: tiles of different frames must not assemble.
+            meta.sceneHash =
+                sceneHash(a, scene) + (ribFrameOrdinal ? fmt::format("-frame{}", *ribFrameOrdinal) : "");
             meta.tileIndex = tile ? tile->first : 0;
             meta.tileCount = tile ? tile->second : 1;
         }
