@@ -291,3 +291,31 @@ TEST(Tiles, AssembleAndTheOptionsRefuseBadInput) {
 }
 
 }  // namespace
+
+namespace {
+// Tiles of different frames of one multi-frame RIB share the file and the options: the frame is part of
+// what `assemble` checks, so they are refused, while the tiles of one frame assemble.
+TEST(Tiles, TilesOfDifferentFramesOfOneFileDoNotAssemble) {
+    const fs::path dir = test::testScratchDir();
+    const std::string frame =
+        "Format 32 24 1\nWorldBegin\nLightSource \"distantlight\" 1\nSphere 1 -1 1 360\nWorldEnd\n";
+    const std::string rib = test::writeTestFile(
+        "two_frames.rib", "FrameBegin 1\nTranslate 0 0 4\n" + frame +
+                              "FrameEnd\nFrameBegin 2\nTranslate 0 0 6\n" + frame + "FrameEnd\n");
+    auto tile = [&](int frameNumber, int index) {
+        const std::string out =
+            (dir / ("f" + std::to_string(frameNumber) + "_" + std::to_string(index) + ".exr")).string();
+        EXPECT_EQ(runTessera("render " + rib + " --frames " + std::to_string(frameNumber) + " --tile " +
+                             std::to_string(index) + "/2 -q -o " + out),
+                  0);
+        return out;
+    };
+    const std::string a0 = tile(1, 0), a1 = tile(1, 1), b1 = tile(2, 1);
+    std::string output;
+    EXPECT_EQ(runTessera("assemble " + a0 + " " + b1 + " -o " + (dir / "mixed.exr").string(), &output), 2);
+    EXPECT_NE(output.find("tile of another render"), std::string::npos) << output;
+    EXPECT_FALSE(fs::exists(dir / "mixed.exr"));
+    EXPECT_EQ(runTessera("assemble " + a0 + " " + a1 + " -o " + (dir / "one.exr").string(), &output), 0)
+        << output;
+}
+}  // namespace
