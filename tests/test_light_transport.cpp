@@ -317,3 +317,55 @@ WorldEnd
 
 }  // namespace
 }  // namespace tessera::test
+
+namespace tessera::test {
+namespace {
+
+// RI Imager "background" (appendix A): Ci += (1 - alpha) background, alpha = 1, in both engines: empty
+// pixels are the colour, covered ones unchanged, edge pixels composited by their coverage.
+TEST(Imager, BackgroundCompositesUnderTheImageInBothEngines) {
+    const std::string body = R"(Format 48 32 1
+PixelSamples 4 4
+Projection "perspective" "fov" [30]
+Translate 0 0 6
+WorldBegin
+LightSource "distantlight" 1
+Sphere 1 -1 1 360
+WorldEnd
+)";
+    const Loaded plain = load(body);
+    const Loaded bg = load("Imager \"background\" \"background\" [0.2 0.3 0.5]\n" + body);
+    ASSERT_TRUE(bg.scene.image.hasBackground);
+    ASSERT_EQ(plain.scene.quadrics.size(), 1u);
+    ASSERT_EQ(plain.scene.camera.width, 48);
+    for (const char* engine : {"reyes", "rt"}) {
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        const RenderResult a = render(plain.scene, rs), b = render(bg.scene, rs);
+        int empty = 0, covered = 0;
+        for (int y = 0; y < 32; ++y)
+            for (int x = 0; x < 48; ++x) {
+                const float* p = a.image.pixel(x, y);
+                const float* q = b.image.pixel(x, y);
+                const float open = 1.f - p[3];
+                EXPECT_NEAR(q[0], p[0] + open * 0.2f, 1e-6f) << engine << " " << x << "," << y;
+                EXPECT_NEAR(q[1], p[1] + open * 0.3f, 1e-6f);
+                EXPECT_NEAR(q[2], p[2] + open * 0.5f, 1e-6f);
+                EXPECT_EQ(q[3], 1.f);
+                empty += p[3] == 0.f;
+                covered += p[3] > 0.999f;
+            }
+        EXPECT_GT(empty, 50) << engine;
+        EXPECT_GT(covered, 20) << engine << " centre alpha " << a.image.pixel(24, 16)[3] << " size "
+                               << a.image.width << "x" << a.image.height;
+    }
+    expectError("Imager \"background\" \"background\" [-1 0 0]\n" + body, 1);
+    const Loaded other = load("Imager \"clamptoalpha\"\n" + body);
+    EXPECT_FALSE(other.scene.image.hasBackground);
+    ASSERT_FALSE(other.warnings.empty());
+    EXPECT_TRUE(contains(other.warnings[0], "clamptoalpha")) << other.warnings[0];
+}
+
+}  // namespace
+}  // namespace tessera::test

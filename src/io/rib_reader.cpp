@@ -317,6 +317,29 @@ class RibReader {
         scene_.image.filterWidthX = float(xw);
         scene_.image.filterWidthY = float(yw);
     }
+    // Imager (RI spec 3.2, sec. 4.1.5): the standard "background" imager (appendix A) composites the image
+    // over its "background" colour (default white) and makes it opaque; other imagers are warned about.
+    void imager(const Request& r, const Arguments& args) {
+        args.atLeast(1, "name ...parameterlist...");
+        const std::string& name = args.string(0);
+        auto ps = parseParams(r, 1, decls_, diag_);
+        if (name != "background") {
+            diag_.warnOnce("imager:" + name, r.line, "Imager \"" + name + "\" is not supported; ignored");
+            return;
+        }
+        Color bg{1, 1, 1};
+        for (const Param& p : ps) {
+            if (p.name == "background")
+                bg = paramTriple(r, p, diag_);
+            else
+                diag_.warn(r.line,
+                           "Imager \"background\": parameter \"" + p.name + "\" is not known; ignored");
+        }
+        if (!isFinite(bg) || bg.x < 0 || bg.y < 0 || bg.z < 0)
+            diag_.fail(r.line, "Imager \"background\": the colour must be finite and not negative");
+        scene_.image.hasBackground = true;
+        scene_.image.background = bg;
+    }
     void exposure(const Request& r, const Arguments& args) {
         auto v = args.numbers(2, "gain gamma");
         if (!(v[0] > 0 && v[1] > 0)) diag_.fail(r.line, "Exposure gain and gamma must be positive");
@@ -1203,6 +1226,7 @@ class RibReader {
             {"PixelSamples", &RibReader::pixelSamples},
             {"PixelFilter", &RibReader::pixelFilter},
             {"Exposure", &RibReader::exposure},
+            {"Imager", &RibReader::imager},
             {"Display", &RibReader::display},
             {"Option", &RibReader::option},
             {"Attribute", &RibReader::attribute},

@@ -120,6 +120,10 @@ void declareShaderParams(Declarations& decls) {
     Decl name;
     name.type = "string";
     decls.declare("texturename", name);  // paintedplastic, shinymetal, bumpy (RI spec 3.2, appendix A)
+    Decl background;
+    background.cls = "uniform";
+    background.type = "color";
+    decls.declare("background", background);  // the background imager
 }
 
 template <class Target>

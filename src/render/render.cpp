@@ -73,6 +73,19 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
                 "--reyes-shadows raytrace traces the undisplaced surfaces: shadows of displacement need "
                 "--reyes-shadows map");
     }
+    // RI Imager "background": Ci += (1 - alpha) * background, alpha = 1 (premultiplied colour), on the
+    // pixels the engines wrote; the attribute planes are left as rendered.
+    if (scene.image.hasBackground) {
+        Image& img = result.image;
+        const Color bg = scene.image.background;
+        for (int y = img.y0; y < img.y0 + img.height; ++y)
+            for (int x = img.x0; x < img.x0 + img.width; ++x) {
+                float* p = img.pixel(x, y);
+                const float open = 1.f - p[3];
+                p[0] += open * bg.x, p[1] += open * bg.y, p[2] += open * bg.z, p[3] = 1.f;
+            }
+        result.stats["background"] = {bg.x, bg.y, bg.z};
+    }
     result.stats["threads"] = threads;
     const Camera& cam = viewCamera(scene, settings);
     result.stats["width"] = cam.width;

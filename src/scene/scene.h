@@ -22,6 +22,10 @@ struct ImageOptions {
     float exposureGain = 1.f, exposureGamma = 1.f;  // RI default: linear
     bool srgbOutput = false;                        // used for scenes without a RIB (.bpt)
     std::string displayName;                        // RIB Display name ("" if none)
+    // RIB Imager "background" (RI spec 3.2, appendix A): composite over this colour, Ci += (1 - alpha) *
+    // background, alpha = 1; applied to the rendered image by render() (render/render.cpp).
+    bool hasBackground = false;
+    Color background{1, 1, 1};
     // RIB CropWindow xmin xmax ymin ymax in NDC (RI default 0 1 0 1: the whole image); film/crop.h maps it
     // to pixels by the RI 3.2 rounding rule.
     double cropWindow[4] = {0, 1, 0, 1};
