@@ -155,6 +155,10 @@ TEST(Tiles, AssembledTilesEqualTheSingleRenderBitForBitInBothEngines) {
         EXPECT_EQ(t4.sceneHash.size(), 16u);
         const std::string joined = (dir / (std::string(engine) + "_joined.exr")).string();
         ASSERT_EQ(runTessera("assemble" + tiles + " -o " + joined, &out), 0) << out;
+        const ExrInfo whole = readExrInfo(joined);
+        EXPECT_EQ(whole.tileIndex, 0);  // the assembled image: the one tile of a one-tile split
+        EXPECT_EQ(whole.tileCount, 1);
+
         const Raw a = readRaw(full), b = readRaw(joined);
         ASSERT_EQ(a.channels.size(), 9u);  // R G B A, Z, N.X N.Y N.Z, id
         ASSERT_EQ(b.width, 64);
