@@ -510,9 +510,9 @@ TEST(RibFiles, GzippedRib) {
 }
 
 TEST(RibFiles, UnknownRequestsWarnOncePerName) {
-    Loaded l = load(scene("set -x\nImager \"background\"\nImager \"background\"",
+    Loaded l = load(scene("set -x\nAtmosphere \"fog\"\nAtmosphere \"fog\"",
                           "Points \"P\" [0 0 0]\nPoints \"P\" [1 1 1]"));
-    EXPECT_EQ(countWarnings(l.warnings, "'Imager'"), 1);
+    EXPECT_EQ(countWarnings(l.warnings, "'Atmosphere'"), 1);
     EXPECT_EQ(countWarnings(l.warnings, "'Points'"), 1);
     EXPECT_EQ(countWarnings(l.warnings, "'set'"), 1);
     EXPECT_EQ(l.scene.patches.size(), 1u);
