@@ -485,7 +485,7 @@ void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_
     SampleTile& tile = ws.tile;
     const RayList& rays = ws.rays;
     const size_t n = pts.count, N = size_t(std::max(1, ao.samples));
-    const int spp = tile.spp, tw = tile.region.width();
+    const int spp = tile.spp;
     const bool finite = std::isfinite(ao.maxDistance);
     const float tmax = finite ? std::max(0.f, ao.maxDistance - fr.acc.offset) : INFINITY;
     ws.shadow.clear();
@@ -493,10 +493,9 @@ void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_
     for (size_t k = 0; k < n; ++k) {
         const uint32_t r = ws.hitRay[k], s = rays.owner[r];
         const RayHit& rh = ws.hits[r];
-        const size_t pixel = s / size_t(spp);
-        const uint32_t pseed =
-            pixelSeed(tile.region.x0 + int(pixel % tw), tile.region.y0 + int(pixel / tw), seed);
-        const uint32_t first = tile.sampleIndex[s] * uint32_t(N);
+        uint32_t pseed, index;
+        sampleCoordinates(tile, s, seed, pseed, index);
+        const uint32_t first = index * uint32_t(N);
         const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
         const Frame3 frame = frameAbout(Nf);
         const Vec3 o = pts.P[k] + Nf * fr.acc.offset;
