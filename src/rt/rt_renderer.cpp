@@ -396,14 +396,9 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
                 if (light.type == LightType::Ambient || light.type == LightType::Area) continue;
                 const LightSample ls = sampleLight(light, pts.P[k]);
                 if (!ls.valid) continue;
-                Vec3 L = ls.L;
-                float tmax = ls.dist;
-                if (isPositional(light.type)) {  // aimed from the offset origin (as makeShadowRays)
-                    const Vec3 toLight = light.position - o;
-                    const float len = length(toLight);
-                    if (!(len > 0.f) || !std::isfinite(len)) continue;
-                    L = toLight / len, tmax = len - acc.offset;
-                }
+                Vec3 L;
+                float tmax;
+                aimShadowRay(light, ls, o, acc.offset, L, tmax);
                 const float cosR = dot(Nf, L);
                 if (!(cosR > 0.f)) continue;
                 shadowRay(L, tmax, w * pathBsdfEval(b, Nf, wo, L) * ls.Cl * (cosR * kPi), uint32_t(l));

@@ -22,6 +22,21 @@ struct ShadowOrigin {
     uint32_t owner = 0;
 };
 
+// Direction and length of the shadow ray of `sample` from the offset origin o: towards a point or spot
+// light it is aimed from o, so that the ray's line passes through the light (the shadow binning projects
+// from the light); it stops `offset` short of the light.
+inline void aimShadowRay(const ShadingLight& light, const LightSample& sample, Vec3 o, float offset, Vec3& L,
+                         float& tmax) {
+    L = sample.L;
+    tmax = sample.dist;
+    if (isPositional(light.type)) {
+        const Vec3 toLight = light.position - o;
+        const float len = length(toLight);
+        if (len > 0.f && std::isfinite(len)) L = toLight / len, tmax = len;
+    }
+    if (std::isfinite(tmax)) tmax -= offset;
+}
+
 // The queries as shadow rays, light by light (one ShadowRun per light that has rays, for the shadow
 // binning), from the face-forward side of the surface offset by acc.offset. shadowIdx[point * lights +
 // light]: the sample's ray (kNone: none). originOf(k) -> ShadowOrigin of point k.
@@ -41,17 +56,10 @@ void makeShadowRays(const RtAccel& acc, std::span<const ShadingLight> lights, co
             const LightSample& sample = ls.sample[ls.index(k, l)];
             const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
             const Vec3 o = pts.P[k] + Nf * acc.offset;
-            Vec3 L = sample.L;
-            float tmax = sample.dist;
-            if (isPositional(lights[l].type)) {
-                // Aimed from the offset origin, so that the ray's line passes through the light (the
-                // shadow binning projects from the light).
-                const Vec3 toLight = lights[l].position - o;
-                const float len = length(toLight);
-                if (len > 0.f && std::isfinite(len)) L = toLight / len, tmax = len;
-                if (!(dot(Nf, L) > 0.f)) continue;
-            }
-            if (std::isfinite(tmax)) tmax -= acc.offset;
+            Vec3 L;
+            float tmax;
+            aimShadowRay(lights[l], sample, o, acc.offset, L, tmax);
+            if (isPositional(lights[l].type) && !(dot(Nf, L) > 0.f)) continue;
             const ShadowOrigin from = originOf(k);
             shadowIdx[k * nL + l] = uint32_t(rays.size());
             rays.push(o, L, 0.f, tmax, from.owner, Color{}, from.patch, kShadow, 0, from.uv, Nf, from.time);
