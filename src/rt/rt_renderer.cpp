@@ -85,6 +85,19 @@ void sampleCoordinates(const SampleTile& tile, uint32_t s, uint32_t seed, uint32
     index = tile.sampleIndex[s];
 }
 
+// A camera ray's hit in its sample: covered, at depth t, and its pixel hit by some sample.
+void markCameraHit(SampleTile& tile, uint32_t s, float t) {
+    tile.a[s] = 1.f;
+    tile.z[s] = t;
+    tile.pixelHit[s / size_t(tile.spp)] = 1;
+}
+// Whether hit k of the batch is textured (the film's has-texture channel): textures on bicubic patches
+// only, as Reyes.
+bool hitTextured(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t patch) {
+    return fr.scene.materials[pts.materialOf(k)].texture >= 0 &&
+           fr.scene.attributes[patch].kind == SurfaceKind::BicubicBezier;
+}
+
 // Radiance an area light's surface sends along a ray that hit it at `rh` from direction d: Le on the
 // front side, 0 behind; `cosine` receives |cos| at the light (for the density conversions).
 Color areaEmission(const Frame& fr, const RayHit& rh, Vec3 d, float& cosine, int& light) {
@@ -260,13 +273,10 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
         const RayHit& rh = ws.hits[r];
         const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
         if (rays.kind[r] == kPrimary) {
-            tile.a[s] = 1.f;
-            tile.z[s] = rh.h.t;
-            tile.pixelHit[s / size_t(tile.spp)] = 1;
+            markCameraHit(tile, s, rh.h.t);
             if (tile.channels)
                 tile.setAttributes(s, fr.scene.attributes[rh.patch].object, Nf, ws.shadowedLights[k],
-                                   fr.scene.materials[pts.materialOf(k)].texture >= 0 &&
-                                       fr.scene.attributes[rh.patch].kind == SurfaceKind::BicubicBezier);
+                                   hitTextured(fr, pts, k, rh.patch));
         }
         const Color w = rays.weight[r];
         const Color c = w * ws.radiance[k];
@@ -352,9 +362,7 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
         const Color w = rays.weight[r];
         const Vec3 I = pts.I[k], N = pts.N[k], Nf = faceForward(N, I), wo = -I;
         if (rays.kind[r] == kPrimary) {
-            tile.a[s] = 1.f;
-            tile.z[s] = rh.h.t;
-            tile.pixelHit[s / size_t(tile.spp)] = 1;
+            markCameraHit(tile, s, rh.h.t);
         }
         const PathBsdf b = pathBsdfOf(m, pts.textureOf(k));
         // 1. Emission.
@@ -460,8 +468,7 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
             const RayHit& rh = ws.hits[r];
             tile.setAttributes(rays.owner[r], fr.scene.attributes[rh.patch].object,
                                faceForward(pts.N[k], pts.I[k]), ws.shadowedLights[k],
-                               fr.scene.materials[pts.materialOf(k)].texture >= 0 &&
-                                   fr.scene.attributes[rh.patch].kind == SurfaceKind::BicubicBezier);
+                               hitTextured(fr, pts, k, rh.patch));
         }
     ws.shadeMs += msSince(ts);
 }
@@ -480,7 +487,6 @@ void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_
     SampleTile& tile = ws.tile;
     const RayList& rays = ws.rays;
     const size_t n = pts.count, N = size_t(std::max(1, ao.samples));
-    const int spp = tile.spp;
     const bool finite = std::isfinite(ao.maxDistance);
     const float tmax = finite ? std::max(0.f, ao.maxDistance - fr.acc.offset) : INFINITY;
     ws.shadow.clear();
@@ -534,9 +540,7 @@ void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_
         }
         const float value = float(open / double(N));
         tile.r[s] = tile.g[s] = tile.b[s] = value;
-        tile.a[s] = 1.f;
-        tile.z[s] = rh.h.t;
-        tile.pixelHit[s / size_t(spp)] = 1;
+        markCameraHit(tile, s, rh.h.t);
         if (tile.channels)
             tile.setAttributes(s, fr.scene.attributes[rh.patch].object, faceForward(pts.N[k], pts.I[k]), 0,
                                false);
