@@ -12,6 +12,10 @@ namespace {
 constexpr int32_t kMaxEdgeRate = 1 << 20;  // cap for edges that reach towards the eye plane
 constexpr int kMaxSplitDepth = 40;
 constexpr int kRateSamples = 8;
+// Lattice of a collapsed edge: a power of two, so that halving cuts stay on it for 16 levels.
+constexpr int32_t kCollapsedLattice = 1 << 16;
+// A source edge shorter than this on screen is one point for splitting (no visible crack can open).
+constexpr float kCollapsedPixels = 1e-3f;
 
 bool lexLess(Vec3 p, Vec3 q) {
     if (p.x != q.x) return p.x < q.x;
@@ -32,9 +36,9 @@ int32_t rateFromLength(float pixels, float side) {
     return t > float(kMaxEdgeRate) ? kMaxEdgeRate : int32_t(t);
 }
 
-// Segment count of a source edge from its projected polyline length.
+// Projected polyline length of a source edge, in pixels.
 template <class PointAt>
-int32_t measureRate(const ReyesView& view, float side, PointAt&& pointAt) {
+float measureLength(const ReyesView& view, PointAt&& pointAt) {
     float len = 0;
     Vec3 prev = rasterForLength(view, pointAt(0.f));
     for (int i = 1; i <= kRateSamples; ++i) {
@@ -43,7 +47,21 @@ int32_t measureRate(const ReyesView& view, float side, PointAt&& pointAt) {
         len += std::sqrt(dx * dx + dy * dy);
         prev = cur;
     }
-    return rateFromLength(len, side);
+    return len;
+}
+
+// Segment count of a source edge from its projected polyline length.
+template <class PointAt>
+int32_t measureRate(const ReyesView& view, float side, PointAt&& pointAt) {
+    return rateFromLength(measureLength(view, pointAt), side);
+}
+
+// Lattice of a source edge of projected length `pixels`.
+void setEdgeLattice(PieceEdge& edge, float pixels, float side) {
+    edge.collapsed = pixels < kCollapsedPixels;
+    edge.total = edge.collapsed ? kCollapsedLattice : rateFromLength(pixels, side);
+    edge.k0 = 0;
+    edge.k1 = edge.total;
 }
 
 PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, float side) {
@@ -51,9 +69,7 @@ PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, f
     Vec3 cp[4];
     canonicalBoundary(patch, e, cp, edge.a, edge.b);
     edge.boundary = int8_t(e);
-    edge.total = measureRate(view, side, [&](float t) { return evalCurve(cp, t); });
-    edge.k0 = 0;
-    edge.k1 = edge.total;
+    setEdgeLattice(edge, measureLength(view, [&](float t) { return evalCurve(cp, t); }), side);
     // The piece walks every edge in increasing parameter; reversed if the canonical start is the far end.
     static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
     edge.reversed = !(edge.a.x == kStart[e].x && edge.a.y == kStart[e].y);
@@ -77,11 +93,13 @@ PieceEdge quadricBoundaryEdge(const ReyesView& view, const PlacedQuadric& pq, in
     edge.b = reverse ? kStart[e] : kEnd[e];
     edge.boundary = int8_t(e);
     edge.reversed = reverse;
-    edge.total = measureRate(view, side, [&](float t) {
-        return quadricPoint(pq, {edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t});
-    });
-    edge.k0 = 0;
-    edge.k1 = edge.total;
+    setEdgeLattice(edge,
+                   measureLength(view,
+                                 [&](float t) {
+                                     return quadricPoint(pq, {edge.a.x * (1.f - t) + edge.b.x * t,
+                                                              edge.a.y * (1.f - t) + edge.b.y * t});
+                                 }),
+                   side);
     return edge;
 }
 
@@ -94,18 +112,34 @@ PieceEdge interiorEdge(const ReyesView& view, PointAt&& surfaceAt, Vec2 p, Vec2 
     edge.b = swap ? p : q;
     edge.reversed = swap;
     edge.boundary = -1;
-    edge.total = measureRate(view, side, [&](float t) {
-        Vec2 uv{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t};
-        return surfaceAt(uv);
-    });
-    edge.k0 = 0;
-    edge.k1 = edge.total;
+    setEdgeLattice(
+        edge,
+        measureLength(view,
+                      [&](float t) {
+                          Vec2 uv{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t};
+                          return surfaceAt(uv);
+                      }),
+        side);
     return edge;
 }
 
+// The segments of a piece's middle u and v isolines (straight lines of its bilinear (u,v) quad).
+template <class PointAt>
+void measureInterior(const ReyesView& view, PointAt&& surfaceAt, Piece& piece, float side) {
+    auto lerp = [](Vec2 p, Vec2 q, float t) { return Vec2{p.x + (q.x - p.x) * t, p.y + (q.y - p.y) * t}; };
+    auto isoline = [&](Vec2 p, Vec2 q) {
+        return measureRate(view, side, [&](float t) { return surfaceAt(lerp(p, q, t)); });
+    };
+    const Vec2* c = piece.uv;
+    piece.interiorU = isoline(lerp(c[0], c[3], 0.5f), lerp(c[1], c[2], 0.5f));
+    piece.interiorV = isoline(lerp(c[0], c[1], 0.5f), lerp(c[3], c[2], 0.5f));
+}
+
 // Cut edge e at its lattice midpoint: `first` runs from the piece's start to the cut, `second` onwards.
-void cutEdge(const PieceEdge& e, int& cutK, PieceEdge& first, PieceEdge& second) {
-    int half = e.segments() / 2;
+// An odd count rounds down, or up with roundUp: the piece's two opposite edges round opposite ways, so
+// that a piece with one segment on each is cut along its diagonal into two triangles.
+void cutEdge(const PieceEdge& e, bool roundUp, int& cutK, PieceEdge& first, PieceEdge& second) {
+    int half = (e.segments() + (roundUp ? 1 : 0)) / 2;
     cutK = e.reversed ? e.k1 - half : e.k0 + half;
     first = second = e;
     if (!e.reversed) {
@@ -203,8 +237,8 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
         piece.x0 = x0, piece.y0 = y0, piece.x1 = x1, piece.y1 = y1;
         piece.blurPixels = std::max(0.f, std::max((x1 - x0) - sharpW, (y1 - y0) - sharpH));
     }
-    int maxSeg = 0;
-    for (const PieceEdge& e : piece.edge) maxSeg = std::max(maxSeg, e.segments());
+    int maxSeg = std::max(piece.interiorU, piece.interiorV);
+    for (const PieceEdge& e : piece.edge) maxSeg = std::max(maxSeg, e.rate());
     if (straddles) return Verdict::SplitNear;
     if (maxSeg > view.maxGridEdge) return Verdict::Split;
     return Verdict::Dice;
@@ -261,15 +295,19 @@ void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hull
         SplitJob job = stack.back();
         stack.pop_back();
         Piece& p = job.piece;
+        measureInterior(view, surfaceAt, p, side);
         Verdict v = classify(view, hullOf, p);
         if (v == Verdict::Cull) {
             ++counters.culled;
             continue;
         }
-        // Split across u (cutting e0 and e2) when those edges carry more segments, else across v.
-        int su = std::max(p.edge[0].segments(), p.edge[2].segments());
-        int sv = std::max(p.edge[1].segments(), p.edge[3].segments());
-        if (v != Verdict::Dice && (job.depth >= kMaxSplitDepth || std::max(su, sv) <= 1)) {
+        // Split across u (cutting e0 and e2) when that direction needs more segments, else across v; a
+        // direction whose two edges hold fewer than two lattice segments between them cannot be cut.
+        const int su = pieceGridU(p), sv = pieceGridV(p);
+        const bool cutU = p.edge[0].segments() + p.edge[2].segments() >= 2;
+        const bool cutV = p.edge[1].segments() + p.edge[3].segments() >= 2;
+        const bool acrossU = cutU && (su >= sv || !cutV);
+        if (v != Verdict::Dice && (job.depth >= kMaxSplitDepth || std::max(su, sv) <= 1 || !(cutU || cutV))) {
             // No further progress possible. A piece still crossing the eye plane is dropped (the RI
             // "eye split" rule); an oversized one is diced as it is.
             if (v == Verdict::SplitNear) {
@@ -284,18 +322,18 @@ void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hull
         }
         ++counters.splits;
         Piece lo = p, hi = p;
-        if (su >= sv) {
+        if (acrossU) {
             int k0, k2;
-            cutEdge(p.edge[0], k0, lo.edge[0], hi.edge[0]);
-            cutEdge(p.edge[2], k2, lo.edge[2], hi.edge[2]);
+            cutEdge(p.edge[0], false, k0, lo.edge[0], hi.edge[0]);
+            cutEdge(p.edge[2], true, k2, lo.edge[2], hi.edge[2]);
             Vec2 m0 = latticeUV(p.edge[0], k0), m2 = latticeUV(p.edge[2], k2);
             PieceEdge mid = interiorEdge(view, surfaceAt, m0, m2, side);
             lo.uv[1] = m0, lo.uv[2] = m2, lo.edge[1] = mid;
             hi.uv[0] = m0, hi.uv[3] = m2, hi.edge[3] = mid;
         } else {
             int k3, k1;
-            cutEdge(p.edge[3], k3, lo.edge[3], hi.edge[3]);
-            cutEdge(p.edge[1], k1, lo.edge[1], hi.edge[1]);
+            cutEdge(p.edge[3], false, k3, lo.edge[3], hi.edge[3]);
+            cutEdge(p.edge[1], true, k1, lo.edge[1], hi.edge[1]);
             Vec2 m3 = latticeUV(p.edge[3], k3), m1 = latticeUV(p.edge[1], k1);
             PieceEdge mid = interiorEdge(view, surfaceAt, m3, m1, side);
             lo.uv[3] = m3, lo.uv[2] = m1, lo.edge[2] = mid;

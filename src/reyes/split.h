@@ -27,7 +27,12 @@ struct PieceEdge {
     int32_t k0 = 0, k1 = 1;
     int8_t boundary = -1;   // 0..3: source is that patch boundary curve (see patchEdge); -1: interior line
     bool reversed = false;  // the piece walks this edge from k1 down to k0
+    // The source edge is one point (a sphere's pole, a collapsed patch edge): its lattice is fine
+    // (kCollapsedLattice) so that splits can cut it anywhere, and it asks for no micropolygons.
+    bool collapsed = false;
     int segments() const { return k1 - k0; }
+    // Micropolygons this edge asks of a grid or a split.
+    int rate() const { return collapsed ? std::min(segments(), 1) : segments(); }
     int startK() const { return reversed ? k1 : k0; }
     int endK() const { return reversed ? k0 : k1; }
     // Lattice index of the s-th vertex from the piece's start corner.
@@ -42,14 +47,19 @@ struct Piece {
     PieceEdge edge[4];
     float x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // raster bound of the control hull (over the shutter and lens)
     float blurPixels = 0;                  // how far the blur spreads it (motion path + CoC diameter)
+    // Segments its middle u and v isolines need: a piece whose boundary is short but whose inside is
+    // long (a sphere's poles are its u edges, a teapot's lid top collapses an edge to a point) is diced
+    // and split by these too, else it becomes one sliver of zero-area micropolygons.
+    int32_t interiorU = 1, interiorV = 1;
 };
 
-// The grid a piece dices into: nu = max(top, bottom edge segments), nv likewise (at least 1 each).
+// The grid a piece dices into: nu = max(top, bottom edge segments, middle u isoline), nv likewise (at
+// least 1 each). Boundary vertices snap onto their edge's lattice, so a finer inside stays crack-free.
 inline int pieceGridU(const Piece& p) {
-    return std::max({p.edge[0].segments(), p.edge[2].segments(), 1});
+    return std::max({p.edge[0].rate(), p.edge[2].rate(), p.interiorU, 1});
 }
 inline int pieceGridV(const Piece& p) {
-    return std::max({p.edge[1].segments(), p.edge[3].segments(), 1});
+    return std::max({p.edge[1].rate(), p.edge[3].rate(), p.interiorV, 1});
 }
 
 struct DisplacementFrame;  // reyes/displace.h
