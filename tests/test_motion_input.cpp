@@ -191,7 +191,7 @@ TEST(MotionInput, CameraMotionIsRefinedAndStartsAtShutterOpen) {
 TEST(MotionInput, OptionsForBlurAndApproximation) {
     Loaded l =
         load(world("Hider \"hidden\" \"string blursampling\" \"interleaved\" \"int blurtilesize\" 8 "
-                   "\"int blurpermutations\" [16] \"jitter\" [1]",
+                   "\"int blurpermutations\" [16] \"jitter\" [0] \"depthfilter\" \"min\"",
                    "GeometricApproximation \"motionfactor\" 1.5\nGeometricApproximation \"focusfactor\" 2\n"
                    "GeometricApproximation \"flatness\" 0.5\n" +
                        std::string(kSquare)));
@@ -200,13 +200,14 @@ TEST(MotionInput, OptionsForBlurAndApproximation) {
     EXPECT_EQ(l.scene.image.blurPermutations, 16);
     EXPECT_FLOAT_EQ(l.scene.attributes[0].motionFactor, 1.5f);
     EXPECT_FLOAT_EQ(l.scene.attributes[0].focusFactor, 2.f);
-    int flatness = 0, jitter = 0;
+    EXPECT_FALSE(l.scene.image.jitter);  // Hider "jitter" [0]: strata centres (film/sampler.h)
+    int flatness = 0, depthfilter = 0;
     for (const std::string& w : l.warnings) {
         flatness += contains(w, "\"flatness\" is not supported");
-        jitter += contains(w, "jitter");
+        depthfilter += contains(w, "depthfilter");
     }
     EXPECT_EQ(flatness, 1);
-    EXPECT_EQ(jitter, 1);
+    EXPECT_EQ(depthfilter, 1);
 }
 
 TEST(MotionInput, MovingLightsArePlacedAtShutterOpenWithAWarning) {

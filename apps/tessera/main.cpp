@@ -60,8 +60,8 @@ double peakRssMb() {
 
 struct RenderArgs {
     std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
-    std::string sampler = "sobol";
-    std::string shadows = "scene";     // which lights cast shadows: on, off, scene (each light's attribute)
+    std::string sampler;            // "": sobol, or centred where the scene says Hider "hidden" "jitter" [0]
+    std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
     std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
     int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = -1, maxGridEdge = 16;
     int lightSamples = 0;  // 0: each area light's own "samples"
@@ -542,7 +542,11 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     settings.engine = a.engine;
     settings.threads = a.threads;
     settings.seed = a.seed;
-    settings.sampler = a.sampler == "jittered" ? SamplerKind::Jittered : SamplerKind::Sobol;
+    // --sampler, else the scene's Hider "jitter" [0] (strata centres), else Sobol'.
+    settings.sampler = a.sampler == "jittered"                      ? SamplerKind::Jittered
+                       : a.sampler == "centred"                     ? SamplerKind::Centred
+                       : a.sampler == "sobol" || scene.image.jitter ? SamplerKind::Sobol
+                                                                    : SamplerKind::Centred;
     settings.bucketSize = a.bucketSize;
     settings.subpatchDepth = a.subpatchDepth;
     // Bounces: 4 traced lobes for the direct integrator; 16 for the path tracer, whose Russian roulette
@@ -942,8 +946,11 @@ int main(int argc, char** argv) {
     render->add_option("--threads", ra.threads, "Worker threads (0 = all cores)")->check(intRange(0, 4096));
     render->add_option("--stats", ra.stats, "Write statistics as JSON to this file");
     render->add_option("--seed", ra.seed, "Sample pattern seed");
-    render->add_option("--sampler", ra.sampler, "Film samples: sobol (Owen-scrambled Sobol') or jittered")
-        ->check(CLI::IsMember({"sobol", "jittered"}));
+    render
+        ->add_option("--sampler", ra.sampler,
+                     "Film samples: sobol (Owen-scrambled Sobol'), jittered or centred (strata centres); "
+                     "default: sobol, or centred where the scene's Hider says \"jitter\" [0]")
+        ->check(CLI::IsMember({"sobol", "jittered", "centred"}));
     render->add_option("--bucket-size", ra.bucketSize, "Bucket side in pixels")->check(intRange(4, 1024));
     render->add_option("--max-grid", ra.maxGridEdge, "Reyes: micropolygons per grid edge")
         ->check(intRange(1, 256));

@@ -1,6 +1,7 @@
 // The prologue both engines share: the film set-up (filter, samples per pixel, region, image with its
 // planes), the camera's projection and the lights in camera space.
 #pragma once
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -12,6 +13,13 @@
 #include "shading/texture.h"
 
 namespace tessera {
+
+// The lookups of the lights whose shadows are maps read from files (Light::shadowFiles), in the frame's
+// shading space; ShadingLight::shadowMap points into it. The depths stay in the scene.
+struct FileShadowMaps {
+    std::vector<std::array<ShadowMapFace, 6>> faces;  // per light
+    std::vector<ShadowMapLookup> lookups;             // per light (faceCount 0: none)
+};
 
 struct FrameSetup {
     EngineClock::time_point start;  // when the engine began (engine_ms)
@@ -25,6 +33,7 @@ struct FrameSetup {
     BlurPattern blur;                  // each sample's time and lens position (inactive: sharp frame)
     // The scene's textures (Scene::textures), opened for this render; nullptr when it has none.
     std::shared_ptr<const Textures> textures;
+    std::shared_ptr<const FileShadowMaps> fileShadowMaps;  // what lights[l].shadowMap points into
 
     FrameSetup(const Scene& scene, const RenderSettings& settings);
     int samplesPerPixel() const { return nx * ny; }

@@ -58,7 +58,12 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     for (int py = reg.y0; py < reg.y1; ++py)
         for (int px = reg.x0; px < reg.x1; ++px)
             for (int s = 0; s < spp; ++s, ++i) {
-                samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
+                if (sampler == SamplerKind::Centred) {
+                    sx[i] = (px << kSubpixelBits) + ((s % nx) * 2 + 1) * (1 << (kSubpixelBits - 1)) / nx;
+                    sy[i] = (py << kSubpixelBits) + ((s / nx) * 2 + 1) * (1 << (kSubpixelBits - 1)) / ny;
+                } else {
+                    samplePositionFixed(px, py, s, nx, ny, seed, sx[i], sy[i]);
+                }
                 sampleIndex[i] = uint32_t(s);
             }
 }

@@ -29,7 +29,10 @@ namespace tessera {
 
 // Which sample positions the film uses: Sobol (default) or the original jittered strata (kept so that
 // earlier images can be reproduced and the two compared; docs/sampler.md).
-enum class SamplerKind : uint8_t { Sobol, Jittered };
+// Sobol: Owen-scrambled Sobol' (the default); Jittered: stratified jitter (film.h); Centred: each
+// stratum's centre, no jitter (RIB Hider "hidden" "jitter" [0], what depth passes for shadow maps use:
+// a depth is then exactly where the lookups assume it, at a texel's centre).
+enum class SamplerKind : uint8_t { Sobol, Jittered, Centred };
 
 // Dimension slots of one camera sample. Film x, y and time are one 3D Sobol' point; each later pair
 // (u, v) is its own padded 2D (0,2)-sequence. Per bounce, engines take further pairs from kDimFirstFree.

@@ -57,6 +57,7 @@ Declarations::Declarations() {
         {"Kt", "uniform float"},        {"eta", "uniform float"},        {"specularcolor", "uniform color"},
         {"intensity", "uniform float"}, {"lightcolor", "uniform color"}, {"from", "uniform point"},
         {"to", "uniform point"},        {"fov", "uniform float"},        {"name", "uniform string"},
+        {"jitter", "uniform integer"},  // Hider "hidden" (PRMan, Aqsis)
     };
     for (auto [name, decl] : builtin) declared_[name] = *parseDecl(decl);
 }

@@ -24,6 +24,7 @@
 #include "io/rib_request.h"
 #include "io/rib_shaders.h"
 #include "shading/registry.h"
+#include "shading/shadow_map.h"
 #include "shading/texture.h"
 
 namespace tessera {
@@ -433,6 +434,11 @@ class RibReader {
                                            std::to_string(lo) + " to " + std::to_string(hi) + ", found " +
                                            fmtNum(v));
                 (tile ? scene_.image.blurTileSize : scene_.image.blurPermutations) = int(v);
+            } else if (p.name == "jitter") {
+                const float v = paramFloat(r, p, diag_);
+                if (v != 0.f && v != 1.f)
+                    diag_.fail(p.line, "Hider \"hidden\": \"jitter\" must be 0 or 1, found " + fmtNum(v));
+                scene_.image.jitter = v != 0.f;
             } else {
                 warnIgnoredParam(p, "Hider \"hidden\"", diag_);
             }
@@ -478,6 +484,16 @@ class RibReader {
         textureSearchPath_ = std::move(out);
     }
     std::string fileDirectory() const { return std::filesystem::path(lex_->file()).parent_path().string(); }
+    // A render product a RIB reads back (MakeShadow's depth file, a light's shadow map): where Display and
+    // MakeShadow write them, relative to the current directory as in PRMan, else (a map shipped with the
+    // scene) relative to the RIB file. A file in neither place: the current directory's path.
+    std::string productPath(const std::string& name) const {
+        namespace fs = std::filesystem;
+        std::error_code ec;
+        if (fs::path(name).is_absolute() || fs::is_regular_file(name, ec)) return name;
+        const std::string beside = relativeToFile(name);
+        return fs::is_regular_file(beside, ec) ? beside : name;
+    }
     std::string relativeToFile(const std::string& name) const {
         namespace fs = std::filesystem;
         fs::path p(name);
@@ -550,12 +566,51 @@ class RibReader {
         if (const std::string why = makeTexture(in, out, swrap, twrap); !why.empty())
             diag_.fail(r.line, "MakeTexture: cannot write texture \"" + printable(out, 200) + "\": " + why);
     }
+    // A shadow map a light shader names (productPath: where MakeShadow writes it, else beside the RIB), read
+    // once per frame: a missing file, or one that is not a depth map whose view Tessera can project into, is
+    // an error at the parameter's line.
+    size_t shadowMapIndex(int line, const std::string& name, const std::string& what) {
+        const std::string path = productPath(name);
+        for (size_t i = 0; i < scene_.shadowMapFiles.size(); ++i)
+            if (scene_.shadowMapFiles[i].path == path) return i;
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(path, ec))
+            diag_.fail(line,
+                       what + ": shadow map \"" + printable(name, 200) +
+                           "\" not found (made by MakeShadow from a Display \"zfile\" of an earlier frame?)");
+        DepthMap map;
+        try {
+            map = readDepthMap(path);
+        } catch (const std::exception& e) {
+            diag_.fail(line, what + ": shadow map: " + e.what());
+        }
+        ShadowMapFace face;
+        if (const std::string why =
+                fileShadowMapFace(map.worldToCamera, map.worldToNDC, map.width, map.height, Mat4{}, face);
+            !why.empty())
+            diag_.fail(line, what + ": shadow map \"" + printable(name, 200) + "\": " + why);
+        if (map.kind != "shadow")
+            diag_.warnOnce(
+                "zfileshadow:" + path, line,
+                what + ": \"" + printable(name, 200) +
+                    "\" is a Display \"zfile\" depth map, not MakeShadow's output; read as a shadow map");
+        ShadowMapFile file;
+        file.path = path;
+        file.width = map.width;
+        file.height = map.height;
+        file.depth = std::move(map.depth);
+        file.worldToCamera = map.worldToCamera;
+        file.worldToNDC = map.worldToNDC;
+        scene_.shadowMapFiles.push_back(std::move(file));
+        return scene_.shadowMapFiles.size() - 1;
+    }
     // MakeShadow picturename texturename ...parameterlist... (RI spec 3.2, sec. 8.3): turns a depth map
     // written by Display "zfile" (or "shadow") into a shadow map when the request is read, as RenderMan
     // renderers do; the format stays OpenEXR (image_io.h, DepthMap), marked "shadow".
     void makeShadowRequest(const Request& r, const Arguments& args) {
         args.atLeast(2, "picturename texturename ...parameterlist...");
-        const std::string in = relativeToFile(args.string(0)), out = relativeToFile(args.string(1));
+        // Written where Display writes (the current directory), read from there or beside the RIB.
+        const std::string in = productPath(args.string(0)), out = args.string(1);
         parseParams(r, 2, decls_, diag_);
         std::error_code ec;
         if (!std::filesystem::is_regular_file(in, ec))
@@ -859,9 +914,27 @@ class RibReader {
                                   "\": an area light is declared with AreaLightSource; light ignored");
             return;
         }
+        const std::string what = std::string(area ? "AreaLightSource" : "LightSource") + " \"" + name + "\"";
+        // The shadowing lights' map names (strings, so not in the shader's table).
+        std::array<std::string, 6> mapNames;
+        std::array<int, 6> mapLines{};
+        std::vector<Param> rest;
+        for (const Param& p : ps) {
+            int face = -1;
+            if (shader->shadowNames == rib::ShadowNames::One && p.name == rib::kShadowNameParam) face = 0;
+            for (int f = 0; f < 6 && shader->shadowNames == rib::ShadowNames::Cube; ++f)
+                if (p.name == rib::kCubeShadowNameParams[f]) face = f;
+            if (face < 0) {
+                rest.push_back(p);
+                continue;
+            }
+            mapNames[size_t(face)] = paramString(r, p, diag_);
+            mapLines[size_t(face)] = p.line;
+        }
         LightShaderParams params;
-        applyShaderParams(shader->params, r, ps, params,
-                          std::string(area ? "AreaLightSource" : "LightSource") + " \"" + name + "\"", diag_);
+        applyShaderParams(shader->params, r, rest, params, what, diag_);
+        if (!(params.width > 0.f && params.width <= 32.f))
+            diag_.fail(r.line, what + ": \"width\" must be above 0 and at most 32");
         if (area && !(params.samples >= 1 && params.samples <= 65536))
             diag_.fail(r.line, "AreaLightSource: \"samples\" must be between 1 and 65536");
         Light light;
@@ -885,6 +958,26 @@ class RibReader {
             light.castsShadows =
                 true;  // soft shadows are what an area light is for (--shadows off still rules)
             state_.attributes().areaLight = int32_t(scene_.lights.size());
+        }
+        // shadowspot, shadowdistant, shadowpoint: a map name makes the light cast shadows from that file
+        // ("raytrace": shadow rays in both engines, as PRMan reads it); no name leaves the light to the
+        // "shadows" attribute, as for the plain lights.
+        bool anyName = false, traced = false, files = false;
+        for (size_t f = 0; f < 6; ++f) {
+            if (mapNames[f].empty()) continue;
+            anyName = true;
+            if (mapNames[f] == "raytrace") {
+                traced = true;
+                continue;
+            }
+            files = true;
+            light.shadowFiles[f] = int32_t(shadowMapIndex(mapLines[f], mapNames[f], what));
+        }
+        if (traced && files) diag_.fail(r.line, what + ": the shadow map names mix \"raytrace\" with files");
+        if (anyName) {
+            light.castsShadows = true;
+            light.shadowSource = traced ? ShadowSource::RayTraced : ShadowSource::File;
+            light.shadowWidth = params.width;
         }
         if (!isFinite(light.color) || !isFinite(light.from) || !isFinite(light.to))
             diag_.fail(

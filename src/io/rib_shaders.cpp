@@ -71,12 +71,26 @@ constexpr LightParam kSpotParams[] = {kIntensity,      kLightColor,      kFrom, 
 constexpr LightParam kSamples{"samples", &LightShaderParams::samples};
 constexpr LightParam kAreaParams[] = {kIntensity, kLightColor, kSamples};
 
+// The RI standard shadowing lights (RI spec 3.2, appendix A; the parameters of PRMan's and Aqsis'
+// shaders): the plain light plus "samples" and "width" of the shadow() lookup and, read by the reader,
+// the map names. "samples" is accepted and unused: the percentage-closer filter integrates its box
+// exactly (shading/shadow_map.h).
+constexpr LightParam kShadowWidth{"width", &LightShaderParams::width};
+constexpr LightParam kShadowDistantParams[] = {kIntensity, kLightColor, kFrom, kTo, kSamples, kShadowWidth};
+constexpr LightParam kShadowPointParams[] = {kIntensity, kLightColor, kFrom, kSamples, kShadowWidth};
+constexpr LightParam kShadowSpotParams[] = {
+    kIntensity,      kLightColor,       kFrom,    kTo,         kConeAngle,
+    kConeDeltaAngle, kBeamDistribution, kSamples, kShadowWidth};
+
 constexpr LightShader kLightShaders[] = {
     {"ambientlight", LightType::Ambient, kAmbientParams},
     {"distantlight", LightType::Distant, kDistantParams},
     {"pointlight", LightType::Point, kPointParams},
     {"spotlight", LightType::Spot, kSpotParams},
     {"arealight", LightType::Area, kAreaParams},
+    {"shadowdistant", LightType::Distant, kShadowDistantParams, ShadowNames::One},
+    {"shadowspot", LightType::Spot, kShadowSpotParams, ShadowNames::One},
+    {"shadowpoint", LightType::Point, kShadowPointParams, ShadowNames::Cube},
 };
 
 template <class Shader>
@@ -120,6 +134,8 @@ void declareShaderParams(Declarations& decls) {
     Decl name;
     name.type = "string";
     decls.declare("texturename", name);  // paintedplastic, shinymetal, bumpy (RI spec 3.2, appendix A)
+    decls.declare(kShadowNameParam, name);
+    for (const char* face : kCubeShadowNameParams) decls.declare(face, name);
     Decl background;
     background.cls = "uniform";
     background.type = "color";

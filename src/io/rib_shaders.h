@@ -49,12 +49,22 @@ struct LightShaderParams {
     // spotlight: radians(30), radians(5), 2
     float coneangle = 0.5235988f, conedeltaangle = 0.0872665f, beamdistribution = 2.f;
     float samples = 16;  // arealight: shadow rays per shading point (Light::samples)
+    float width = 1;     // shadowspot, shadowdistant, shadowpoint: the shadow lookup's filter scale
 };
+
+// Which shadow-map file names a light shader reads (string parameters, read by the reader itself).
+enum class ShadowNames { None, One, Cube };
+
+// The string parameters naming shadow maps: "shadowname" (shadowspot, shadowdistant), and shadowpoint's
+// six faces in Light::shadowFiles order (+x, -x, +y, -y, +z, -z).
+inline constexpr const char* kShadowNameParam = "shadowname";
+inline constexpr const char* kCubeShadowNameParams[6] = {"sfpx", "sfnx", "sfpy", "sfny", "sfpz", "sfnz"};
 
 struct LightShader {
     const char* name;
     LightType type;
     std::span<const ShaderParam<LightShaderParams>> params;
+    ShadowNames shadowNames = ShadowNames::None;
 };
 
 std::span<const SurfaceShader> surfaceShaders();

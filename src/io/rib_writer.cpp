@@ -174,8 +174,9 @@ void writeRib(const Scene& scene, std::ostream& o) {
     if (cam.lensRadius() > 0.f)
         o << "DepthOfField " << num(cam.fStop) << " " << num(cam.focalLength) << " " << num(cam.focalDistance)
           << "\n";
-    if (!img.blurSampling.empty() || img.blurTileSize > 0 || img.blurPermutations > 0) {
+    if (!img.blurSampling.empty() || img.blurTileSize > 0 || img.blurPermutations > 0 || !img.jitter) {
         o << "Hider \"hidden\"";
+        if (!img.jitter) o << " \"int jitter\" [0]";
         if (!img.blurSampling.empty()) o << " \"string blursampling\" " << quoted(img.blurSampling);
         if (img.blurTileSize > 0) o << " \"int blurtilesize\" [" << img.blurTileSize << "]";
         if (img.blurPermutations > 0) o << " \"int blurpermutations\" [" << img.blurPermutations << "]";
@@ -216,25 +217,52 @@ void writeRib(const Scene& scene, std::ostream& o) {
               << num(shadowMap.shadingRate) << "] \"bias\" [" << num(shadowMap.bias) << "] \"filterwidth\" ["
               << num(shadowMap.filterWidth) << "]\n";
         }
+        // shadowspot, shadowdistant, shadowpoint: the maps the light reads (absolute paths, so that the
+        // written file finds them wherever it is put), or "raytrace".
+        std::string names, shader = "light";
+        if (l.shadowSource != ShadowSource::Renderer) {
+            shader = "shadow";
+            static const char* kFaces[6] = {"sfpx", "sfnx", "sfpy", "sfny", "sfpz", "sfnz"};
+            const bool cube = l.type == LightType::Point;
+            for (int f = 0; f < (cube ? 6 : 1); ++f) {
+                std::string name = "raytrace";
+                if (l.shadowSource == ShadowSource::File) {
+                    const int32_t k = l.shadowFiles[size_t(f)];
+                    if (k < 0 || size_t(k) >= scene.shadowMapFiles.size()) continue;
+                    std::error_code ec;
+                    const auto abs = std::filesystem::absolute(scene.shadowMapFiles[size_t(k)].path, ec);
+                    name = ec ? scene.shadowMapFiles[size_t(k)].path : abs.string();
+                }
+                names +=
+                    std::string(" \"") + (cube ? kFaces[f] : "shadowname") + "\" " + tessera::quoted(name);
+            }
+            if (l.shadowWidth != 1.f) names += " \"width\" [" + num(l.shadowWidth) + "]";
+        }
+        auto lightName = [&](const char* base) {
+            std::string n = shader == "light" ? std::string(base) + "light" : "shadow" + std::string(base);
+            return tessera::quoted(n);
+        };
         switch (l.type) {
             case LightType::Ambient:
                 o << "LightSource \"ambientlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
                   << triple(l.color) << "]\n";
                 break;
             case LightType::Distant:
-                o << "LightSource \"distantlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
-                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to)
-                  << "]\n";
+                o << "LightSource " << lightName("distant") << " " << handle++
+                  << " \"intensity\" [1] \"lightcolor\" [" << triple(l.color) << "] \"from\" ["
+                  << triple(l.from) << "] \"to\" [" << triple(l.to) << "]" << names << "\n";
                 break;
             case LightType::Point:
-                o << "LightSource \"pointlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
-                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "]\n";
+                o << "LightSource " << lightName("point") << " " << handle++
+                  << " \"intensity\" [1] \"lightcolor\" [" << triple(l.color) << "] \"from\" ["
+                  << triple(l.from) << "]" << names << "\n";
                 break;
             case LightType::Spot:
-                o << "LightSource \"spotlight\" " << handle++ << " \"intensity\" [1] \"lightcolor\" ["
-                  << triple(l.color) << "] \"from\" [" << triple(l.from) << "] \"to\" [" << triple(l.to)
-                  << "] \"coneangle\" [" << num(l.coneAngle) << "] \"conedeltaangle\" ["
-                  << num(l.coneDeltaAngle) << "] \"beamdistribution\" [" << num(l.beamDistribution) << "]\n";
+                o << "LightSource " << lightName("spot") << " " << handle++
+                  << " \"intensity\" [1] \"lightcolor\" [" << triple(l.color) << "] \"from\" ["
+                  << triple(l.from) << "] \"to\" [" << triple(l.to) << "] \"coneangle\" [" << num(l.coneAngle)
+                  << "] \"conedeltaangle\" [" << num(l.coneDeltaAngle) << "] \"beamdistribution\" ["
+                  << num(l.beamDistribution) << "]" << names << "\n";
                 break;
             case LightType::Area:  // not written yet: its surfaces would need their AreaLightSource blocks
                 break;

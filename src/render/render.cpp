@@ -34,9 +34,15 @@ bool anyDisplaced(const Scene& scene) {
     return false;
 }
 
-bool anyLightCastsShadows(const Scene& scene, const RenderSettings& settings) {
-    for (const Light& l : scene.lights)
-        if (lightCastsShadows(l, settings.shadows)) return true;
+// Whether Reyes needs the ray tracer's shadow rays: for every light that casts shadows under
+// --reyes-shadows raytrace, and for the lights whose shadowname is "raytrace" always.
+bool reyesTracesShadows(const Scene& scene, const RenderSettings& settings) {
+    for (const Light& l : scene.lights) {
+        if (!lightCastsShadows(l, settings.shadows)) continue;
+        if (l.shadowSource == ShadowSource::RayTraced) return true;
+        if (settings.reyesShadows == ReyesShadows::Raytrace && l.shadowSource != ShadowSource::File)
+            return true;
+    }
     return false;
 }
 
@@ -50,7 +56,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
     RenderResult result;
     arena.execute([&] {
         if (settings.engine == "reyes") {
-            if (settings.reyesShadows == ReyesShadows::Raytrace && anyLightCastsShadows(scene, settings))
+            if (reyesTracesShadows(scene, settings))
                 result = renderReyesWithRayTracedShadows(scene, settings);
             else
                 result = renderReyes(scene, settings);
@@ -68,7 +74,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
                 "the scene has displaced surfaces: --engine rt ignores displacement (renders them "
                 "undisplaced); "
                 "--engine reyes displaces");
-        else if (settings.reyesShadows == ReyesShadows::Raytrace && anyLightCastsShadows(scene, settings))
+        else if (reyesTracesShadows(scene, settings))
             result.warnings.push_back(
                 "--reyes-shadows raytrace traces the undisplaced surfaces: shadows of displacement need "
                 "--reyes-shadows map");

@@ -209,18 +209,22 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     points.I = Is.data();
     points.textureColor = textured ? Ct.data() : nullptr;
     const std::span<const Material> material(shade.material, 1);
-    bool queries = false;
-    if (shade.visibility)
-        for (const ShadingLight& l : shade.lights) queries = queries || l.castsShadows;
-    if (queries) {
-        // The shading module's three steps, the visibility queries answered by shadow maps or rays.
+    bool queries = false, fileMaps = false;
+    for (const ShadingLight& l : shade.lights) {
+        queries = queries || (shade.visibility && l.castsShadows);
+        fileMaps = fileMaps || l.shadowMap;
+    }
+    if (queries || fileMaps) {
+        // The shading module's three steps, the visibility queries answered by shadow maps or rays (maps
+        // read from files answer in sampleLights).
         thread_local LightSamples samples;
         sampleLights(shade.lights, material, points, samples);
-        const uint32_t patch = piece.patch;
-        thread_local std::vector<uint32_t> patchOf;
-        patchOf.assign(count, patch);
-        shade.visibility->answer(VisibilityQuery{points, shade.lights, patchOf.data(), UVs.data(), 0.f},
-                                 samples);
+        if (queries) {
+            thread_local std::vector<uint32_t> patchOf;
+            patchOf.assign(count, piece.patch);
+            shade.visibility->answer(VisibilityQuery{points, shade.lights, patchOf.data(), UVs.data(), 0.f},
+                                     samples);
+        }
         shadeSurfaces(material, points, samples, Ci.data());
         if (shade.wantShadowCounts) {
             // A light counts as in shadow where more than half of it is blocked (the ray tracer's shadow
@@ -229,7 +233,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             for (int v = 0; v < count; ++v)
                 for (size_t l = 0; l < samples.lights; ++l) {
                     const size_t i = samples.index(size_t(v), l);
-                    grid.shadowedLights[v] += samples.needsVisibility[i] && samples.visibility[i] < 0.5f;
+                    grid.shadowedLights[v] += samples.visibility[i] < 0.5f;
                 }
         }
     } else {

@@ -53,13 +53,19 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
             break;
         }
 
-    // Shadows: the caller's answers (ray-traced), else a shadow map per light that casts shadows, rendered
-    // now by this pipeline from the light (once per light and frame, before the frame's buckets).
-    bool shadows = false;
-    for (const ShadingLight& l : frame.lights) shadows = shadows || l.castsShadows;
+    // Shadows: the caller's shadow rays (`visibility`) answer every light under --reyes-shadows raytrace
+    // and the lights whose shadows are ray traced whatever the engine (tracedShadows); the others get a
+    // shadow map each, rendered now by this pipeline from the light (once per light and frame, before the
+    // frame's buckets). Maps read from files are looked up in sampleLights and ask nothing.
+    bool shadows = false, maps = false;
+    for (const ShadingLight& l : frame.lights) {
+        shadows = shadows || l.castsShadows;
+        maps = maps || (l.castsShadows && !l.tracedShadows);
+    }
     std::unique_ptr<ShadowMaps> shadowMaps;
-    if (shadows && !visibility) {
-        shadowMaps = std::make_unique<ShadowMaps>(scene, settings, cam, frame.lights, frame.textures.get());
+    if (maps && (settings.reyesShadows == ReyesShadows::Map || !visibility)) {
+        shadowMaps = std::make_unique<ShadowMaps>(scene, settings, cam, frame.lights, frame.textures.get(),
+                                                  visibility);
         visibility = shadowMaps.get();
     }
 

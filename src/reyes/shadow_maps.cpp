@@ -20,13 +20,6 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // rim (tan grows without bound towards 90 degrees).
 constexpr float kMaxSpotMapHalfAngle = 60.f * std::numbers::pi_v<float> / 180.f;
 
-AffineFrame toFrame(const Mat4& m) {
-    AffineFrame f;
-    for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 4; ++c) f.m[r][c] = float(m.m[r][c]);
-    return f;
-}
-
 // A rigid world-to-light transform: rows x, y, z (z along the light's view), origin at `eye`.
 Mat4 lightFromWorld(Vec3 eye, Vec3 z) {
     z = normalize(z);
@@ -147,14 +140,16 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
 }
 
 ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const Camera& shadingCamera,
-                       std::span<const ShadingLight> lights, const Textures* textures) {
+                       std::span<const ShadingLight> lights, const Textures* textures,
+                       const LightVisibility* rays)
+    : rays_(rays) {
     const auto t0 = EngineClock::now();
     const Mat4 worldFromShading = shadingCamera.cameraFromWorld.inverse();
     const Bounds3 bounds = scene.worldBounds();
     const float sceneSize = bounds.empty() ? 1.f : std::max(length(bounds.diagonal()), 1e-6f);
     maps_.resize(lights.size());
     for (size_t l = 0; l < lights.size() && l < scene.lights.size(); ++l) {
-        if (!lights[l].castsShadows || bounds.empty()) continue;
+        if (!lights[l].castsShadows || lights[l].tracedShadows || bounds.empty()) continue;
         const Light& light = scene.lights[l];
         if (light.type == LightType::Area) continue;  // ray traced only (rt/area_lights.h)
         auto map = std::make_unique<Map>();
@@ -202,8 +197,8 @@ ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const
             const Vec3 axes[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
             for (const Vec3& a : axes)
                 faces.push_back(perspectiveFace(p, lightFromWorld(light.from, a), 1.f, sceneSize));
-            map->lookup.cubeFromShading =
-                toFrame(Mat4::translate(-light.from.x, -light.from.y, -light.from.z) * worldFromShading);
+            map->lookup.cubeFromShading = affineFrameOf(
+                Mat4::translate(-light.from.x, -light.from.y, -light.from.z) * worldFromShading);
         }
         for (const Camera& c : faces) {
             DepthPassStats st;
@@ -213,10 +208,10 @@ ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const
             map->stats.ms += st.ms;
             const Projector pr(c);
             ShadowMapFace f;
-            f.lightFromShading = toFrame(c.cameraFromWorld * worldFromShading);
+            f.lightFromShading = affineFrameOf(c.cameraFromWorld * worldFromShading);
             f.perspective = c.perspective;
             f.sx = pr.sx, f.sy = pr.sy, f.ox = pr.ox, f.oy = pr.oy;
-            f.size = c.width;
+            f.width = f.height = c.width;
             map->faces.push_back(f);
         }
         for (size_t f = 0; f < map->faces.size(); ++f) map->faces[f].depth = map->depth[f].data();
@@ -240,21 +235,28 @@ float ShadowMaps::visibility(size_t light, Vec3 P, Vec3 N) const {
 
 void ShadowMaps::answer(const VisibilityQuery& q, LightSamples& ls) const {
     uint64_t n = 0;
+    bool traced = false;
     for (size_t k = 0; k < q.points.count; ++k)
         for (size_t l = 0; l < ls.lights; ++l) {
             const size_t s = ls.index(k, l);
             if (!ls.needsVisibility[s]) continue;
             const ShadowMapLookup* m = lookup(l);
-            if (!m) continue;
+            if (!m) {
+                traced = true;
+                continue;
+            }
             ls.visibility[s] = shadowMapVisibility(*m, q.points.P[k], q.points.N[k]);
+            ls.needsVisibility[s] = 0;  // answered: the rays below skip it
             ++n;
         }
     lookups_.fetch_add(n, std::memory_order_relaxed);
+    if (traced && rays_) rays_->answer(q, ls);
 }
 
 void ShadowMaps::writeStats(nlohmann::json& s) const {
-    static const char* kTypes[] = {"ambient", "distant", "point", "spot"};
-    s["method"] = "map";
+    static const char* kTypes[] = {"ambient", "distant", "point", "spot", "area"};
+    if (rays_) rays_->writeStats(s);  // the lights whose shadows are ray traced
+    s["method"] = rays_ ? "map+raytrace" : "map";
     s["maps_ms"] = renderMs_;
     s["lookups"] = lookups_.load();
     nlohmann::json maps = nlohmann::json::array();

@@ -36,9 +36,11 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
 class ShadowMaps final : public LightVisibility {
   public:
     // Renders the maps of the lights whose ShadingLight casts shadows (`lights`: the frame's lights, in the
-    // order of scene.lights), for lookups from `shadingCamera`'s camera space.
+    // order of scene.lights), for lookups from `shadingCamera`'s camera space. Lights whose shadows are
+    // ray traced (ShadingLight::tracedShadows) get no map: `rays` answers their queries.
     ShadowMaps(const Scene& scene, const RenderSettings& settings, const Camera& shadingCamera,
-               std::span<const ShadingLight> lights, const Textures* textures = nullptr);
+               std::span<const ShadingLight> lights, const Textures* textures = nullptr,
+               const LightVisibility* rays = nullptr);
     void answer(const VisibilityQuery& query, LightSamples& samples) const override;
     void writeStats(nlohmann::json& shadows) const override;
 
@@ -59,6 +61,7 @@ class ShadowMaps final : public LightVisibility {
         DepthPassStats stats;
     };
     std::vector<std::unique_ptr<Map>> maps_;  // per light
+    const LightVisibility* rays_ = nullptr;
     double renderMs_ = 0;
     mutable std::atomic<uint64_t> lookups_{0};
 };

@@ -390,7 +390,9 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
         auto shadowRay = [&](Vec3 L, float tmax, Color c, uint32_t light) {
             if (!(maxComponent(c) > 0.f)) return;
             if (!fr.lights[light].castsShadows) {
-                add(s, c);
+                // Shadows from maps read from files (or none): no ray.
+                const ShadowMapLookup* map = fr.lights[light].shadowMap;
+                add(s, map ? c * shadowMapVisibility(*map, pts.P[k], pts.N[k]) : c);
                 return;
             }
             ws.shadow.push(o, L, 0.f, tmax, s, c, rh.patch, kShadow, 0, Vec2{rh.h.u, rh.h.v}, Nf,

@@ -70,7 +70,8 @@ void makeShadowRays(const RtAccel& acc, std::span<const ShadingLight> lights, co
 }
 
 // The shadow rays' answers as the light samples' visibility (0 where blocked). `shadowedLights` (may be
-// nullptr): per point, the number of lights in shadow (the film's shadow-count channel).
+// nullptr): per point, the number of lights in shadow (the film's shadow-count channel), counting also
+// the lights whose visibility sampleLights took from maps read from files.
 inline void applyShadowRays(const std::vector<uint32_t>& shadowIdx, const std::vector<uint8_t>& blocked,
                             LightSamples& ls, size_t points, uint8_t* shadowedLights) {
     const size_t nL = ls.lights;
@@ -78,10 +79,9 @@ inline void applyShadowRays(const std::vector<uint32_t>& shadowIdx, const std::v
         if (shadowedLights) shadowedLights[k] = 0;
         for (size_t l = 0; l < nL; ++l) {
             const uint32_t s = shadowIdx[k * nL + l];
-            if (s != kNone && blocked[s]) {
-                ls.visibility[k * nL + l] = 0.f;
-                if (shadowedLights) ++shadowedLights[k];
-            }
+            if (s != kNone && blocked[s]) ls.visibility[k * nL + l] = 0.f;
+            // In shadow where more than half of the light is blocked (shadow-map lights are filtered).
+            if (shadowedLights && ls.visibility[k * nL + l] < 0.5f) ++shadowedLights[k];
         }
     }
 }

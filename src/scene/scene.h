@@ -34,6 +34,9 @@ struct ImageOptions {
     // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
     std::string blurSampling;
     int blurTileSize = 0, blurPermutations = 0;
+    // RIB Hider "hidden" "jitter" [0]: film samples at their strata's centres (SamplerKind::Centred), as
+    // shadow-map depth passes are rendered; the CLI's --sampler overrides it.
+    bool jitter = true;
 };
 
 // Area: RI AreaLightSource "arealight" (docs/light_transport.md): the surfaces declared after it in its
@@ -53,6 +56,22 @@ struct ShadowMapParams {
     bool operator==(const ShadowMapParams&) const = default;
 };
 
+// Where a light's shadows come from when it casts them: the engine's own choice (Reyes: shadow maps it
+// renders, or --reyes-shadows raytrace; the ray tracer: shadow rays), depth maps read from files (RI
+// shadowspot, shadowdistant, shadowpoint with a "shadowname"), or shadow rays in both engines (the
+// shadowname "raytrace", as PRMan reads it).
+enum class ShadowSource : uint8_t { Renderer, File, RayTraced };
+
+// A shadow map read from a file (MakeShadow's output, or a Display "zfile"): camera-space depth of the
+// view that made it (infinity where nothing was seen), row-major top row first, and that view's
+// matrices (io/image_io.h DepthMap). Both engines look it up through shading/shadow_map.h.
+struct ShadowMapFile {
+    std::string path;
+    int width = 0, height = 0;
+    std::vector<float> depth;
+    Mat4 worldToCamera, worldToNDC;
+};
+
 struct Light {
     LightType type = LightType::Distant;
     Color color{1, 1, 1};  // intensity * lightcolor
@@ -68,6 +87,14 @@ struct Light {
     // Area lights: shadow rays per shading point of the direct integrator (stratified over the light's
     // surface; RIB "samples", the CLI's --light-samples overrides). The path tracer takes one per bounce.
     int samples = 16;
+    ShadowSource shadowSource = ShadowSource::Renderer;
+    // ShadowSource::File: the maps (indices into Scene::shadowMapFiles; -1: none, that face is lit). One
+    // for distant and spot lights; six for point lights, the faces +x, -x, +y, -y, +z, -z of the world
+    // axes around `from` (shadowpoint's sfpx ... sfnz), picked by the major axis of the light's direction.
+    std::array<int32_t, 6> shadowFiles{-1, -1, -1, -1, -1, -1};
+    // The shaders' "width": the percentage-closer filter of a file map is width x shadowMap.filterWidth
+    // texels wide.
+    float shadowWidth = 1.f;
 };
 
 enum class MaterialType { Matte, Plastic, Metal, ShinyMetal, PaintedPlastic, Constant, Mirror, Glass };
@@ -201,6 +228,7 @@ struct Scene {
     // The texture files materials refer to (Material::texture), resolved to paths by the reader.
     std::vector<std::string> textures;
     std::vector<DisplacementShader> displacements;  // PatchAttributes::displacement
+    std::vector<ShadowMapFile> shadowMapFiles;      // Light::shadowFiles
     uint32_t objectCount = 0;
     std::string sourcePath;
 

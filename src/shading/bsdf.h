@@ -11,12 +11,16 @@
 namespace tessera {
 
 // faceforward(N, I): N turned to face against the incident direction I.
-TESSERA_HD Vec3 faceForward(Vec3 N, Vec3 I) { return dot(N, I) < 0 ? N : -N; }
+TESSERA_HD Vec3 faceForward(Vec3 N, Vec3 I) {
+    return dot(N, I) < 0 ? N : -N;
+}
 
 // Exponent of the RI specular() lobe max(0, N.H)^e. The spec writes e = 1/roughness, but PRMan, BMRT and
 // Aqsis all use e = 1/(roughness/8) (BMRT's and Aqsis' shader sources; the RenderMan Companion's plastic
 // images); we follow the renderers so that RIBs written for them look the same here.
-TESSERA_HD float specularExponent(float roughness) { return 8.f / std::max(roughness, 1e-4f); }
+TESSERA_HD float specularExponent(float roughness) {
+    return 8.f / std::max(roughness, 1e-4f);
+}
 
 // One light's contribution to the RI specular() sum, before Cl: max(0, Nf.H)^e, H = normalize(L + V).
 TESSERA_HD float specularLobe(Vec3 Nf, Vec3 V, Vec3 L, float exponent) {
@@ -26,7 +30,9 @@ TESSERA_HD float specularLobe(Vec3 Nf, Vec3 V, Vec3 L, float exponent) {
 }
 
 // Mirror direction of I about N (unit vectors; N on either side).
-TESSERA_HD Vec3 reflectDir(Vec3 I, Vec3 N) { return normalize(I - N * (2.f * dot(I, N))); }
+TESSERA_HD Vec3 reflectDir(Vec3 I, Vec3 N) {
+    return normalize(I - N * (2.f * dot(I, N)));
+}
 
 // Refraction through a surface of relative index eta (outside 1, inside eta; N points outside). Returns
 // false on total internal reflection (F = 1); F receives the unpolarised Fresnel reflectance of a

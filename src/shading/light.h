@@ -8,6 +8,7 @@
 #include "core/hostdevice.h"
 #include "core/transform.h"
 #include "scene/scene.h"
+#include "shading/shadow_map.h"
 
 namespace tessera {
 
@@ -28,6 +29,12 @@ struct ShadingLight {
     // Whether its light samples ask the engine for visibility (shadows); engines set it from the light and
     // RenderSettings::shadows (FrameSetup).
     bool castsShadows = false;
+    // Its shadows are ray traced whatever the engine (the RI shadowname "raytrace"): Reyes answers its
+    // queries with shadow rays even where it renders maps for the other lights.
+    bool tracedShadows = false;
+    // Its shadows come from depth maps read from files (Light::shadowFiles; the frame owns them):
+    // sampleLights looks them up and the light asks no visibility queries (castsShadows is false).
+    const ShadowMapLookup* shadowMap = nullptr;
 };
 
 inline ShadingLight prepareLight(const Light& l, const Mat4& toSpace) {

@@ -23,6 +23,10 @@ constexpr std::array kLights = {
     LightShaderInfo{"pointlight", LightType::Point},
     LightShaderInfo{"spotlight", LightType::Spot},
     LightShaderInfo{"arealight", LightType::Area},
+    // The shadowing lights: the same light, its shadows from map files (Light::shadowSource).
+    LightShaderInfo{"shadowdistant", LightType::Distant},
+    LightShaderInfo{"shadowspot", LightType::Spot},
+    LightShaderInfo{"shadowpoint", LightType::Point},
 };
 
 constexpr std::array kDisplacements = {

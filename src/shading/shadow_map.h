@@ -14,8 +14,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <string>
 
 #include "core/hostdevice.h"
+#include "core/transform.h"
 #include "core/vec.h"
 
 namespace tessera {
@@ -42,8 +44,8 @@ struct ShadowMapFace {
     AffineFrame lightFromShading;  // the engine's shading space to this face's light space
     bool perspective = false;
     float sx = 1, sy = 1, ox = 0, oy = 0;
-    int size = 0;  // texels per side
-    const float* depth = nullptr;
+    int width = 0, height = 0;     // texels
+    const float* depth = nullptr;  // width * height; nullptr: an empty face (everything lit)
 };
 
 // The map of one light: one face (distant: orthographic; spot: perspective), or six (a cube map around a
@@ -85,7 +87,7 @@ TESSERA_HD float receiverPlaneDepth(const ShadowMapFace& f, Vec3 p, Vec3 n, floa
 // Texels outside the face and empty texels count as lit.
 TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
                                          float filterWidth) {
-    if (f.perspective && !(p.z > 0.f)) return 1.f;  // behind the light
+    if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;  // no map, or behind the light
     float tx, ty, texelWorld;
     shadowMapProject(f, p, tx, ty, texelWorld);
     if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
@@ -101,11 +103,11 @@ TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n,
             if (!(wx > 0.f)) continue;
             const float w = wx * wy;
             total += w;
-            if (x < 0 || y < 0 || x >= f.size || y >= f.size) {
+            if (x < 0 || y < 0 || x >= f.width || y >= f.height) {
                 lit += w;
                 continue;
             }
-            const float stored = f.depth[size_t(y) * size_t(f.size) + size_t(x)];
+            const float stored = f.depth[size_t(y) * size_t(f.width) + size_t(x)];
             const float receiver = receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f);
             if (receiver - biasWorld <= stored) lit += w;
         }
@@ -129,5 +131,23 @@ TESSERA_HD float shadowMapVisibility(const ShadowMapLookup& map, Vec3 P, Vec3 N)
     return shadowMapFaceVisibility(f, f.lightFromShading.point(P), f.lightFromShading.vector(N), map.bias,
                                    map.filterWidth);
 }
+
+// ---- maps read from files (host only; shadow_map.cpp) ---------------------------------------------------
+
+// The affine part of m (its last row is taken to be 0 0 0 1).
+inline AffineFrame affineFrameOf(const Mat4& m) {
+    AffineFrame f;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 4; ++c) f.m[r][c] = float(m.m[r][c]);
+    return f;
+}
+
+// The face of a depth map made by another view (a Display "zfile", MakeShadow's output), for lookups from
+// shading space: its light space is that view's camera space (worldToCamera), its texel mapping that
+// view's worldToNDC (RenderMan's NDC: x, y in [0, 1] from the top-left corner) times width and height.
+// Returns "" and fills `face` (all but `depth`), or says why the matrices are not those of a perspective
+// or orthographic camera looking along +z (skewed or off-axis projections are not read).
+std::string fileShadowMapFace(const Mat4& worldToCamera, const Mat4& worldToNDC, int width, int height,
+                              const Mat4& worldFromShading, ShadowMapFace& face);
 
 }  // namespace tessera

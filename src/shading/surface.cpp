@@ -18,8 +18,12 @@ void sampleLights(std::span<const ShadingLight> lights, std::span<const Material
         const Vec3 Nf = faceForward(points.N[i], points.I[i]);
         for (size_t l = 0; l < nL; ++l) {
             s[l] = sampleLight(lights[l], points.P[i]);
-            out.needsVisibility[i * nL + l] =
-                lights[l].castsShadows && s[l].valid && !s[l].ambient && dot(Nf, s[l].L) > 0.f;
+            const bool lit = s[l].valid && !s[l].ambient && dot(Nf, s[l].L) > 0.f;
+            out.needsVisibility[i * nL + l] = lights[l].castsShadows && lit;
+            // Maps read from files answer here, the same for every engine (shading/shadow_map.h).
+            if (lights[l].shadowMap && lit)
+                out.visibility[i * nL + l] =
+                    shadowMapVisibility(*lights[l].shadowMap, points.P[i], points.N[i]);
         }
     }
 }

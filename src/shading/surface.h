@@ -52,7 +52,8 @@ TESSERA_HD bool surfaceHasTracedLobes(MaterialType t) {
 }
 
 // Step 1: light samples for every point of the batch. Only lights that cast shadows (ShadingLight::
-// castsShadows) ask for visibility, and not where they face the point's back side (Nf.L <= 0).
+// castsShadows) ask for visibility, and not where they face the point's back side (Nf.L <= 0); lights
+// whose shadows are maps read from files (ShadingLight::shadowMap) get their visibility here.
 void sampleLights(std::span<const ShadingLight> lights, std::span<const Material> materials,
                   const SurfacePoints& points, LightSamples& out);
 
@@ -120,8 +121,8 @@ TESSERA_HD Color shadeSurfacePoint(const Material& m, Vec3 N, Vec3 I, const Ligh
 }
 
 // Steps 1-3 fused for a batch whose every visibility query answers "visible" (Reyes when no light casts
-// shadows):
-// the same light samples and accumulation, without storing the samples.
+// shadows and none reads a shadow-map file): the same light samples and accumulation, without storing
+// the samples.
 void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<const Material> materials,
                              const SurfacePoints& points, Color* Ci);
 
