@@ -85,8 +85,9 @@ AttributeEnd
     write("killeroo2", "two Killeroos (23064 bicubic patches)", 1024, 768, 40, [-560, 40, 200], [10, 10, -40],
           [0, 0, 1], 10, 5000, body)
 
-def bigguy_box():
+def bigguy_box(glossy=False):
     # Five walls (floor, ceiling, back, left, right) as bilinear patches around one Big Guy; open front.
+    # glossy: the floor and Big Guy are Surface "glossy" (paper 002 sec. 5.3.5's spreads 0.1 and 0.4).
     s, h = 6.0, 5.0
     def quad(p):
         return 'Patch "bilinear" "P" [ ' + " ".join(f"{v:g}" for pt in p for v in pt) + " ]\n"
@@ -104,15 +105,25 @@ LightSource "pointlight" 2 "intensity" [ 40 ] "from" [ 0 6 3 ]
 Surface "matte" "Ka" [ 1 ] "Kd" [ 0.9 ]
 """
     for name, col, pts in walls:
-        body += f"AttributeBegin # {name}\nColor [ {col[0]} {col[1]} {col[2]} ]\n" + quad(pts) + "AttributeEnd\n"
-    body += ('AttributeBegin # Big Guy\nColor [ 0.8 0.62 0.5 ]\n'
-             'Surface "plastic" "Ka" [ 1 ] "Kd" [ 0.8 ] "Ks" [ 0.35 ] "roughness" [ 0.15 ]\n'
+        gloss = ('Surface "glossy" "Ka" [ 1 ] "Kd" [ 0.45 ] "Ks" [ 0.5 ] "spread" [ 0.1 ] "samples" [ 4 ]\n'
+                 if glossy and name == "floor" else "")
+        body += f"AttributeBegin # {name}\nColor [ {col[0]} {col[1]} {col[2]} ]\n" + gloss + quad(pts) + "AttributeEnd\n"
+    surface = ('Surface "glossy" "Ka" [ 1 ] "Kd" [ 0.3 ] "Ks" [ 0.6 ] "roughness" [ 0.15 ] "spread" [ 0.4 ] '
+               '"samples" [ 4 ]\n' if glossy else
+               'Surface "plastic" "Ka" [ 1 ] "Kd" [ 0.8 ] "Ks" [ 0.35 ] "roughness" [ 0.15 ]\n')
+    body += ('AttributeBegin # Big Guy\nColor [ 0.8 0.62 0.5 ]\n' + surface +
              'ReadArchive "archives/bigguy_patches.rib"\nAttributeEnd\n')
-    write("bigguy_box", "Big Guy (3570 patches) in a five-walled box (a Cornell-box-like set for lighting work)",
-          800, 800, 48, [0, 2.5, 17.5], [0, 2, 0], [0, 1, 0], 0.5, 1000, body)
+    if glossy:
+        write("bigguy_box_glossy", "the Big Guy box with a glossy floor (spread 0.1) and a glossy Big Guy (spread "
+              "0.4), 4 reflection rays per camera hit (ray traced: --engine rt)",
+              400, 400, 48, [0, 2.5, 17.5], [0, 2, 0], [0, 1, 0], 0.5, 1000, body)
+    else:
+        write("bigguy_box", "Big Guy (3570 patches) in a five-walled box (a Cornell-box-like set for lighting work)",
+              800, 800, 48, [0, 2.5, 17.5], [0, 2, 0], [0, 1, 0], 0.5, 1000, body)
 
 if __name__ == "__main__":
     bigguy_grid("bigguy9", 3, 3)
     bigguy_grid("bigguy24", 6, 4)
     killeroo2()
     bigguy_box()
+    bigguy_box(glossy=True)

@@ -74,6 +74,7 @@ struct RenderArgs {
     bool noBlur = false;
     // Ray-traced light transport (docs/light_transport.md).
     std::string integrator = "direct", aoWeighting = "cosine";
+    std::string gloss = "paper";  // direct integrator: glossy reflection rays (shading/gloss.h)
     int aoSamples = 64;
     double aoDistance = 0;  // 0: unlimited
     std::string aovs;       // --aov z,N,id,...
@@ -377,6 +378,7 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
                     a.blurSampling, a.blurTile, a.blurPermutations, a.adaptive, a.adaptiveThreshold, a.format,
                     a.up));
     mix(std::to_string(a.lightSamples));
+    mix(a.gloss);
     return fmt::format("{:016x}", h);
 }
 
@@ -556,6 +558,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     settings.cullBackfaces = a.cullBackfaces;
     settings.rayBinning = !a.noRayBinning;
     settings.maxGridEdge = a.maxGridEdge;
+    settings.gloss = a.gloss == "microfacet" ? GlossModel::Microfacet : GlossModel::Paper;
     settings.integrator = a.integrator == "ao"     ? Integrator::AmbientOcclusion
                           : a.integrator == "path" ? Integrator::Path
                                                    : Integrator::Direct;
@@ -967,6 +970,12 @@ int main(int argc, char** argv) {
                      "rt: direct (lights, soft shadows of area lights, mirror, glass), path (path tracing: "
                      "diffuse and glossy interreflection, caustics) or ao (ambient occlusion, a grey image)")
         ->check(CLI::IsMember({"direct", "path", "ao"}))
+        ->capture_default_str();
+    render
+        ->add_option("--gloss", ra.gloss,
+                     "rt, --integrator direct: Surface \"glossy\" reflection rays: paper (paper 002's "
+                     "R + s(pu + qv), folded above the surface) or microfacet (the path tracer's GGX lobe)")
+        ->check(CLI::IsMember({"paper", "microfacet"}))
         ->capture_default_str();
     render
         ->add_option("--light-samples", ra.lightSamples,

@@ -13,6 +13,7 @@
 #include "film/blur_pattern.h"
 #include "film/film.h"
 #include "scene/scene.h"
+#include "shading/gloss.h"
 
 namespace tessera {
 
@@ -107,6 +108,8 @@ struct RenderSettings {
     int lightSamples = 0;
     // Path tracer: Russian roulette from this bounce on (survival by the path's throughput).
     int rouletteDepth = 3;
+    // Direct integrator: the glossy surfaces' reflection rays (shading/gloss.h, --gloss).
+    GlossModel gloss = GlossModel::Paper;
     bool cullBackfaces = false;
     // Camera and shadow rays may find their candidates by binning the boxes in a projection plane instead
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves

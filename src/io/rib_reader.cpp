@@ -832,6 +832,16 @@ class RibReader {
             }
         }
         applyShaderParams(shader->params, r, rest, m, what, diag_);
+        if (m.type == MaterialType::Glossy) {
+            if (!(m.glossSamples >= 1.f && m.glossSamples <= 4096.f) ||
+                m.glossSamples != std::floor(m.glossSamples))
+                diag_.fail(r.line, what + ": \"samples\" must be an integer from 1 to 4096, found " +
+                                       fmtNum(m.glossSamples));
+            if (!(m.spread <= 10.f))
+                diag_.fail(r.line,
+                           what + ": \"spread\" must be at most 10 (negative: from \"roughness\"), found " +
+                               fmtNum(m.spread));
+        }
         state_.attributes().surface = m;
     }
     // Displacement (RI spec 3.2, sec. 4.2.3 and appendix A): "bumpy" "Km" k "texturename" "file" (P += Km *

@@ -21,6 +21,8 @@ constexpr SurfaceParam kSpecularColor{"specularcolor", kColor, &Material::specul
 constexpr SurfaceParam kKr{"Kr", &Material::Kr};
 constexpr SurfaceParam kKt{"Kt", &Material::Kt};
 constexpr SurfaceParam kEta{"eta", &Material::eta};
+constexpr SurfaceParam kGlossSamples{"samples", &Material::glossSamples};
+constexpr SurfaceParam kSpread{"spread", &Material::spread};
 
 // Per shader: its own parameters, then (after "also") the others every surface accepts.
 constexpr SurfaceParam kMatteParams[] = {kKa, kKd, /* also */ kKs, kRoughness, kSpecularColor, kKr,
@@ -40,6 +42,18 @@ constexpr SurfaceParam kMirrorParams[] = {kKr,        /* also */ kKa, kKd, kKs,
 constexpr SurfaceParam kGlassParams[] = {kKr, kKt, kEta,       /* also */ kKa,
                                          kKd, kKs, kRoughness, kSpecularColor};
 
+// glossy: plastic's parameters plus the traced reflection's "samples" and "spread" (docs/light_transport.md).
+constexpr SurfaceParam kGlossyParams[] = {kKa,
+                                          kKd,
+                                          kKs,
+                                          kRoughness,
+                                          kSpecularColor,
+                                          kGlossSamples,
+                                          kSpread,
+                                          /* also */ kKr,
+                                          kKt,
+                                          kEta};
+
 constexpr SurfaceShader kSurfaceShaders[] = {
     {"matte", MaterialType::Matte, kMatteParams},
     {"plastic", MaterialType::Plastic, kPlasticParams},
@@ -49,6 +63,7 @@ constexpr SurfaceShader kSurfaceShaders[] = {
     {"glass", MaterialType::Glass, kGlassParams},
     {"shinymetal", MaterialType::ShinyMetal, kShinyMetalParams},
     {"paintedplastic", MaterialType::PaintedPlastic, kPlasticParams},
+    {"glossy", MaterialType::Glossy, kGlossyParams},
 };
 
 // Light parameters (RI spec 3.2, appendix A): "from" is the position of point and distant lights,

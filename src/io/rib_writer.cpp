@@ -82,6 +82,12 @@ void writeSurface(std::ostream& o, const Material& m, const Scene& scene) {
             o << "Surface \"glass\" \"Kr\" [" << num(m.Kr) << "] \"Kt\" [" << num(m.Kt) << "] \"eta\" ["
               << num(m.eta) << "]\n";
             break;
+        case MaterialType::Glossy:
+            o << "Surface \"glossy\" \"Ka\" [" << num(m.Ka) << "] \"Kd\" [" << num(m.Kd) << "] \"Ks\" ["
+              << num(m.Ks) << "] \"roughness\" [" << num(m.roughness) << "] \"specularcolor\" ["
+              << triple(m.specularColor) << "] \"samples\" [" << num(m.glossSamples) << "] \"spread\" ["
+              << num(m.spread) << "]\n";
+            break;
         case MaterialType::Plastic:
         case MaterialType::PaintedPlastic:
         default:

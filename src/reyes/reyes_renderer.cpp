@@ -40,7 +40,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         if (surfaceHasTracedLobes(m.type)) {
             // Mirror and glass get their local terms here; the traced part needs the ray tracer.
             result.warnings.push_back(
-                "the scene has mirror or glass surfaces: Reyes renders their highlights only; "
+                "the scene has mirror, glass or glossy surfaces: Reyes renders their highlights only; "
                 "reflections and refractions need --engine rt");
             break;
         }

@@ -193,6 +193,18 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
     // the hulls at the knots bound it at all times (and a straight camera-space path projects to a
     // straight raster path).
     const int knots = view.patchMoves(piece.patch) ? view.knotCount() : 1;
+    // The view's four side planes through the eye (perspective, pinhole): a hull wholly outside one of
+    // them at every knot is out of view even where it reaches behind the eye, which the raster bound
+    // cannot tell (a sky sphere around the camera would otherwise be split at the eye plane for ever).
+    const bool sidePlanes = pr.perspective && !view.lens;
+    float slope[4] = {0, 0, 0, 0};  // x/z and y/z of the cull window's edges: x0, x1, y0, y1
+    if (sidePlanes) {
+        const float ax = (view.cullX0 - pr.ox) / pr.sx, bx = (view.cullX1 - pr.ox) / pr.sx;
+        const float ay = (view.cullY0 - pr.oy) / pr.sy, by = (view.cullY1 - pr.oy) / pr.sy;
+        slope[0] = std::min(ax, bx), slope[1] = std::max(ax, bx);
+        slope[2] = std::min(ay, by), slope[3] = std::max(ay, by);
+    }
+    unsigned outsideAll = sidePlanes ? 0xfu : 0u;  // side planes that every knot's hull lies beyond
     bool anyInRange = false, straddles = false;
     float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
     float sharpW = 0, sharpH = 0;
@@ -206,6 +218,16 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
         const float grow = view.displacement && view.displacement->displaced(piece.patch)
                                ? view.displacement->radius[piece.patch]
                                : 0.f;
+        if (grow > 0.f) outsideAll = 0;  // displaced: the hull alone does not bound it
+        if (outsideAll) {
+            unsigned out = 0xfu;
+            for (int i = 0; i < count && out; ++i) {
+                const Vec3& q = hull[i];
+                out &= (q.x < slope[0] * q.z ? 1u : 0u) | (q.x > slope[1] * q.z ? 2u : 0u) |
+                       (q.y < slope[2] * q.z ? 4u : 0u) | (q.y > slope[3] * q.z ? 8u : 0u);
+            }
+            outsideAll &= out;
+        }
         if (grow > 0.f) {
             b.lo = b.lo - Vec3{grow, grow, grow};
             b.hi = b.hi + Vec3{grow, grow, grow};
@@ -230,7 +252,7 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
         }
         x0 = std::min(x0, kx0), y0 = std::min(y0, ky0), x1 = std::max(x1, kx1), y1 = std::max(y1, ky1);
     }
-    if (!anyInRange) return Verdict::Cull;
+    if (!anyInRange || outsideAll) return Verdict::Cull;
     if (!straddles) {
         if (x1 < view.cullX0 || x0 > view.cullX1 || y1 < view.cullY0 || y0 > view.cullY1)
             return Verdict::Cull;

@@ -16,6 +16,7 @@
 #include "rt/binning.h"
 #include "rt/ray_list.h"
 #include "rt/shadow_rays.h"
+#include "shading/gloss.h"
 #include "shading/hemisphere.h"
 #include "shading/path_bsdf.h"
 #include "shading/surface.h"
@@ -74,6 +75,7 @@ struct Frame {
     uint32_t seed;
     int lightSamples;  // --light-samples (0: each area light's own)
     int rouletteDepth;
+    GlossModel gloss;
 };
 
 // The per-pixel seed and sample index of tile sample s (the shared sampler's coordinates, film/sampler.h).
@@ -238,8 +240,10 @@ void addAreaLighting(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
     }
     ws.trace.occluded(ws.areaShadow, ws.areaBlocked);
     for (size_t k = 0; k < n; ++k) {
-        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        Material m = fr.scene.materials[pts.materialOf(k)];
         if (!surfaceUsesLights(m.type)) continue;
+        // A glossy surface's reflection rays see the light's surface: no highlight from it on top.
+        if (m.type == MaterialType::Glossy) m.Ks = 0.f;
         const LightSample* samples = ws.areaSamples.data() + k * slots;
         const uint32_t* ray = ws.areaRay.data() + k * slots;
         ws.radiance[k] += shadeSurfaceLights(
@@ -260,6 +264,33 @@ void addAreaLighting(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
 }
 
 // ---- end of shading ----------------------------------------------------------------------------------
+
+// The glossy reflection rays of hit k (ray r) into `ws.next` (shading/gloss.h): a camera hit traces the
+// material's "samples" rays, stratified by the sampler's BSDF pair (index x n + j: a power-of-two n is an
+// aligned block of the (0,2)-sequence); later hits one ray each (paper 002 sec. 5.3.5), from a pair
+// decorrelated by the ray's position in its generation.
+void addGlossRays(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t r, Workspace& ws) {
+    const RayList& rays = ws.rays;
+    const RayHit& rh = ws.hits[r];
+    const uint32_t s = rays.owner[r];
+    const Material& m = fr.scene.materials[pts.materialOf(k)];
+    const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
+    uint32_t pseed, index;
+    sampleCoordinates(ws.tile, s, fr.seed, pseed, index);
+    const bool camera = rays.kind[r] == kPrimary;
+    const int n = camera ? std::clamp(int(m.glossSamples), 1, 4096) : 1;
+    if (!camera) pseed = hash32(pseed ^ hash32(r * 0x9e3779b9u + uint32_t(rays.depth[r])));
+    for (int j = 0; j < n; ++j) {
+        const Sample2D u = sample2D(pseed, camera ? index * uint32_t(n) + uint32_t(j) : index, kDimBsdfU);
+        const GlossRay g = glossyReflection(m, fr.gloss, pts.N[k], pts.I[k], u.u, u.v, n);
+        if (!g.valid) continue;
+        const Color weight = rays.weight[r] * g.weight;
+        if (!(maxComponent(weight) > 1e-4f / float(n))) continue;
+        ws.next.push(pts.P[k] + Nf * fr.acc.offset, g.direction, 0.f, std::numeric_limits<float>::infinity(),
+                     s, weight, rh.patch, kReflection, uint8_t(rays.depth[r] + 1), Vec2{rh.h.u, rh.h.v}, Nf,
+                     rays.time[r]);
+    }
+}
 
 // Accumulates the hits' radiance into the tile in ray order (deterministic), writes the film's attributes
 // of camera-ray hits and the next generation (the traced lobes) to `ws.next`.
@@ -284,9 +315,9 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
         tile.g[s] += c.y;
         tile.b[s] += c.z;
         if (rays.depth[r] >= fr.maxDepth) continue;
+        const Material& m = fr.scene.materials[pts.materialOf(k)];
         TracedLobe lobes[2];
-        const int nLobes =
-            tracedLobes(fr.scene.materials[pts.materialOf(k)], pts.I[k], pts.N[k], w, 1e-4f, lobes);
+        const int nLobes = tracedLobes(m, pts.I[k], pts.N[k], w, 1e-4f, lobes);
         for (int j = 0; j < nLobes; ++j) {
             const bool t = lobes[j].transmitted;
             ws.next.push(pts.P[k] + Nf * (t ? -fr.acc.offset : fr.acc.offset), lobes[j].direction, 0.f,
@@ -294,6 +325,7 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
                          t ? kRefraction : kReflection, uint8_t(rays.depth[r] + 1), Vec2{rh.h.u, rh.h.v},
                          t ? -Nf : Nf, rays.time[r]);
         }
+        if (m.type == MaterialType::Glossy) addGlossRays(fr, pts, k, r, ws);
     }
 }
 
@@ -849,7 +881,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
                    areaLights,
                    settings.seed,
                    settings.lightSamples,
-                   std::max(1, settings.rouletteDepth)};
+                   std::max(1, settings.rouletteDepth),
+                   settings.gloss};
 
     // Tiles of at most 64x64 pixels and about 16k samples: the wavefront's ray and candidate lists scale
     // with the samples in a tile, so more samples per pixel means smaller tiles and bounded memory; at 1

@@ -97,7 +97,17 @@ struct Light {
     float shadowWidth = 1.f;
 };
 
-enum class MaterialType { Matte, Plastic, Metal, ShinyMetal, PaintedPlastic, Constant, Mirror, Glass };
+enum class MaterialType {
+    Matte,
+    Plastic,
+    Metal,
+    ShinyMetal,
+    PaintedPlastic,
+    Constant,
+    Mirror,
+    Glass,
+    Glossy
+};
 
 // Parameters of the RI standard surface shaders (RI spec 3.2, appendix A), plus mirror and glass.
 struct Material {
@@ -107,6 +117,10 @@ struct Material {
     float Ka = 1.f, Kd = 1.f, Ks = 0.5f, roughness = 0.1f;
     Color specularColor{1, 1, 1};
     float Kr = 1.f, Kt = 1.f, eta = 1.5f;
+    // glossy (docs/light_transport.md): reflection rays per camera hit of the direct integrator (later
+    // hits trace one, as paper 002 sec. 5.3.5), and the spread s of the paper's perturbed reflection
+    // R + s (p u + q v) (negative: the GGX alpha of `roughness`, the path tracer's lobe width).
+    float glossSamples = 4.f, spread = -1.f;
     // paintedplastic's "texturename": index into Scene::textures (-1: none, Cs alone).
     int32_t texture = -1;
 };

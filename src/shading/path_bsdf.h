@@ -76,6 +76,7 @@ TESSERA_HD PathBsdf pathBsdfOf(const Material& m, Color Ct = Color{1, 1, 1}) {
             b.glossy = m.specularColor * m.Ks;
             break;
         case MaterialType::Plastic:
+        case MaterialType::Glossy:
         default:
             b.diffuse = m.Cs * m.Kd;
             b.glossy = m.specularColor * m.Ks;

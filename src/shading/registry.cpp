@@ -15,6 +15,7 @@ constexpr std::array kSurfaces = {
     SurfaceShaderInfo{"constant", MaterialType::Constant, false},
     SurfaceShaderInfo{"mirror", MaterialType::Mirror, true},
     SurfaceShaderInfo{"glass", MaterialType::Glass, true},
+    SurfaceShaderInfo{"glossy", MaterialType::Glossy, true},
 };
 
 constexpr std::array kLights = {
@@ -95,6 +96,9 @@ Material defaultMaterial(MaterialType type) {
         case MaterialType::Glass:
             m.Kr = 1, m.Kt = 1, m.eta = 1.5f;
             m.Ka = 0, m.Kd = 0;
+            break;
+        case MaterialType::Glossy:  // plastic's terms, its Ks the glossy reflection's weight
+            m.Ka = 1, m.Kd = 0.5f, m.Ks = 0.5f, m.roughness = 0.1f;
             break;
     }
     return m;

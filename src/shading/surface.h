@@ -48,7 +48,7 @@ TESSERA_HD bool surfaceUsesLights(MaterialType t) {
 }
 // Whether part of a surface's response is traced (mirror and glass): Reyes shades only the local part.
 TESSERA_HD bool surfaceHasTracedLobes(MaterialType t) {
-    return t == MaterialType::Mirror || t == MaterialType::Glass;
+    return t == MaterialType::Mirror || t == MaterialType::Glass || t == MaterialType::Glossy;
 }
 
 // Step 1: light samples for every point of the batch. Only lights that cast shadows (ShadingLight::
@@ -103,9 +103,12 @@ TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t li
             return m.Os * (m.Cs * Ct * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
         // Mirror and glass: the RI plastic terms with their own Ka, Kd, Ks (defaults 0, 0, 0.5: a highlight)
         // as the local part; reflection and refraction are traced lobes.
+        // Glossy: plastic's terms too; its reflection of everything but the delta lights is traced
+        // (glossyReflection), so area lights add no highlight to it (rt/rt_renderer.cpp).
         case MaterialType::Plastic:
         case MaterialType::Mirror:
         case MaterialType::Glass:
+        case MaterialType::Glossy:
         default:
             return m.Os * (m.Cs * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
     }
