@@ -620,7 +620,7 @@ void setField(const rib::ShaderParam<Target>& row, double v, Target& target) {
 bool sameMaterialFields(const Material& a, const Material& b) {
     return a.type == b.type && a.Cs == b.Cs && a.Os == b.Os && a.Ka == b.Ka && a.Kd == b.Kd && a.Ks == b.Ks &&
            a.roughness == b.roughness && a.specularColor == b.specularColor && a.Kr == b.Kr && a.Kt == b.Kt &&
-           a.eta == b.eta;
+           a.eta == b.eta && a.glossSamples == b.glossSamples && a.spread == b.spread;
 }
 
 }  // namespace
@@ -630,7 +630,8 @@ TEST(RibShaderTables, EverySurfaceRowSetsTheFieldItNames) {
     for (const rib::SurfaceShader& shader : rib::surfaceShaders()) {
         for (size_t k = 0; k < shader.params.size(); ++k) {
             const rib::ShaderParam<Material>& row = shader.params[k];
-            const double v = 0.3 + 0.125 * double(k);  // distinct from every default
+            // Distinct from every default; glossy's "samples" is a count of at least 1.
+            const double v = std::string(row.name) == "samples" ? 8.0 + double(k) : 0.3 + 0.125 * double(k);
             SCOPED_TRACE(std::string(shader.name) + " " + row.name);
             Loaded l = load(scene("", std::string("Surface \"") + shader.name + "\" \"" + row.name + "\" " +
                                           ribValue(row.type, v)));

@@ -75,6 +75,8 @@ struct RenderArgs {
     // Ray-traced light transport (docs/light_transport.md).
     std::string integrator = "direct", aoWeighting = "cosine";
     std::string gloss = "paper";  // direct integrator: glossy reflection rays (shading/gloss.h)
+    int passes = 1;               // progressive: the samples per pixel in this many passes
+    bool writePartial = false;    // write the image after every pass, and keep it when interrupted
     int aoSamples = 64;
     double aoDistance = 0;  // 0: unlimited
     std::string aovs;       // --aov z,N,id,...
@@ -379,12 +381,15 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
                     a.up));
     mix(std::to_string(a.lightSamples));
     mix(a.gloss);
+    mix(std::to_string(a.passes));
     return fmt::format("{:016x}", h);
 }
 
 int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     // Mistakes first, before anything is loaded: options, then the files the render will write.
     if (a.spp < 0 || a.spp > kMaxSpp) fail(fmt::format("error: --spp must be between 1 and {}", kMaxSpp));
+    if (a.writePartial && a.passes < 2)
+        fail("error: --write-partial writes the image after each pass: give --passes N (N >= 2)");
     if (a.threads < 0) fail("error: --threads must be >= 0 (0 = all cores)");
     if (a.shadingRate < 0 || !std::isfinite(a.shadingRate)) fail("error: --shading-rate must be > 0");
     if (a.bucketSize < 4 || a.bucketSize > 1024) fail("error: --bucket-size must be between 4 and 1024");
@@ -406,6 +411,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     if (a.adaptive) {
         if (a.engine != "rt") fail("error: --adaptive is ray traced: use it with --engine rt");
         if (a.spp > 0) fail("error: --adaptive chooses the samples per pixel itself: drop --spp");
+        if (a.passes > 1) fail("error: --adaptive renders in one pass: drop --passes");
         if (a.adaptiveThresholdGiven && !(a.adaptiveThreshold >= 0 && std::isfinite(a.adaptiveThreshold)))
             fail(
                 fmt::format("error: --adaptive-threshold must be a number >= 0 (0: refine every subpixel, "
@@ -601,26 +607,89 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     };
     settings.cancel = &gCancel;
 
+    // Progressive (--passes N): the samples per pixel split into N passes of spp / N, each its own
+    // independent estimate (its own scramble seed), averaged as they finish; --write-partial writes the
+    // average after every pass, so an interrupted render keeps what converged.
+    const int passes = std::max(1, a.passes);
+    const int totalSpp = scene.image.pixelSamplesX * scene.image.pixelSamplesY;
+    if (passes > 1) {
+        if (totalSpp % passes != 0)
+            fail(
+                fmt::format("error: --passes {} does not divide the {} samples per pixel", passes, totalSpp));
+        splitSamplesPerPixel(totalSpp / passes, scene.image.pixelSamplesX, scene.image.pixelSamplesY);
+    }
     progress.begin();
     auto t0 = std::chrono::steady_clock::now();
     RenderResult result;
-    try {
-        result = render(scene, settings);
-    } catch (const std::invalid_argument& e) {
-        fail(std::string("error: ") + e.what());
-    } catch (const std::bad_alloc&) {
-        fmt::print(stderr, "error: out of memory while rendering {}: no image written\n", a.scene);
-        return 1;
+    Image sum;  // passes > 1: the sum of the finished passes' RGBA
+    int passesDone = 0;
+    auto average = [&]() {
+        Image img = result.image;
+        for (size_t i = 0; i < img.rgba.size(); ++i) img.rgba[i] = sum.rgba[i] / float(passesDone);
+        return img;
+    };
+    const uint32_t baseSeed = settings.seed;
+    for (int pass = 0; pass < passes; ++pass) {
+        RenderResult r;
+        settings.seed = baseSeed + uint32_t(pass) * 0x9e3779b9u;  // independent scrambles per pass
+        if (passes > 1) {
+            const int64_t before = int64_t(pass);
+            settings.progress = [&progress, before, passes](auto done, auto total) {
+                progress.update(before * int64_t(total) + int64_t(done), int64_t(total) * passes);
+            };
+        }
+        try {
+            r = render(scene, settings);
+        } catch (const std::invalid_argument& e) {
+            fail(std::string("error: ") + e.what());
+        } catch (const std::bad_alloc&) {
+            fmt::print(stderr, "error: out of memory while rendering {}: no image written\n", a.scene);
+            return 1;
+        }
+        if (r.cancelled) {
+            result.cancelled = true;
+            break;
+        }
+        if (pass == 0) {
+            result = std::move(r);
+            sum = result.image;
+        } else {
+            for (size_t i = 0; i < sum.rgba.size(); ++i) sum.rgba[i] += r.image.rgba[i];
+            result.stats = std::move(r.stats);
+        }
+        ++passesDone;
+        if (a.writePartial && pass + 1 < passes) {
+            try {
+                ExrMetadata meta = exrMetadata(scene.camera, -1.0);
+                meta.displayWidth = scene.camera.width, meta.displayHeight = scene.camera.height;
+                OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma,
+                                   scene.image.srgbOutput, &meta};
+                writeImage(output, average(), enc);
+            } catch (const std::exception& e) {
+                fmt::print(stderr, "error: {}\n", e.what());
+                return 1;
+            }
+        }
     }
+    if (passesDone > 1) result.image = average();
+    settings.seed = baseSeed;
     double renderMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     if (!a.quiet)
         for (const std::string& w : result.warnings) fmt::print(stderr, "warning: {}\n", w);
     if (result.cancelled) {
-        fmt::print(stderr, "\ninterrupted after {:.0f} ms: no image written\n", renderMs);
+        if (a.writePartial && passesDone > 0)
+            fmt::print(stderr, "\ninterrupted after {:.0f} ms: {} kept {} of {} passes ({} spp)\n", renderMs,
+                       output, passesDone, passes, passesDone * totalSpp / passes);
+        else
+            fmt::print(stderr, "\ninterrupted after {:.0f} ms: no image written\n", renderMs);
         return 130;
     }
     progress.finish();
+    if (passes > 1) {
+        result.stats["passes"] = passes;
+        result.stats["spp"] = totalSpp;
+    }
 
     nlohmann::json& s = result.stats;
     s["scene"] = a.scene;
@@ -971,6 +1040,14 @@ int main(int argc, char** argv) {
                      "diffuse and glossy interreflection, caustics) or ao (ambient occlusion, a grey image)")
         ->check(CLI::IsMember({"direct", "path", "ao"}))
         ->capture_default_str();
+    render
+        ->add_option("--passes", ra.passes,
+                     "Progressive: render the samples per pixel in N passes of spp/N (independent estimates, "
+                     "averaged); N must divide the samples per pixel")
+        ->check(intRange(1, 65536));
+    render->add_flag("--write-partial", ra.writePartial,
+                     "With --passes: write the average after every pass, and keep it when interrupted "
+                     "(Ctrl-C)");
     render
         ->add_option("--gloss", ra.gloss,
                      "rt, --integrator direct: Surface \"glossy\" reflection rays: paper (paper 002's "

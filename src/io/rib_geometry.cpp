@@ -16,9 +16,7 @@ namespace tessera::rib {
 namespace {
 
 bool sameMaterial(const Material& a, const Material& b) {
-    return a.type == b.type && a.texture == b.texture && a.Cs == b.Cs && a.Os == b.Os && a.Ka == b.Ka &&
-           a.Kd == b.Kd && a.Ks == b.Ks && a.roughness == b.roughness && a.specularColor == b.specularColor &&
-           a.Kr == b.Kr && a.Kt == b.Kt && a.eta == b.eta;
+    return a == b;  // every field (glossy's samples and spread too)
 }
 
 bool isBezier(const Basis& b) {

@@ -123,6 +123,7 @@ struct Material {
     float glossSamples = 4.f, spread = -1.f;
     // paintedplastic's "texturename": index into Scene::textures (-1: none, Cs alone).
     int32_t texture = -1;
+    bool operator==(const Material&) const = default;
 };
 
 // A surface's RI texture coordinates s, t (RI spec 3.2, sec. 4.2.7 and 5.2): the values at its (u,v)
