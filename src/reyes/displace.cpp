@@ -149,8 +149,9 @@ DisplacedVertex displaceVertex(const ReyesView& view, const DisplacementFrame& f
     int count = 0;
     if (owner && owner->boundary >= 0) {
         const bool degenerate = degenerateEdge(bp, owner->boundary);
-        if (degenerate || k == 0 || k == owner->total) {
-            const Vec2 cuv = (degenerate || k == 0) ? owner->a : owner->b;
+        const float w = owner->param(k);  // on the source edge: exactly 0 and 1 at its corners
+        if (degenerate || w == 0.f || w == 1.f) {
+            const Vec2 cuv = (degenerate || w == 0.f) ? owner->a : owner->b;
             const int32_t g = frame.cornerGroup[size_t(patch) * 4 + size_t(cornerIndex(cuv))];
             if (g >= 0) {
                 for (uint32_t m = frame.groupStart[size_t(g)]; m < frame.groupStart[size_t(g) + 1]; ++m) {
@@ -165,7 +166,6 @@ DisplacedVertex displaceVertex(const ReyesView& view, const DisplacementFrame& f
                 Vec3 cp[4];
                 Vec2 a, b;
                 canonicalBoundary(view.patches[q], nb % 4, cp, a, b);
-                const float w = float(k) / float(owner->total);
                 const Vec2 uvq{a.x * (1.f - w) + b.x * w, a.y * (1.f - w) + b.y * w};
                 // In patch (then edge) order, so both sides add the same two terms in the same order.
                 const bool neighbourFirst =

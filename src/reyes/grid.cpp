@@ -177,7 +177,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             for (int v = 0; v < count; ++v) {
                 Vec3 P;
                 if (owners[v] >= 0 && e[owners[v]].boundary >= 0)
-                    P = evalCurve(curve[owners[v]], float(lattice[v]) / float(e[owners[v]].total));
+                    P = evalCurve(curve[owners[v]], e[owners[v]].param(lattice[v]));
                 else if (owners[v] >= 0)
                     P = latticePosition(at, e[owners[v]], lattice[v]);  // an interior line: through the patch
                 else

@@ -103,6 +103,11 @@ PieceEdge quadricBoundaryEdge(const ReyesView& view, const PlacedQuadric& pq, in
     return edge;
 }
 
+// The (u,v) at parameter s of an edge's source line, from canonical endpoint a (s = 0) to b (s = 1).
+Vec2 lerpUV(const PieceEdge& e, float s) {
+    return {e.a.x * (1.f - s) + e.b.x * s, e.a.y * (1.f - s) + e.b.y * s};
+}
+
 // A new interior source edge from (u,v) point p to q, walked p -> q by the piece that owns it.
 template <class PointAt>
 PieceEdge interiorEdge(const ReyesView& view, PointAt&& surfaceAt, Vec2 p, Vec2 q, float side) {
@@ -297,7 +302,7 @@ Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k) {
         Vec3 cp[4];
         Vec2 a, b;
         canonicalBoundary(patch, e.boundary, cp, a, b);
-        return evalCurve(cp, float(k) / float(e.total));
+        return evalCurve(cp, e.param(k));
     }
     Vec2 uv = latticeUV(e, k);
     return evalPatch(patch, uv.x, uv.y);
@@ -305,11 +310,34 @@ Vec3 latticePosition(const BezierPatch& patch, const PieceEdge& e, int k) {
 
 namespace {
 
+// Cut edge e for a split: an edge measured above the grid limit at the parametric middle of its
+// interval, each half measured again by `measure(e, s0, s1)` (pixels); any other edge at its lattice
+// middle (cutEdge). `first` runs from the piece's start corner to the cut. Returns the cut's (u,v).
+template <class Measure>
+Vec2 cutPieceEdge(const ReyesView& view, const PieceEdge& e, bool roundUp, float side, Measure&& measure,
+                  PieceEdge& first, PieceEdge& second) {
+    if (!e.collapsed && e.total > view.maxGridEdge && e.k0 == 0 && e.k1 == e.total) {
+        const float sm = 0.5f * (e.s0 + e.s1);
+        PieceEdge lower = e, upper = e;
+        lower.s1 = sm, upper.s0 = sm;
+        setEdgeLattice(lower, measure(e, e.s0, sm), side);
+        setEdgeLattice(upper, measure(e, sm, e.s1), side);
+        first = e.reversed ? upper : lower;
+        second = e.reversed ? lower : upper;
+        return latticeUV(lower, lower.total);  // = param sm exactly
+    }
+    int k;
+    cutEdge(e, roundUp, k, first, second);
+    return latticeUV(e, k);
+}
+
 // Split and cull one surface's (u,v) square into pieces: `root` has its boundary edges, `hullOf` bounds
-// a rectangle of it, `surfaceAt` evaluates a point (for interior split lines).
-template <class SurfaceAt>
+// a rectangle of it, `surfaceAt` evaluates a point (for interior split lines), `measure(edge, s0, s1)`
+// the projected length of part [s0, s1] of an edge's source curve, evaluated exactly as when the edge was
+// made (so that pieces sharing it agree).
+template <class SurfaceAt, class Measure>
 void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hullOf, SurfaceAt&& surfaceAt,
-                 float side, std::vector<Piece>& out, SplitCounters& counters) {
+                 Measure&& measure, float side, std::vector<Piece>& out, SplitCounters& counters) {
     size_t before = out.size();
     std::vector<SplitJob> stack;
     stack.push_back({root, 0});
@@ -345,18 +373,14 @@ void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hull
         ++counters.splits;
         Piece lo = p, hi = p;
         if (acrossU) {
-            int k0, k2;
-            cutEdge(p.edge[0], false, k0, lo.edge[0], hi.edge[0]);
-            cutEdge(p.edge[2], true, k2, lo.edge[2], hi.edge[2]);
-            Vec2 m0 = latticeUV(p.edge[0], k0), m2 = latticeUV(p.edge[2], k2);
+            const Vec2 m0 = cutPieceEdge(view, p.edge[0], false, side, measure, lo.edge[0], hi.edge[0]);
+            const Vec2 m2 = cutPieceEdge(view, p.edge[2], true, side, measure, lo.edge[2], hi.edge[2]);
             PieceEdge mid = interiorEdge(view, surfaceAt, m0, m2, side);
             lo.uv[1] = m0, lo.uv[2] = m2, lo.edge[1] = mid;
             hi.uv[0] = m0, hi.uv[3] = m2, hi.edge[3] = mid;
         } else {
-            int k3, k1;
-            cutEdge(p.edge[3], false, k3, lo.edge[3], hi.edge[3]);
-            cutEdge(p.edge[1], true, k1, lo.edge[1], hi.edge[1]);
-            Vec2 m3 = latticeUV(p.edge[3], k3), m1 = latticeUV(p.edge[1], k1);
+            const Vec2 m3 = cutPieceEdge(view, p.edge[3], false, side, measure, lo.edge[3], hi.edge[3]);
+            const Vec2 m1 = cutPieceEdge(view, p.edge[1], true, side, measure, lo.edge[1], hi.edge[1]);
             PieceEdge mid = interiorEdge(view, surfaceAt, m3, m1, side);
             lo.uv[3] = m3, lo.uv[2] = m1, lo.edge[2] = mid;
             hi.uv[0] = m3, hi.uv[1] = m1, hi.edge[0] = mid;
@@ -391,8 +415,19 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
     Piece root = rootPiece(patchIndex);
     for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side);
     const PieceHull hull{view, &patch, nullptr};
-    splitPieces(
-        view, root, hull, [&](Vec2 uv) { return evalPatch(patch, uv.x, uv.y); }, side, out, counters);
+    auto surfaceAt = [&](Vec2 uv) { return evalPatch(patch, uv.x, uv.y); };
+    // Part of an edge's source curve: a boundary through its canonical control points (as boundaryEdge
+    // measured it, so the neighbouring patch measures the same), a split line through the patch.
+    auto measure = [&](const PieceEdge& e, float s0, float s1) {
+        if (e.boundary >= 0) {
+            Vec3 cp[4];
+            Vec2 a, b;
+            canonicalBoundary(patch, e.boundary, cp, a, b);
+            return measureLength(view, [&](float t) { return evalCurve(cp, s0 + (s1 - s0) * t); });
+        }
+        return measureLength(view, [&](float t) { return surfaceAt(lerpUV(e, s0 + (s1 - s0) * t)); });
+    };
+    splitPieces(view, root, hull, surfaceAt, measure, side, out, counters);
 }
 
 void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index, float side,
@@ -401,8 +436,11 @@ void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index
     Piece root = rootPiece(index);
     for (int e = 0; e < 4; ++e) root.edge[e] = quadricBoundaryEdge(view, pq, e, side);
     const PieceHull hull{view, nullptr, &pq};
-    splitPieces(
-        view, root, hull, [&](Vec2 uv) { return quadricPoint(pq, uv); }, side, out, counters);
+    auto surfaceAt = [&](Vec2 uv) { return quadricPoint(pq, uv); };
+    auto measure = [&](const PieceEdge& e, float s0, float s1) {
+        return measureLength(view, [&](float t) { return surfaceAt(lerpUV(e, s0 + (s1 - s0) * t)); });
+    };
+    splitPieces(view, root, hull, surfaceAt, measure, side, out, counters);
 }
 
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,

@@ -20,10 +20,16 @@
 
 namespace tessera {
 
-// One edge of a piece: the sub-interval [k0,k1] of a source edge's lattice 0..total.
+// One edge of a piece: the sub-interval [k0,k1] of a lattice 0..total spread uniformly over the parameter
+// interval [s0, s1] of a source edge (a patch boundary or a split line, from canonical endpoint a at s = 0
+// to b at s = 1). An edge measured at more than the grid limit is never cut on its lattice: it is cut at
+// the parametric middle of [s0, s1] and each half is measured again (DiagSplit's rule, Fisher et al.
+// 2009), so a lattice adapts to where the edge is long on screen; both pieces that share an edge make the
+// same cuts, since each decision depends on the edge alone.
 struct PieceEdge {
-    Vec2 a, b;          // canonical endpoints of the source edge, in the patch's (u,v) domain
-    int32_t total = 1;  // T: segments of the whole source edge
+    Vec2 a, b;                 // canonical endpoints of the source edge, in the patch's (u,v) domain
+    float s0 = 0.f, s1 = 1.f;  // the part of the source edge this lattice spans
+    int32_t total = 1;         // T: segments of the lattice over [s0, s1]
     int32_t k0 = 0, k1 = 1;
     int8_t boundary = -1;   // 0..3: source is that patch boundary curve (see patchEdge); -1: interior line
     bool reversed = false;  // the piece walks this edge from k1 down to k0
@@ -37,6 +43,11 @@ struct PieceEdge {
     int endK() const { return reversed ? k0 : k1; }
     // Lattice index of the s-th vertex from the piece's start corner.
     int latticeAt(int s) const { return reversed ? k1 - s : k0 + s; }
+    // Source-edge parameter of lattice point k (exactly s0 and s1 at the ends).
+    float param(int k) const {
+        const float w = float(k) / float(total);
+        return s0 * (1.f - w) + s1 * w;
+    }
 };
 
 // A diceable region of one patch: corners c00, c10, c11, c01 in (u,v) and edges
@@ -104,7 +115,7 @@ struct SplitCounters {
 void canonicalBoundary(const BezierPatch& patch, int e, Vec3 cp[4], Vec2& a, Vec2& b);
 
 inline Vec2 latticeUV(const PieceEdge& e, int k) {
-    float w = float(k) / float(e.total);
+    const float w = e.param(k);
     // a*(1-w) + b*w is exact at both ends (w = 0, 1), so corners are bit-identical across pieces.
     return {e.a.x * (1.f - w) + e.b.x * w, e.a.y * (1.f - w) + e.b.y * w};
 }
