@@ -172,3 +172,56 @@ TEST(Aov, OcclusionPlaneAndBadRequests) {
 }
 
 }  // namespace
+
+// The surface AOVs on the two planes (left matte Kd 0.6 Cs (0.2 0.4 0.8), right a mirror): albedo Kd Cs
+// and white for the mirror, Cs, camera-space P on the plane (z = 5 or 7, x and y along the pixel's line of
+// sight), Ci and a equal to the image's own colour and alpha; colour layers named R, G, B.
+TEST(Aov, AlbedoPositionSurfaceColourCiAndAlphaInBothEngines) {
+    const fs::path dir = fs::temp_directory_path() / ("tessera_aov_surface_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    const fs::path rib = dir / "surface.rib";
+    std::ofstream(rib) << "Format 64 48 1\nPixelSamples 2 2\nProjection \"perspective\" \"fov\" 40\n"
+                          "WorldBegin\nLightSource \"ambientlight\" 1 \"intensity\" 1\n"
+                          "AttributeBegin\nColor [0.2 0.4 0.8]\nSurface \"matte\" \"Kd\" [0.6]\n"
+                          "Patch \"bilinear\" \"P\" [-20 -20 5  0 -20 5  -20 20 5  0 20 5]\nAttributeEnd\n"
+                          "AttributeBegin\nSurface \"mirror\"\n"
+                          "Patch \"bilinear\" \"P\" [0 -20 7  20 -20 7  0 20 7  20 20 7]\nAttributeEnd\n"
+                          "WorldEnd\n";
+    const float half = std::tan(20.f * 3.14159265f / 180.f);  // the view's half-height at z = 1
+    for (const char* engine : {"reyes", "rt"}) {
+        const fs::path exr = dir / (std::string(engine) + ".exr");
+        std::string out;
+        ASSERT_EQ(runTessera("render " + rib.string() + " --engine " + engine +
+                                 " --aov albedo,P,Cs,Ci,a -q -o " + exr.string(),
+                             &out),
+                  0)
+            << out;
+        const Channels c = readChannels(exr);
+        for (const char* name : {"albedo.R", "albedo.G", "albedo.B", "P.X", "P.Y", "P.Z", "Cs.R", "Cs.G",
+                                 "Cs.B", "Ci.R", "Ci.G", "Ci.B", "a"})
+            ASSERT_TRUE(c.f.count(name)) << engine << " lacks channel " << name;
+        for (int y = 2; y < kH - 2; ++y)
+            for (int x = 2; x < kW - 2; ++x) {
+                if (std::abs(x + 0.5 - kW / 2.0) < 2) continue;
+                const size_t i = size_t(y) * kW + x;
+                const bool left = x < kW / 2;
+                const float z = left ? 5.f : 7.f;
+                SCOPED_TRACE(std::string(engine) + " " + std::to_string(x) + "," + std::to_string(y));
+                EXPECT_NEAR(c.f.at("albedo.R")[i], left ? 0.12f : 1.f, 1e-4);
+                EXPECT_NEAR(c.f.at("albedo.G")[i], left ? 0.24f : 1.f, 1e-4);
+                EXPECT_NEAR(c.f.at("albedo.B")[i], left ? 0.48f : 1.f, 1e-4);
+                EXPECT_NEAR(c.f.at("Cs.B")[i], left ? 0.8f : 1.f, 1e-4);
+                EXPECT_NEAR(c.f.at("P.Z")[i], z, 1e-3);
+                // The filtered P of a plane is the plane's point at the filter's centre of weight: within
+                // a pixel's width of the pixel centre's line of sight.
+                const float px = (2.f * (x + 0.5f) / kH - float(kW) / kH) * half * z;
+                const float py = (1.f - 2.f * (y + 0.5f) / kH) * half * z;
+                const float pixel = 2.f * half * z / kH;
+                EXPECT_NEAR(c.f.at("P.X")[i], px, pixel);
+                EXPECT_NEAR(c.f.at("P.Y")[i], py, pixel);
+                EXPECT_FLOAT_EQ(c.f.at("a")[i], c.f.at("A")[i]);
+                EXPECT_NEAR(c.f.at("Ci.G")[i], c.f.at("G")[i], 2e-3f);  // RGB is half precision
+            }
+    }
+    fs::remove_all(dir);
+}

@@ -107,8 +107,9 @@ struct AovRequest {
     uint32_t channels = 0;
     std::vector<std::string> planes;  // written by an engine under this name (occlusion)
     std::vector<std::string> names;   // as given
+    bool ci = false, alpha = false;   // Ci and a: the image's own colour and alpha as layers too
 };
-constexpr const char* kAovNames = "z, N, id, shadows, textured, occlusion";
+constexpr const char* kAovNames = "z, N, id, shadows, textured, occlusion, albedo, P, Cs, Ci, a";
 std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
     AovRequest r;
     if (list.empty()) return r;
@@ -125,6 +126,16 @@ std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
             r.channels |= kChannelHasTexture;
         else if (name == "occlusion")
             r.planes.push_back(name);
+        else if (name == "albedo")
+            r.channels |= kChannelAlbedo;
+        else if (name == "P")
+            r.channels |= kChannelPosition;
+        else if (name == "Cs")
+            r.channels |= kChannelSurfaceColor;
+        else if (name == "Ci")
+            r.ci = true;
+        else if (name == "a")
+            r.alpha = true;
         else {
             bad = name;
             return std::nullopt;
@@ -734,10 +745,25 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         }
         OutputEncoding enc{scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput,
                            &meta};
-        if (depthDisplay)
+        if (depthDisplay) {
             writeDepthMap(output, depthMapOf(result.image, meta, scene.image.displayType));
-        else
-            writeImage(output, result.image, enc);
+        } else {
+            // Ci and a: the colour (premultiplied) and alpha as named layers beside RGBA.
+            Image& img = result.image;
+            const size_t n = size_t(img.width) * size_t(img.height);
+            if (aovs->ci) {
+                ImagePlane ci{"Ci", 3, false, true, std::vector<float>(n * 3), {}};
+                for (size_t i = 0; i < n; ++i)
+                    for (int c = 0; c < 3; ++c) ci.values[i * 3 + size_t(c)] = img.rgba[i * 4 + size_t(c)];
+                img.planes.push_back(std::move(ci));
+            }
+            if (aovs->alpha) {
+                ImagePlane alpha{"a", 1, false, false, std::vector<float>(n), {}};
+                for (size_t i = 0; i < n; ++i) alpha.values[i] = img.rgba[i * 4 + 3];
+                img.planes.push_back(std::move(alpha));
+            }
+            writeImage(output, img, enc);
+        }
         if (!a.adaptiveMap.empty()) writeAdaptiveMap(a.adaptiveMap, result);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);
     } catch (const std::exception& e) {

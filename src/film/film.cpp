@@ -37,6 +37,9 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     sized(normalZ, kChannelNormal, 0.f);
     sized(shadowCount, kChannelShadowCount, uint8_t(0));
     sized(hasTexture, kChannelHasTexture, uint8_t(0));
+    sized(albedo, kChannelAlbedo, Vec3{0, 0, 0});
+    sized(position, kChannelPosition, Vec3{0, 0, 0});
+    sized(surfaceColor, kChannelSurfaceColor, Vec3{0, 0, 0});
     aovNames = aovNames_;
     aovValues.resize(aovNames.size());
     for (auto& v : aovValues) v.assign(n, 0.f);
@@ -96,11 +99,13 @@ void SampleTile::setBlur(const BlurPattern* pattern) {
 
 void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovNames) {
     const size_t n = size_t(width) * height;
-    auto add = [&](const std::string& name, int components, bool integer, float background) {
+    auto add = [&](const std::string& name, int components, bool integer, float background,
+                   bool color = false) {
         ImagePlane p;
         p.name = name;
         p.components = components;
         p.integer = integer;
+        p.color = color;
         if (integer)
             p.ids.assign(n, kNoObject);
         else
@@ -112,6 +117,9 @@ void Image::addPlanes(uint32_t channels, const std::vector<std::string>& aovName
     if (channels & kChannelNormal) add("N", 3, false, 0.f);
     if (channels & kChannelShadowCount) add("shadows", 1, false, 0.f);
     if (channels & kChannelHasTexture) add("textured", 1, false, 0.f);
+    if (channels & kChannelAlbedo) add("albedo", 3, false, 0.f, true);
+    if (channels & kChannelPosition) add("P", 3, false, 0.f);
+    if (channels & kChannelSurfaceColor) add("Cs", 3, false, 0.f, true);
     for (const std::string& a : aovNames) add(a, 1, false, 0.f);
 }
 
@@ -172,12 +180,19 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
     ImagePlane* textured = tile.has(kChannelHasTexture) ? out.plane("textured") : nullptr;
     ImagePlane* normal = tile.has(kChannelNormal) ? out.plane("N") : nullptr;
     ImagePlane* shadows = tile.has(kChannelShadowCount) ? out.plane("shadows") : nullptr;
+    // The surface AOVs: three filtered components each, at acc[4 + aovs ...] after the AOV planes.
+    ImagePlane* surface[3] = {tile.has(kChannelAlbedo) ? out.plane("albedo") : nullptr,
+                              tile.has(kChannelPosition) ? out.plane("P") : nullptr,
+                              tile.has(kChannelSurfaceColor) ? out.plane("Cs") : nullptr};
+    const std::vector<Vec3>* surfaceValues[3] = {&tile.albedo, &tile.position, &tile.surfaceColor};
+    const bool anySurface = surface[0] || surface[1] || surface[2];
     std::vector<std::pair<ImagePlane*, const std::vector<float>*>> aovs;
     for (size_t k = 0; k < tile.aovNames.size(); ++k)
         if (ImagePlane* p = out.plane(tile.aovNames[k])) aovs.push_back({p, &tile.aovValues[k]});
-    const bool filtered = normal || shadows || !aovs.empty();
+    const bool filtered = normal || shadows || !aovs.empty() || anySurface;
     if (!id && !depth && !textured && !filtered) return;
-    std::vector<float> acc(3 + 1 + aovs.size());
+    const size_t surfaceAt = 4 + aovs.size();
+    std::vector<float> acc(surfaceAt + 9);
     for (int py = target.y0; py < target.y1; ++py) {
         for (int px = target.x0; px < target.x1; ++px) {
             const size_t pix = out.index(px, py);
@@ -200,6 +215,12 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
                 }
                 if (shadows) acc[3] += w * float(tile.shadowCount[i]);
                 for (size_t k = 0; k < aovs.size(); ++k) acc[4 + k] += w * (*aovs[k].second)[i];
+                for (int q = 0; q < 3; ++q)
+                    if (surface[q]) {
+                        const Vec3 v = (*surfaceValues[q])[i];
+                        acc[surfaceAt + 3 * q] += w * v.x, acc[surfaceAt + 3 * q + 1] += w * v.y,
+                            acc[surfaceAt + 3 * q + 2] += w * v.z;
+                    }
             });
             if (!(sw != 0.f)) continue;
             if (normal) {
@@ -209,6 +230,10 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
             }
             if (shadows) shadows->values[pix] = acc[3] / sw;
             for (size_t k = 0; k < aovs.size(); ++k) aovs[k].first->values[pix] = acc[4 + k] / sw;
+            for (int q = 0; q < 3; ++q)
+                if (surface[q])
+                    for (int j = 0; j < 3; ++j)
+                        surface[q]->values[pix * 3 + j] = acc[surfaceAt + 3 * q + j] / sw;
         }
     }
 }

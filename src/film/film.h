@@ -23,9 +23,15 @@ enum FilmChannel : uint32_t {
     kChannelShadowCount = 1u << 2,  // number of lights in shadow at the sample's shading point
     kChannelHasTexture = 1u << 3,   // the surface the sample sees is textured
     kChannelDepth = 1u << 4,        // camera-space depth as an image plane (the tile always has it)
+    // Surface AOVs (filtered like colour): the diffuse albedo denoisers take (surfaceAlbedo, shading/
+    // surface.h), the camera-space position P and the surface colour Cs (times its texture).
+    kChannelAlbedo = 1u << 5,
+    kChannelPosition = 1u << 6,
+    kChannelSurfaceColor = 1u << 7,
 };
+constexpr uint32_t kSurfaceAovChannels = kChannelAlbedo | kChannelPosition | kChannelSurfaceColor;
 constexpr uint32_t kAllFilmChannels = kChannelObjectId | kChannelNormal | kChannelShadowCount |
-                                      kChannelHasTexture | kChannelDepth;
+                                      kChannelHasTexture | kChannelDepth | kSurfaceAovChannels;
 constexpr uint32_t kNoObject = 0xffffffffu;
 
 // A pixel plane of the image beside RGBA: filtered (normal, shadow count, AOVs) or taken from the sample
@@ -33,9 +39,10 @@ constexpr uint32_t kNoObject = 0xffffffffu;
 struct ImagePlane {
     std::string name;  // "id", "N", "z", "shadows", "textured", or an AOV's name
     int components = 1;
-    bool integer = false;         // data in `ids` (object ids), else in `values`
-    std::vector<float> values;    // width * height * components
-    std::vector<uint32_t> ids;    // width * height
+    bool integer = false;       // data in `ids` (object ids), else in `values`
+    bool color = false;         // three components named R, G, B in files (else X, Y, Z)
+    std::vector<float> values;  // width * height * components
+    std::vector<uint32_t> ids;  // width * height
 };
 
 struct Rect {
@@ -54,7 +61,8 @@ struct Image {
     std::vector<ImagePlane> planes;
     Image() = default;
     Image(int w, int h) : width(w), height(h), rgba(size_t(w) * h * 4, 0.f) {}
-    explicit Image(Rect r) : width(r.width()), height(r.height()), x0(r.x0), y0(r.y0), rgba(size_t(width) * height * 4, 0.f) {}
+    explicit Image(Rect r)
+        : width(r.width()), height(r.height()), x0(r.x0), y0(r.y0), rgba(size_t(width) * height * 4, 0.f) {}
     size_t index(int x, int y) const { return size_t(y - y0) * width + (x - x0); }
     float* pixel(int x, int y) { return &rgba[index(x, y) * 4]; }
     const float* pixel(int x, int y) const { return &rgba[index(x, y) * 4]; }
@@ -75,10 +83,11 @@ static_assert(kSubpixelBits == 8, "filmSamplesFixed (sampler.h) writes 1/256-pix
 // (px,py): stratum (s % nx, s / nx) of the pixel, jittered by a hash of (pixel, sample, seed). Positions
 // lie on the 1/256-pixel fixed-point lattice that the rasterizer uses, so both engines see exactly the
 // same sample positions.
-inline void samplePositionFixed(int px, int py, int s, int nx, int ny, uint32_t seed, int32_t& x, int32_t& y) {
+inline void samplePositionFixed(int px, int py, int s, int nx, int ny, uint32_t seed, int32_t& x,
+                                int32_t& y) {
     // One hash per (pixel, sample): cheap enough to recompute per bucket, no tables to share.
-    const uint32_t h = hash32((uint32_t(px) * 73856093u) ^ (uint32_t(py) * 19349663u) ^ (uint32_t(s) * 83492791u) ^
-                              (seed * 2654435761u));
+    const uint32_t h = hash32((uint32_t(px) * 73856093u) ^ (uint32_t(py) * 19349663u) ^
+                              (uint32_t(s) * 83492791u) ^ (seed * 2654435761u));
     const int32_t jx = int32_t(h & 0xff), jy = int32_t((h >> 8) & 0xff);
     x = (px << kSubpixelBits) + ((s % nx) * 256 + jx) / nx;
     y = (py << kSubpixelBits) + ((s / nx) * 256 + jy) / ny;
@@ -117,15 +126,16 @@ struct SampleTile {
     std::vector<uint32_t> objectId;
     std::vector<float> normalX, normalY, normalZ;  // shading normal
     std::vector<uint8_t> shadowCount, hasTexture;
-    std::vector<std::string> aovNames;         // further channels a display asked for,
-    std::vector<std::vector<float>> aovValues;  // one float per sample each
+    std::vector<Vec3> albedo, position, surfaceColor;  // the surface AOVs (kSurfaceAovChannels)
+    std::vector<std::string> aovNames;                 // further channels a display asked for,
+    std::vector<std::vector<float>> aovValues;         // one float per sample each
 
     // (Re)initialise for a region without reallocating when the size fits. Slot s of every pixel lies in
     // stratum (s % nx, s / nx) with either sampler; a pixel's positions depend only on (pixel, seed).
     // Dimension d of slot i: sampleDimension(pixelSeed(px, py, seed), sampleIndex[i], d). `channels`
     // (FilmChannel bits) and `aovNames`: the attribute channels to carry.
-    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ, SamplerKind sampler, uint32_t channels = 0,
-               const std::vector<std::string>& aovNames = {});
+    void reset(Rect region, int nx, int ny, uint32_t seed, float farZ, SamplerKind sampler,
+               uint32_t channels = 0, const std::vector<std::string>& aovNames = {});
     // After reset: give the samples their times and lens points (nullptr or an inactive pattern: none).
     void setBlur(const BlurPattern* pattern);
     size_t sampleCount() const { return sx.size(); }
@@ -136,6 +146,13 @@ struct SampleTile {
         if (has(kChannelNormal)) normalX[i] = normal.x, normalY[i] = normal.y, normalZ[i] = normal.z;
         if (has(kChannelShadowCount)) shadowCount[i] = uint8_t(std::min(shadowedLights, 255));
         if (has(kChannelHasTexture)) hasTexture[i] = textured;
+    }
+    bool wantsSurfaceAovs() const { return (channels & kSurfaceAovChannels) != 0; }
+    // The surface AOVs of a covered sample.
+    void setSurfaceAovs(size_t i, Vec3 diffuseAlbedo, Vec3 P, Vec3 Cs) {
+        if (has(kChannelAlbedo)) albedo[i] = diffuseAlbedo;
+        if (has(kChannelPosition)) position[i] = P;
+        if (has(kChannelSurfaceColor)) surfaceColor[i] = Cs;
     }
 };
 

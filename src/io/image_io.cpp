@@ -205,7 +205,7 @@ void writeExr(const std::string& path, const Image& image, const ExrMetadata* me
                     if (comp > 1) {  // appended piece by piece (g++ 12 -Wrestrict false positive)
                         name += '.';
                         if (comp == 3)
-                            name += "XYZ"[c];
+                            name += (plane.color ? "RGB" : "XYZ")[c];
                         else
                             name += std::to_string(c);
                     }

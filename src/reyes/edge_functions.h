@@ -82,6 +82,10 @@ inline void writeSampleHit(const Grid& g, int a, int b, int c, float l0, float l
         if (!g.shadowedLights.empty())
             shadowed = g.shadowedLights[l0 >= l1 && l0 >= l2 ? a : l1 >= l2 ? b : c];
         tile.setAttributes(i, g.objectId, N, shadowed, g.textured);
+        if (!g.albedo.empty())
+            tile.setSurfaceAovs(i, g.albedo[a] * l0 + g.albedo[b] * l1 + g.albedo[c] * l2,
+                                g.P[a] * l0 + g.P[b] * l1 + g.P[c] * l2,
+                                g.Cs[a] * l0 + g.Cs[b] * l1 + g.Cs[c] * l2);
     }
 }
 

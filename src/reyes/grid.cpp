@@ -252,6 +252,16 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             grid.NX[v] = Nf.x, grid.NY[v] = Nf.y, grid.NZ[v] = Nf.z;
         }
     }
+    grid.albedo.clear(), grid.P.clear(), grid.Cs.clear();
+    if (shade.wantSurfaceAovs && !shade.depthOnly) {
+        grid.albedo.resize(count), grid.P.resize(count), grid.Cs.resize(count);
+        for (int v = 0; v < count; ++v) {
+            const Color Cv = textured ? Ct[v] : Color{1, 1, 1};
+            grid.albedo[v] = surfaceAlbedo(*shade.material, Cv);
+            grid.P[v] = Ps[v];
+            grid.Cs[v] = shade.material->Cs * Cv;
+        }
+    }
     if (maxComponent(shade.emission) > 0.f)
         for (int v = 0; v < count; ++v)
             if (dot(Ns[v], Is[v]) < 0.f) Ci[v] += shade.emission;  // the front side faces the eye

@@ -35,6 +35,9 @@ struct Grid {
     uint32_t objectId = 0;
     bool textured = false;  // its surface has a texture (the film's has-texture channel)
     std::vector<float> NX, NY, NZ;
+    // When the film carries the surface AOVs: per vertex, the albedo, camera-space P and Cs (times the
+    // texture) (empty otherwise).
+    std::vector<Vec3> albedo, P, Cs;
     // When the film counts lights in shadow and lights cast shadows: per vertex, the lights more than half
     // blocked (empty: none).
     std::vector<uint8_t> shadowedLights;
@@ -71,6 +74,7 @@ struct ShadeInputs {
     // Quadric kinds: the quadric in camera space (ReyesView::quadrics[shape]); its closed form gives every
     // vertex's position and normal. Quadrics do not move (the reader takes them at shutter open).
     const PlacedQuadric* quadric = nullptr;
+    bool wantSurfaceAovs = false;  // the film carries albedo, P or Cs (set by name, after the above)
     // The frame's textures (nullptr: the scene has none), the patch's s, t, and how many raster pixels a
     // texture lookup's footprint spans (the micropolygon side when it is wider than a pixel).
     const Textures* textures = nullptr;

@@ -168,6 +168,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                                false,
                                (settings.output.channels & kChannelShadowCount) != 0,
                                quadricOf(view, attr)};
+                in.wantSurfaceAovs = (settings.output.channels & kSurfaceAovChannels) != 0;
                 in.textures = frame.textures.get();
                 in.texCoords = texCoordsOf(scene, piece.patch);
                 in.textureScale = std::max(1.f, std::sqrt(attr.shadingRate));

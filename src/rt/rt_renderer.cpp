@@ -100,6 +100,14 @@ bool hitTextured(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t p
            fr.scene.attributes[patch].kind == SurfaceKind::BicubicBezier;
 }
 
+// The surface AOVs of camera hit k (sample s), when the film carries them: albedo, camera-space P, Cs.
+void setSurfaceAovs(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t s, SampleTile& tile) {
+    if (!tile.wantsSurfaceAovs()) return;
+    const Material& m = fr.scene.materials[pts.materialOf(k)];
+    const Color Ct = pts.textureOf(k);
+    tile.setSurfaceAovs(s, surfaceAlbedo(m, Ct), pts.P[k], m.Cs * Ct);
+}
+
 // Radiance an area light's surface sends along a ray that hit it at `rh` from direction d: Le on the
 // front side, 0 behind; `cosine` receives |cos| at the light (for the density conversions).
 Color areaEmission(const Frame& fr, const RayHit& rh, Vec3 d, float& cosine, int& light) {
@@ -305,9 +313,11 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
         const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
         if (rays.kind[r] == kPrimary) {
             markCameraHit(tile, s, rh.h.t);
-            if (tile.channels)
+            if (tile.channels) {
                 tile.setAttributes(s, fr.scene.attributes[rh.patch].object, Nf, ws.shadowedLights[k],
                                    hitTextured(fr, pts, k, rh.patch));
+                setSurfaceAovs(fr, pts, k, s, tile);
+            }
         }
         const Color w = rays.weight[r];
         const Color c = w * ws.radiance[k];
@@ -503,6 +513,7 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
             tile.setAttributes(rays.owner[r], fr.scene.attributes[rh.patch].object,
                                faceForward(pts.N[k], pts.I[k]), ws.shadowedLights[k],
                                hitTextured(fr, pts, k, rh.patch));
+            setSurfaceAovs(fr, pts, k, rays.owner[r], tile);
         }
     ws.shadeMs += msSince(ts);
 }
@@ -575,9 +586,11 @@ void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_
         const float value = float(open / double(N));
         tile.r[s] = tile.g[s] = tile.b[s] = value;
         markCameraHit(tile, s, rh.h.t);
-        if (tile.channels)
+        if (tile.channels) {
             tile.setAttributes(s, fr.scene.attributes[rh.patch].object, faceForward(pts.N[k], pts.I[k]), 0,
                                false);
+            setSurfaceAovs(fr, pts, k, s, tile);
+        }
         if (aov >= 0) tile.aovValues[size_t(aov)][s] = value;
     }
     ws.shadeMs += msSince(ts);

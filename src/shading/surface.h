@@ -43,6 +43,32 @@ struct LightSamples {
 };
 
 // Whether a surface is lit at all (constant is not: no light samples, no shadow rays).
+// The albedo AOV of a surface (what denoisers such as OpenImageDenoise take as their albedo input): the
+// diffuse reflectance Kd Cs (times the texture colour Ct) of the RI diffuse surfaces, Ks Cs of metals,
+// white for mirror and glass (perfectly specular: the denoiser's convention), Cs for constant; clamped
+// to [0, 1].
+TESSERA_HD Color surfaceAlbedo(const Material& m, Color Ct = Color{1, 1, 1}) {
+    Color a;
+    switch (m.type) {
+        case MaterialType::Metal:
+        case MaterialType::ShinyMetal:
+            a = m.Cs * m.Ks;
+            break;
+        case MaterialType::Mirror:
+        case MaterialType::Glass:
+            a = Color{1, 1, 1};
+            break;
+        case MaterialType::Constant:
+            a = m.Cs;
+            break;
+        default:
+            a = m.Cs * Ct * m.Kd;
+            break;
+    }
+    return {std::fmin(std::fmax(a.x, 0.f), 1.f), std::fmin(std::fmax(a.y, 0.f), 1.f),
+            std::fmin(std::fmax(a.z, 0.f), 1.f)};
+}
+
 TESSERA_HD bool surfaceUsesLights(MaterialType t) {
     return t != MaterialType::Constant;
 }
