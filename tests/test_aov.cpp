@@ -225,3 +225,57 @@ TEST(Aov, AlbedoPositionSurfaceColourCiAndAlphaInBothEngines) {
     }
     fs::remove_all(dir);
 }
+
+// RIB Display "+name" type mode: secondary displays of the same render, each file the beauty and the
+// layers its mode names; the primary keeps only its own (--aov's). Bad modes fail before the render.
+TEST(Aov, SecondaryDisplaysWriteTheirOwnLayers) {
+    const fs::path dir = fs::temp_directory_path() / ("tessera_aov_displays_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    const std::string world =
+        "Format 64 48 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\n"
+        "LightSource \"ambientlight\" 1 \"intensity\" 1\nColor [0.2 0.4 0.8]\nSurface \"matte\" \"Kd\" "
+        "[0.6]\n"
+        "Patch \"bilinear\" \"P\" [-20 -20 5  20 -20 5  -20 20 5  20 20 5]\nWorldEnd\n";
+    const fs::path rib = dir / "s.rib";
+    std::ofstream(rib) << "Display \"" << (dir / "beauty.exr").string() << "\" \"file\" \"rgba\"\n"
+                       << "Display \"+" << (dir / "depth").string() << "\" \"openexr\" \"z\"\n"
+                       << "Display \"+" << (dir / "denoise.exr").string() << "\" \"file\" \"albedo,N\"\n"
+                       << "Display \"+" << (dir / "preview.png").string() << "\" \"file\" \"rgba\"\n"
+                       << world;
+    for (const char* engine : {"reyes", "rt"}) {
+        SCOPED_TRACE(engine);
+        for (const char* f : {"beauty.exr", "depth.exr", "denoise.exr", "preview.png"}) fs::remove(dir / f);
+        std::string out;
+        ASSERT_EQ(runTessera("render " + rib.string() + " --engine " + engine + " -q", &out), 0) << out;
+        const Channels beauty = readChannels(dir / "beauty.exr");
+        const Channels depth = readChannels(dir / "depth.exr");
+        const Channels denoise = readChannels(dir / "denoise.exr");
+        EXPECT_TRUE(fs::exists(dir / "preview.png"));
+        EXPECT_EQ(beauty.f.count("Z") + beauty.f.count("N.X") + beauty.f.count("albedo.R"), 0u);
+        ASSERT_TRUE(depth.f.count("Z"));
+        EXPECT_EQ(depth.f.count("N.X") + depth.f.count("albedo.R"), 0u);
+        ASSERT_TRUE(denoise.f.count("albedo.G") && denoise.f.count("N.Z"));
+        EXPECT_EQ(denoise.f.count("Z"), 0u);
+        for (const Channels* c : {&beauty, &depth, &denoise}) ASSERT_TRUE(c->f.count("R"));
+        const size_t centre = size_t(kH / 2) * kW + kW / 2;
+        EXPECT_NEAR(depth.f.at("Z")[centre], 5.f, 1e-3);
+        EXPECT_NEAR(denoise.f.at("albedo.G")[centre], 0.24f, 1e-4);
+        EXPECT_NEAR(denoise.f.at("N.Z")[centre], -1.f, 1e-3);
+        EXPECT_EQ(beauty.f.at("G"), depth.f.at("G"));  // one render
+    }
+    // Bad modes: the file's line, exit 2, nothing written.
+    auto fails = [&](const std::string& display, const std::string& expect) {
+        const fs::path bad = dir / "bad.rib";
+        std::ofstream(bad) << "Display \"" << (dir / "b.exr").string() << "\" \"file\" \"rgba\"\n"
+                           << display << "\n"
+                           << world;
+        std::string out;
+        EXPECT_EQ(runTessera("render " + bad.string() + " -q", &out), 2) << out;
+        EXPECT_NE(out.find(bad.string() + ":2: error: Display"), std::string::npos) << out;
+        EXPECT_NE(out.find(expect), std::string::npos) << out;
+        EXPECT_FALSE(fs::exists(dir / "b.exr"));
+    };
+    fails("Display \"+x.exr\" \"file\" \"bogus\"", "unknown mode 'bogus'");
+    fails("Display \"+x.png\" \"file\" \"z\"", "needs an OpenEXR file");
+    fs::remove_all(dir);
+}

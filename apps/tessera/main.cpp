@@ -145,6 +145,41 @@ std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
     return r;
 }
 
+// The image a file holds: RGBA and the planes of `want` (the render may have made more for other files),
+// plus Ci and a (the colour, premultiplied, and alpha as named layers) when asked.
+Image withLayers(const Image& rendered, const AovRequest& want, uint32_t channels,
+                 const std::vector<std::string>& planes) {
+    Image img = rendered;
+    img.planes.clear();
+    auto keep = [&](const std::string& name) {
+        if (const ImagePlane* p = rendered.plane(name)) img.planes.push_back(*p);
+    };
+    const std::pair<uint32_t, const char*> named[] = {{kChannelObjectId, "id"},
+                                                      {kChannelDepth, "z"},
+                                                      {kChannelNormal, "N"},
+                                                      {kChannelShadowCount, "shadows"},
+                                                      {kChannelHasTexture, "textured"},
+                                                      {kChannelAlbedo, "albedo"},
+                                                      {kChannelPosition, "P"},
+                                                      {kChannelSurfaceColor, "Cs"}};
+    for (const auto& [bit, name] : named)
+        if (channels & bit) keep(name);
+    for (const std::string& p : planes) keep(p);
+    const size_t n = size_t(img.width) * size_t(img.height);
+    if (want.ci) {
+        ImagePlane ci{"Ci", 3, false, true, std::vector<float>(n * 3), {}};
+        for (size_t i = 0; i < n; ++i)
+            for (int c = 0; c < 3; ++c) ci.values[i * 3 + size_t(c)] = img.rgba[i * 4 + size_t(c)];
+        img.planes.push_back(std::move(ci));
+    }
+    if (want.alpha) {
+        ImagePlane alpha{"a", 1, false, false, std::vector<float>(n), {}};
+        for (size_t i = 0; i < n; ++i) alpha.values[i] = img.rgba[i * 4 + 3];
+        img.planes.push_back(std::move(alpha));
+    }
+    return img;
+}
+
 // The OpenEXR header's camera: worldToCamera, and worldToNDC with NDC x, y in [0, 1] from the top-left
 // corner of the image (RenderMan's NDC) and depth 0 at the near plane, 1 at the far plane.
 ExrMetadata exrMetadata(const Camera& cam, double renderMs) {
@@ -533,6 +568,37 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
                          output, scene.image.displayType));
     if (!aovs->names.empty() && (depthDisplay || fs::path(output).extension() != ".exr"))
         fail(fmt::format("error: --aov needs an OpenEXR output (-o NAME.exr): '{}' holds RGBA only", output));
+    // RIB Display "+name" type mode: further files of this render, each the beauty plus the layers its mode
+    // names (--aov's names; "rgba" or "rgb": the beauty alone). Checked now, before the render.
+    struct Secondary {
+        std::string path;
+        AovRequest layers;
+    };
+    std::vector<Secondary> secondaries;
+    AovRequest wanted = *aovs;  // what the render must make: --aov and every secondary display's layers
+    for (const ImageOptions::SecondaryDisplay& d : scene.image.secondaryDisplays) {
+        const std::string where = fmt::format("{}:{}: error: Display \"+{}\"", a.scene, d.line, d.name);
+        std::string bad;
+        const bool beauty = d.mode == "rgba" || d.mode == "rgb";
+        const std::optional<AovRequest> layers = beauty ? AovRequest{} : parseAovs(d.mode, bad);
+        if (!layers) fail(fmt::format("{}: unknown mode '{}' (known: rgba, rgb, {})", where, bad, kAovNames));
+        for (const std::string& pl : layers->planes)
+            if (pl == "occlusion" && a.integrator != "ao")
+                fail(fmt::format("{}: occlusion is made by --integrator ao (with --engine rt)", where));
+        fs::path path(d.name);
+        if (path.extension().empty()) path += ".exr";
+        if (!isSupportedImageExtension(path.string()))
+            fail(fmt::format("{}: the file must be .exr or .png", where));
+        if (path.extension() == ".png" && !beauty)
+            fail(fmt::format("{}: mode '{}' needs an OpenEXR file (.exr): a .png holds RGBA only", where,
+                             d.mode));
+        checkWritableOrFail(path.string(), "image");
+        wanted.channels |= layers->channels;
+        for (const std::string& pl : layers->planes)
+            if (std::find(wanted.planes.begin(), wanted.planes.end(), pl) == wanted.planes.end())
+                wanted.planes.push_back(pl);
+        secondaries.push_back({path.string(), *layers});
+    }
 
     // The film region: the crop window (--crop, else the RIB's CropWindow), then the tile of it.
     RenderSettings settings;
@@ -584,8 +650,8 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     settings.ao.paperWeighting = a.aoWeighting == "paper";
     settings.adaptive.enabled = a.adaptive;
     if (a.adaptiveThresholdGiven) settings.adaptive.thresholds.color = float(a.adaptiveThreshold);
-    settings.output.channels = aovs->channels | (depthDisplay ? kChannelDepth : 0u);
-    settings.output.aovs = aovs->planes;
+    settings.output.channels = wanted.channels | (depthDisplay ? kChannelDepth : 0u);
+    settings.output.aovs = wanted.planes;
     settings.shadows = a.shadows == "on"    ? ShadowOverride::On
                        : a.shadows == "off" ? ShadowOverride::Off
                                             : ShadowOverride::Scene;
@@ -748,21 +814,11 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         if (depthDisplay) {
             writeDepthMap(output, depthMapOf(result.image, meta, scene.image.displayType));
         } else {
-            // Ci and a: the colour (premultiplied) and alpha as named layers beside RGBA.
-            Image& img = result.image;
-            const size_t n = size_t(img.width) * size_t(img.height);
-            if (aovs->ci) {
-                ImagePlane ci{"Ci", 3, false, true, std::vector<float>(n * 3), {}};
-                for (size_t i = 0; i < n; ++i)
-                    for (int c = 0; c < 3; ++c) ci.values[i * 3 + size_t(c)] = img.rgba[i * 4 + size_t(c)];
-                img.planes.push_back(std::move(ci));
-            }
-            if (aovs->alpha) {
-                ImagePlane alpha{"a", 1, false, false, std::vector<float>(n), {}};
-                for (size_t i = 0; i < n; ++i) alpha.values[i] = img.rgba[i * 4 + 3];
-                img.planes.push_back(std::move(alpha));
-            }
-            writeImage(output, img, enc);
+            // The primary output: the beauty and --aov's layers; then each secondary display's file.
+            writeImage(output, withLayers(result.image, *aovs, aovs->channels, aovs->planes), enc);
+            for (const Secondary& d : secondaries)
+                writeImage(d.path, withLayers(result.image, d.layers, d.layers.channels, d.layers.planes),
+                           enc);
         }
         if (!a.adaptiveMap.empty()) writeAdaptiveMap(a.adaptiveMap, result);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);

@@ -351,13 +351,19 @@ class RibReader {
         args.atLeast(3, "name type mode ...parameterlist...");
         const std::string& name = args.string(0);
         const std::string& type = args.string(1);
-        args.string(2);
+        const std::string& mode = args.string(2);
         parseParams(r, 3, decls_, diag_);  // syntax check only; display parameters do not affect the scene
-        // RI spec 4.1.4: a name starting with '+' adds a secondary display; we keep the primary.
+        // RI spec 4.1.4: a name starting with '+' adds a secondary display of the same render.
         if (!name.empty() && name[0] == '+') {
-            diag_.warnOnce("display+", r.line, "secondary displays ('+" + name.substr(1) + "') are ignored");
+            if (name.size() == 1) diag_.fail(r.line, "Display \"+\": a secondary display needs a name");
+            if (type == "zfile" || type == "shadow")
+                diag_.fail(r.line, "Display \"" + printable(name, 200) +
+                                       "\": a depth map is a frame's primary display, not a secondary one");
+            scene_.image.secondaryDisplays.push_back({name.substr(1), type, mode, r.line});
             return;
         }
+        // A new primary display starts the list afresh (RI: Display without '+' replaces all displays).
+        scene_.image.secondaryDisplays.clear();
         scene_.image.displayName = name;
         scene_.image.displayType = type;
     }

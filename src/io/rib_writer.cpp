@@ -174,6 +174,8 @@ void writeRib(const Scene& scene, std::ostream& o) {
     else
         o << "Exposure " << num(img.exposureGain) << " " << num(img.exposureGamma) << "\n";
     if (!img.displayName.empty()) o << "Display " << quoted(img.displayName) << " \"file\" \"rgba\"\n";
+    for (const ImageOptions::SecondaryDisplay& d : img.secondaryDisplays)
+        o << "Display " << quoted("+" + d.name) << " " << quoted(d.type) << " " << quoted(d.mode) << "\n";
     // Motion blur and depth of field (RI spec 3.2, sec. 4.1.1 and 4.1.5; docs/motion.md).
     if (cam.shutterOpen != 0.f || cam.shutterClose != 0.f)
         o << "Shutter " << num(cam.shutterOpen) << " " << num(cam.shutterClose) << "\n";

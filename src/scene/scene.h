@@ -30,6 +30,14 @@ struct ImageOptions {
     // to pixels by the RI 3.2 rounding rule.
     double cropWindow[4] = {0, 1, 0, 1};
     std::string displayType;  // RIB Display type: "file", "zfile"/"shadow" (a depth map), ... ("" if none)
+    // RIB Display "+name" type mode (RI spec 3.2, sec. 4.1.4): further files of the same render, each
+    // holding the beauty and the layers its mode names (an AOV list, e.g. "z" or "N,albedo"); the CLI
+    // checks the modes (apps/tessera, --aov's names).
+    struct SecondaryDisplay {
+        std::string name, type, mode;
+        int line = 0;
+    };
+    std::vector<SecondaryDisplay> secondaryDisplays;
     // RIB Hider "hidden" "string blursampling" (simple, interleaved, bbox; "" = the renderer's default)
     // and its interleaved tile size and permutation count (0 = default); the CLI overrides them.
     std::string blurSampling;
