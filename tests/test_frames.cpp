@@ -1,22 +1,22 @@
 // Multi-frame RIB (RI spec 3.2, sec. 4.1.1): each frame read with the options outside frames before it and
 // its own; the CLI renders every frame (or those --frames picks) to its own Display name.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <sstream>
 
 #include "io/diagnostics.h"
 #include "io/image_io.h"
 #include "io/rib_reader.h"
 #include "shading/light.h"
+#include "test_support.h"
 
 namespace fs = std::filesystem;
 using namespace tessera;
+using tessera::test::runTesseraIn;
 
 namespace {
 
@@ -41,20 +41,6 @@ std::string twoFrameRib(int secondNumber = 2) {
 fs::path writeFile(const fs::path& path, const std::string& text) {
     std::ofstream(path) << text;
     return path;
-}
-
-int runTessera(const std::string& args, const fs::path& cwd, std::string* output = nullptr) {
-    const fs::path log = cwd / "log.txt";
-    const std::string cmd = "cd '" + cwd.string() + "' && " + std::string(TESSERA_BINARY) + " " + args +
-                            " > '" + log.string() + "' 2>&1";
-    const int status = std::system(cmd.c_str());
-    if (output) {
-        std::ifstream f(log);
-        std::stringstream ss;
-        ss << f.rdbuf();
-        *output = ss.str();
-    }
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 const WarningSink kQuiet = [](const std::string&) {};
@@ -93,7 +79,7 @@ TEST(Frames, CliRendersEveryFrameToItsDisplayName) {
     fs::create_directories(dir);
     writeFile(dir / "s.rib", twoFrameRib());
     std::string out;
-    ASSERT_EQ(runTessera("render s.rib --quiet", dir, &out), 0) << out;
+    ASSERT_EQ(runTesseraIn(dir, "render s.rib --quiet", &out), 0) << out;
     const Image one = readPng((dir / "one.png").string()), two = readPng((dir / "two.png").string());
     EXPECT_EQ(one.width, 40);
     EXPECT_EQ(one.height, 30);
@@ -107,15 +93,15 @@ TEST(Frames, CliFramesPicksOneOrARange) {
     fs::create_directories(dir);
     writeFile(dir / "s.rib", twoFrameRib());
     std::string out;
-    ASSERT_EQ(runTessera("render s.rib --quiet --frames 2", dir, &out), 0) << out;
+    ASSERT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 2", &out), 0) << out;
     EXPECT_FALSE(fs::exists(dir / "one.png"));
     EXPECT_TRUE(fs::exists(dir / "two.png"));
     fs::remove(dir / "two.png");
-    ASSERT_EQ(runTessera("render s.rib --quiet --frames 1-2", dir, &out), 0) << out;
+    ASSERT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 1-2", &out), 0) << out;
     EXPECT_TRUE(fs::exists(dir / "one.png"));
     EXPECT_TRUE(fs::exists(dir / "two.png"));
     // One frame picked: -o names its image.
-    ASSERT_EQ(runTessera("render s.rib --quiet --frames 1 -o picked.png", dir, &out), 0) << out;
+    ASSERT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 1 -o picked.png", &out), 0) << out;
     EXPECT_EQ(readPng((dir / "picked.png").string()).width, 40);
 }
 
@@ -125,19 +111,19 @@ TEST(Frames, CliFrameOutsideTheFileIsAnErrorAfterEarlierFramesAreWritten) {
     fs::create_directories(dir);
     writeFile(dir / "s.rib", twoFrameRib());
     std::string out;
-    EXPECT_EQ(runTessera("render s.rib --quiet --frames 1-3", dir, &out), 2);
+    EXPECT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 1-3", &out), 2);
     EXPECT_NE(out.find("no frame 3"), std::string::npos) << out;
     EXPECT_TRUE(fs::exists(dir / "one.png"));
     EXPECT_TRUE(fs::exists(dir / "two.png"));
-    EXPECT_EQ(runTessera("render s.rib --quiet --frames 9", dir, &out), 2);
+    EXPECT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 9", &out), 2);
     EXPECT_NE(out.find("s.rib: error: --frames 9: the file has no frame 9 (its frames: 1 2)"),
               std::string::npos)
         << out;
-    EXPECT_EQ(runTessera("render s.rib --quiet --frames 2-1", dir, &out), 2);
+    EXPECT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 2-1", &out), 2);
     EXPECT_NE(out.find("is not N or A-B"), std::string::npos) << out;
     // Several frames but one -o: refused before anything renders.
     fs::remove(dir / "one.png");
-    EXPECT_EQ(runTessera("render s.rib --quiet -o x.png", dir, &out), 2);
+    EXPECT_EQ(runTesseraIn(dir, "render s.rib --quiet -o x.png", &out), 2);
     EXPECT_NE(out.find("each frame writes its own Display name"), std::string::npos) << out;
     EXPECT_FALSE(fs::exists(dir / "one.png"));
     EXPECT_FALSE(fs::exists(dir / "x.png"));
@@ -184,7 +170,7 @@ TEST(Frames, ZfileDisplayWritesCameraDepthAndMakeShadowConvertsIt) {
     fs::create_directories(dir);
     writeFile(dir / "s.rib", depthPassRib());
     std::string out;
-    ASSERT_EQ(runTessera("render s.rib --quiet", dir, &out), 0) << out;
+    ASSERT_EQ(runTesseraIn(dir, "render s.rib --quiet", &out), 0) << out;
     const DepthMap z = readDepthMap((dir / "plane.z").string());
     ASSERT_EQ(z.width, 32);
     ASSERT_EQ(z.height, 24);
@@ -205,7 +191,7 @@ TEST(Frames, MakeShadowOfAMissingFileOrNotADepthMapIsAnInputError) {
     // Missing: frame 2 alone was asked for, so no frame made plane.z.
     writeFile(dir / "s.rib", depthPassRib());
     std::string out;
-    EXPECT_EQ(runTessera("render s.rib --quiet --frames 2", dir, &out), 2);
+    EXPECT_EQ(runTesseraIn(dir, "render s.rib --quiet --frames 2", &out), 2);
     EXPECT_NE(out.find("s.rib:9: error: MakeShadow: depth file"), std::string::npos) << out;
     EXPECT_NE(out.find("plane.z\" not found"), std::string::npos) << out;
     EXPECT_FALSE(fs::exists(dir / "plane.shad"));

@@ -217,19 +217,35 @@ std::vector<CoverageCase> coverageCases() {
     return c;
 }
 
+// A case's scene at `res` pixels, its exact per-pixel coverage and their sum (the exact area in pixels).
+struct CoverageTruth {
+    Scene scene;
+    std::vector<double> coverage;
+    double area = 0;
+};
+CoverageTruth coverageTruth(const CoverageCase& cc, int res) {
+    CoverageTruth t;
+    t.scene = load(topView(cc.rib, res)).scene;
+    t.coverage = exactCoverage(t.scene, cc.inside);
+    for (double c : t.coverage) t.area += c;
+    return t;
+}
+Image renderWithEngine(const Scene& s, const char* engine) {
+    RenderSettings rs;
+    rs.engine = engine;
+    rs.threads = 2;
+    return render(s, rs).image;
+}
+
 TEST(QuadricCoverage, BothEnginesCoverTheExactSilhouette) {
     const int res = 64;
     for (const CoverageCase& cc : coverageCases()) {
-        Scene s = load(topView(cc.rib, res)).scene;
-        const std::vector<double> truth = exactCoverage(s, cc.inside);
-        double truthSum = 0;
-        for (double t : truth) truthSum += t;
+        const CoverageTruth t = coverageTruth(cc, res);
+        const std::vector<double>& truth = t.coverage;
+        const double truthSum = t.area;
         for (const char* engine : {"reyes", "rt"}) {
             SCOPED_TRACE(std::string(cc.name) + " " + engine);
-            RenderSettings rs;
-            rs.engine = engine;
-            rs.threads = 2;
-            const Image img = render(s, rs).image;
+            const Image img = renderWithEngine(t.scene, engine);
             double sum = 0;
             int wrongInside = 0, wrongOutside = 0;
             for (int y = 0; y < res; ++y)
@@ -261,16 +277,11 @@ TEST(QuadricCoverage, BothEnginesCoverTheExactSilhouette) {
 TEST(QuadricCoverage, SmallQuadricsSeenAlongTheirAxisKeepTheirArea) {
     for (int res : {8, 12, 16, 24})
         for (const CoverageCase& cc : coverageCases()) {
-            Scene s = load(topView(cc.rib, res)).scene;
-            const std::vector<double> truth = exactCoverage(s, cc.inside);
-            double truthSum = 0;
-            for (double t : truth) truthSum += t;
+            const CoverageTruth t = coverageTruth(cc, res);
+            const double truthSum = t.area;
             for (const char* engine : {"reyes", "rt"}) {
                 SCOPED_TRACE(std::string(cc.name) + " " + engine + " " + std::to_string(res) + " px");
-                RenderSettings rs;
-                rs.engine = engine;
-                rs.threads = 2;
-                const Image img = render(s, rs).image;
+                const Image img = renderWithEngine(t.scene, engine);
                 double sum = 0;
                 for (int y = 0; y < res; ++y)
                     for (int x = 0; x < res; ++x) sum += alphaAt(img, x, y);

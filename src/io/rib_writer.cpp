@@ -9,6 +9,8 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "io/rib_shaders.h"
+
 namespace tessera {
 
 namespace {
@@ -227,10 +229,9 @@ void writeRib(const Scene& scene, std::ostream& o) {
         }
         // shadowspot, shadowdistant, shadowpoint: the maps the light reads (absolute paths, so that the
         // written file finds them wherever it is put), or "raytrace".
-        std::string names, shader = "light";
-        if (l.shadowSource != ShadowSource::Renderer) {
-            shader = "shadow";
-            static const char* kFaces[6] = {"sfpx", "sfnx", "sfpy", "sfny", "sfpz", "sfnz"};
+        const bool shadowing = l.shadowSource != ShadowSource::Renderer;
+        std::string names;
+        if (shadowing) {
             const bool cube = l.type == LightType::Point;
             for (int f = 0; f < (cube ? 6 : 1); ++f) {
                 std::string name = "raytrace";
@@ -241,13 +242,13 @@ void writeRib(const Scene& scene, std::ostream& o) {
                     const auto abs = std::filesystem::absolute(scene.shadowMapFiles[size_t(k)].path, ec);
                     name = ec ? scene.shadowMapFiles[size_t(k)].path : abs.string();
                 }
-                names +=
-                    std::string(" \"") + (cube ? kFaces[f] : "shadowname") + "\" " + tessera::quoted(name);
+                names += std::string(" \"") + (cube ? rib::kCubeShadowNameParams[f] : rib::kShadowNameParam) +
+                         "\" " + tessera::quoted(name);
             }
             if (l.shadowWidth != 1.f) names += " \"width\" [" + num(l.shadowWidth) + "]";
         }
         auto lightName = [&](const char* base) {
-            std::string n = shader == "light" ? std::string(base) + "light" : "shadow" + std::string(base);
+            std::string n = shadowing ? "shadow" + std::string(base) : std::string(base) + "light";
             return tessera::quoted(n);
         };
         switch (l.type) {
