@@ -24,8 +24,11 @@
 #include "io/rib_reader.h"
 #include "io/rib_writer.h"
 #include "io/scene_loader.h"
+#include "preview.h"
 #include "progress.h"
+#include "render/aovs.h"
 #include "render/render.h"
+#include "render/render_options.h"
 
 #ifndef TESSERA_VERSION
 #define TESSERA_VERSION "unknown"
@@ -58,127 +61,25 @@ double peakRssMb() {
     std::exit(2);
 }
 
-struct RenderArgs {
-    std::string scene, output, engine = "reyes", res, stats, format = "auto", up;
-    std::string sampler;            // "": sobol, or centred where the scene says Hider "hidden" "jitter" [0]
-    std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
-    std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
-    int spp = 0, threads = 0, bucketSize = 32, subpatchDepth = 6, maxDepth = -1, maxGridEdge = 16;
-    int lightSamples = 0;  // 0: each area light's own "samples"
+// The render command's arguments: the render options shared with the Python module (render_options.h),
+// then what only the command line has (files, progress, tiles, passes).
+struct RenderArgs : RenderOptions {
+    std::string scene, output, res, stats, format = "auto", up;
+    int spp = 0;
     double shadingRate = 0;
-    unsigned seed = 0;
-    bool quiet = false, cullBackfaces = false, noRayBinning = false, progressLines = false;
-    // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's.
-    std::string shutter, dof, blurSampling;
-    int blurTile = 0, blurPermutations = 0;
-    bool noBlur = false;
-    // Ray-traced light transport (docs/light_transport.md).
-    std::string integrator = "direct", aoWeighting = "cosine";
-    std::string gloss = "paper";  // direct integrator: glossy reflection rays (shading/gloss.h)
-    int passes = 1;               // progressive: the samples per pixel in this many passes
-    bool writePartial = false;    // write the image after every pass, and keep it when interrupted
-    int aoSamples = 64;
-    double aoDistance = 0;  // 0: unlimited
-    std::string aovs;       // --aov z,N,id,...
-    std::string frames;     // --frames N or A-B: RIB frame numbers (docs/inputs.md, multi-frame RIB)
-    // Selective and adaptive supersampling (docs/adaptive.md).
-    bool adaptive = false;
-    double adaptiveThreshold = 0;
-    bool adaptiveThresholdGiven = false;
-    std::string adaptiveMap;
+    bool quiet = false, progressLines = false;
+    // Motion blur and depth of field overrides of the camera (docs/motion.md): "" = the scene's.
+    std::string shutter, dof;
+    int passes = 1;             // progressive: the samples per pixel in this many passes
+    bool writePartial = false;  // write the image after every pass, and keep it when interrupted
+    std::string aovs;           // --aov z,N,id,...
+    std::string frames;         // --frames N or A-B: RIB frame numbers (docs/inputs.md, multi-frame RIB)
+    std::string adaptiveMap;    // --adaptive-map FILE.png (docs/adaptive.md)
     // Crop windows and farm tiles (docs/inputs.md): --crop xmin,xmax,ymin,ymax in NDC, --tile I/N.
     std::string crop, tile;
+    std::string
+        displayServer;  // live preview: HOST:PORT of a tev viewer ("": none, or the RIB's framebuffer)
 };
-
-// The comma-separated parts of a list ("a,,b" has an empty middle part).
-std::vector<std::string> splitCommas(const std::string& text) {
-    std::vector<std::string> parts;
-    size_t at = 0;
-    while (true) {
-        const size_t end = text.find(',', at);
-        parts.push_back(text.substr(at, end == std::string::npos ? std::string::npos : end - at));
-        if (end == std::string::npos) return parts;
-        at = end + 1;
-    }
-}
-
-// The AOVs --aov names: film channels and engine planes (docs: README "AOVs").
-struct AovRequest {
-    uint32_t channels = 0;
-    std::vector<std::string> planes;  // written by an engine under this name (occlusion)
-    std::vector<std::string> names;   // as given
-    bool ci = false, alpha = false;   // Ci and a: the image's own colour and alpha as layers too
-};
-constexpr const char* kAovNames = "z, N, id, shadows, textured, occlusion, albedo, P, Cs, Ci, a";
-std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
-    AovRequest r;
-    if (list.empty()) return r;
-    for (const std::string& name : splitCommas(list)) {
-        if (name == "z")
-            r.channels |= kChannelDepth;
-        else if (name == "N")
-            r.channels |= kChannelNormal;
-        else if (name == "id")
-            r.channels |= kChannelObjectId;
-        else if (name == "shadows")
-            r.channels |= kChannelShadowCount;
-        else if (name == "textured")
-            r.channels |= kChannelHasTexture;
-        else if (name == "occlusion")
-            r.planes.push_back(name);
-        else if (name == "albedo")
-            r.channels |= kChannelAlbedo;
-        else if (name == "P")
-            r.channels |= kChannelPosition;
-        else if (name == "Cs")
-            r.channels |= kChannelSurfaceColor;
-        else if (name == "Ci")
-            r.ci = true;
-        else if (name == "a")
-            r.alpha = true;
-        else {
-            bad = name;
-            return std::nullopt;
-        }
-        r.names.push_back(name);
-    }
-    return r;
-}
-
-// The image a file holds: RGBA and the planes of `want` (the render may have made more for other files),
-// plus Ci and a (the colour, premultiplied, and alpha as named layers) when asked.
-Image withLayers(const Image& rendered, const AovRequest& want, uint32_t channels,
-                 const std::vector<std::string>& planes) {
-    Image img = rendered;
-    img.planes.clear();
-    auto keep = [&](const std::string& name) {
-        if (const ImagePlane* p = rendered.plane(name)) img.planes.push_back(*p);
-    };
-    const std::pair<uint32_t, const char*> named[] = {{kChannelObjectId, "id"},
-                                                      {kChannelDepth, "z"},
-                                                      {kChannelNormal, "N"},
-                                                      {kChannelShadowCount, "shadows"},
-                                                      {kChannelHasTexture, "textured"},
-                                                      {kChannelAlbedo, "albedo"},
-                                                      {kChannelPosition, "P"},
-                                                      {kChannelSurfaceColor, "Cs"}};
-    for (const auto& [bit, name] : named)
-        if (channels & bit) keep(name);
-    for (const std::string& p : planes) keep(p);
-    const size_t n = size_t(img.width) * size_t(img.height);
-    if (want.ci) {
-        ImagePlane ci{"Ci", 3, false, true, std::vector<float>(n * 3), {}};
-        for (size_t i = 0; i < n; ++i)
-            for (int c = 0; c < 3; ++c) ci.values[i * 3 + size_t(c)] = img.rgba[i * 4 + size_t(c)];
-        img.planes.push_back(std::move(ci));
-    }
-    if (want.alpha) {
-        ImagePlane alpha{"a", 1, false, false, std::vector<float>(n), {}};
-        for (size_t i = 0; i < n; ++i) alpha.values[i] = img.rgba[i * 4 + 3];
-        img.planes.push_back(std::move(alpha));
-    }
-    return img;
-}
 
 // The OpenEXR header's camera: worldToCamera, and worldToNDC with NDC x, y in [0, 1] from the top-left
 // corner of the image (RenderMan's NDC) and depth 0 at the near plane, 1 at the far plane.
@@ -217,12 +118,6 @@ std::optional<std::vector<double>> parseNumberList(const std::string& text, size
     }
     if (out.size() != n) return std::nullopt;
     return out;
-}
-
-BlurSampling blurSamplingFromName(const std::string& name) {
-    if (name == "simple") return BlurSampling::Simple;
-    if (name == "interleaved") return BlurSampling::Interleaved;
-    return BlurSampling::BoundingBox;
 }
 
 std::optional<UpAxis> parseUp(const std::string& up) {
@@ -490,6 +385,13 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
                              a.tile));
         if (a.adaptive) fail("error: --tile and --adaptive cannot be combined yet");
     }
+    if (!a.displayServer.empty()) {
+        std::string host;
+        int port = 0;
+        if (!DisplayClient::parseAddress(a.displayServer, host, port))
+            fail(fmt::format("error: --display-server '{}' is not HOST:PORT (port 1..65535)",
+                             a.displayServer));
+    }
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
         char x = 0, extra = 0;
@@ -624,57 +526,13 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
                          settings.view.region.height() != scene.camera.height || tile;
     if (a.adaptive && partial)
         fail("error: --adaptive renders whole images only (no --crop, --tile or CropWindow)");
-    settings.engine = a.engine;
-    settings.threads = a.threads;
-    settings.seed = a.seed;
-    // --sampler, else the scene's Hider "jitter" [0] (strata centres), else Sobol'.
-    settings.sampler = a.sampler == "jittered"                      ? SamplerKind::Jittered
-                       : a.sampler == "centred"                     ? SamplerKind::Centred
-                       : a.sampler == "sobol" || scene.image.jitter ? SamplerKind::Sobol
-                                                                    : SamplerKind::Centred;
-    settings.bucketSize = a.bucketSize;
-    settings.subpatchDepth = a.subpatchDepth;
-    // Bounces: 4 traced lobes for the direct integrator; 16 for the path tracer, whose Russian roulette
-    // ends most paths far earlier (the cap only bounds mirror-and-glass chains).
-    settings.maxDepth = a.maxDepth >= 0 ? a.maxDepth : a.integrator == "path" ? 16 : 4;
-    settings.lightSamples = a.lightSamples;
-    settings.cullBackfaces = a.cullBackfaces;
-    settings.rayBinning = !a.noRayBinning;
-    settings.maxGridEdge = a.maxGridEdge;
-    settings.gloss = a.gloss == "microfacet" ? GlossModel::Microfacet : GlossModel::Paper;
-    settings.integrator = a.integrator == "ao"     ? Integrator::AmbientOcclusion
-                          : a.integrator == "path" ? Integrator::Path
-                                                   : Integrator::Direct;
-    settings.ao.samples = a.aoSamples;
-    if (a.aoDistance > 0) settings.ao.maxDistance = float(a.aoDistance);
-    settings.ao.paperWeighting = a.aoWeighting == "paper";
-    settings.adaptive.enabled = a.adaptive;
-    if (a.adaptiveThresholdGiven) settings.adaptive.thresholds.color = float(a.adaptiveThreshold);
+    try {
+        applyRenderOptions(scene, a, settings);
+    } catch (const std::invalid_argument& e) {
+        fail(std::string("error: ") + e.what());
+    }
     settings.output.channels = wanted.channels | (depthDisplay ? kChannelDepth : 0u);
     settings.output.aovs = wanted.planes;
-    settings.shadows = a.shadows == "on"    ? ShadowOverride::On
-                       : a.shadows == "off" ? ShadowOverride::Off
-                                            : ShadowOverride::Scene;
-    settings.reyesShadows = a.reyesShadows == "raytrace" ? ReyesShadows::Raytrace : ReyesShadows::Map;
-    // Blur: the flags, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
-    settings.blur.enabled = !a.noBlur;
-    const std::string sampling = !a.blurSampling.empty() ? a.blurSampling : scene.image.blurSampling;
-    if (!sampling.empty()) settings.blur.sampling = blurSamplingFromName(sampling);
-    if (a.blurTile > 0)
-        settings.blur.tileSize = a.blurTile;
-    else if (scene.image.blurTileSize > 0)
-        settings.blur.tileSize = scene.image.blurTileSize;
-    if (a.blurPermutations > 0)
-        settings.blur.permutations = a.blurPermutations;
-    else if (scene.image.blurPermutations > 0)
-        settings.blur.permutations = scene.image.blurPermutations;
-    const int spp = scene.image.pixelSamplesX * scene.image.pixelSamplesY;
-    if (settings.blur.enabled && settings.blur.sampling == BlurSampling::Interleaved &&
-        int64_t(spp) * settings.blur.tileSize * settings.blur.tileSize > 65536)
-        fail(
-            fmt::format("error: interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, "
-                        "got {} x {}^2 (lower --spp or --blur-tile)",
-                        spp, settings.blur.tileSize));
     Progress::Mode mode = a.progressLines                       ? Progress::Mode::Lines
                           : (!a.quiet && isatty(STDERR_FILENO)) ? Progress::Mode::Bar
                                                                 : Progress::Mode::Off;
@@ -695,11 +553,25 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
                 fmt::format("error: --passes {} does not divide the {} samples per pixel", passes, totalSpp));
         splitSamplesPerPixel(totalSpp / passes, scene.image.pixelSamplesX, scene.image.pixelSamplesY);
     }
-    progress.begin();
-    auto t0 = std::chrono::steady_clock::now();
     RenderResult result;
     Image sum;  // passes > 1: the sum of the finished passes' RGBA
     int passesDone = 0;
+    // Live preview: --display-server, else a RIB Display "framebuffer" to tev's default address. Each
+    // bucket as it finishes; in later passes the average with the passes before it, as written.
+    std::optional<cli::LivePreview> preview;
+    const std::string displayServer = !a.displayServer.empty()                   ? a.displayServer
+                                      : scene.image.displayType == "framebuffer" ? cli::kDefaultDisplayServer
+                                                                                 : "";
+    if (!displayServer.empty() && !depthDisplay) {
+        preview.emplace(
+            displayServer, fs::path(output).filename().string(), scene.camera.width, scene.camera.height,
+            scene.image.hasBackground ? std::optional<Color>(scene.image.background) : std::nullopt, a.quiet);
+        settings.bucketDone = [&preview, &sum, &passesDone](const Image& image, const Rect& r) {
+            preview->update(image, r, passesDone > 0 ? &sum : nullptr, passesDone);
+        };
+    }
+    progress.begin();
+    auto t0 = std::chrono::steady_clock::now();
     auto average = [&]() {
         Image img = result.image;
         for (size_t i = 0; i < img.rgba.size(); ++i) img.rgba[i] = sum.rgba[i] / float(passesDone);
@@ -750,6 +622,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     }
     if (passesDone > 1) result.image = average();
     settings.seed = baseSeed;
+    if (preview) preview->finish();
     double renderMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     if (!a.quiet)
@@ -815,10 +688,9 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
             writeDepthMap(output, depthMapOf(result.image, meta, scene.image.displayType));
         } else {
             // The primary output: the beauty and --aov's layers; then each secondary display's file.
-            writeImage(output, withLayers(result.image, *aovs, aovs->channels, aovs->planes), enc);
+            writeImage(output, withLayers(result.image, *aovs), enc);
             for (const Secondary& d : secondaries)
-                writeImage(d.path, withLayers(result.image, d.layers, d.layers.channels, d.layers.planes),
-                           enc);
+                writeImage(d.path, withLayers(result.image, d.layers), enc);
         }
         if (!a.adaptiveMap.empty()) writeAdaptiveMap(a.adaptiveMap, result);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);
@@ -1211,6 +1083,9 @@ int main(int argc, char** argv) {
     render->add_option("--tile", ra.tile,
                        "Render tile I (0-based) of an N-tile split I/N of the image (or crop window) into "
                        "near-square tiles; join them with tessera assemble");
+    render->add_option("--display-server", ra.displayServer,
+                       "Stream the buckets as they finish to a tev viewer at HOST:PORT (the RIB's Display "
+                       "\"framebuffer\" streams to 127.0.0.1:14158, tev's default)");
     render->add_flag("--progress", ra.progressLines,
                      "Print 'progress N%' on stderr, one line per whole percent (for logs and render farms)");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");

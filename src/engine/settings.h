@@ -124,6 +124,10 @@ struct RenderSettings {
     // the engine's estimate of its work (samples traced, micropolygons sampled), so the fraction grows
     // steadily over the render. Must be thread-safe.
     std::function<void(uint64_t, uint64_t)> progress;
+    // Live preview (--display-server): called from worker threads after each bucket with the image and the
+    // bucket's pixels, which are final by then (other buckets may be writing theirs: read only these).
+    // Must be thread-safe.
+    std::function<void(const Image&, const Rect&)> bucketDone;
     // Set to true (e.g. by a SIGINT handler) to stop the render early: no bucket starts after it is seen.
     const std::atomic<bool>* cancel = nullptr;
 };

@@ -23,13 +23,16 @@ struct BucketLayout {
     int size = 32;
     int countX = 0, countY = 0;
     BucketLayout(Rect r, int bucketSize)
-        : region(r), size(std::max(1, bucketSize)),
-          countX((r.width() + size - 1) / size), countY((r.height() + size - 1) / size) {}
+        : region(r),
+          size(std::max(1, bucketSize)),
+          countX((r.width() + size - 1) / size),
+          countY((r.height() + size - 1) / size) {}
     int count() const { return countX * countY; }
     // Pixels bucket b writes.
     Rect target(int b) const {
         const int bx = b % countX, by = b / countX;
-        return Rect{region.x0 + bx * size, region.y0 + by * size, std::min(region.x1, region.x0 + (bx + 1) * size),
+        return Rect{region.x0 + bx * size, region.y0 + by * size,
+                    std::min(region.x1, region.x0 + (bx + 1) * size),
                     std::min(region.y1, region.y0 + (by + 1) * size)};
     }
     // The pixels whose samples bucket b needs: its target grown by the filter radius, clipped to the image
@@ -41,8 +44,12 @@ struct BucketLayout {
     }
     // Bucket index range [b0, b1] x [c0, c1] overlapped by a raster rectangle (clamped).
     void overlapped(float x0, float y0, float x1, float y1, int& bx0, int& by0, int& bx1, int& by1) const {
-        auto col = [&](float x) { return std::clamp(int(std::floor((x - region.x0) / size)), 0, countX - 1); };
-        auto row = [&](float y) { return std::clamp(int(std::floor((y - region.y0) / size)), 0, countY - 1); };
+        auto col = [&](float x) {
+            return std::clamp(int(std::floor((x - region.x0) / size)), 0, countX - 1);
+        };
+        auto row = [&](float y) {
+            return std::clamp(int(std::floor((y - region.y0) / size)), 0, countY - 1);
+        };
         bx0 = col(x0), bx1 = col(x1), by0 = row(y0), by1 = row(y1);
     }
 };
@@ -55,10 +62,12 @@ struct TileLoopResult {
 
 // Runs renderBucket(b, workerState) for every bucket; `work[b]` is the bucket's estimated work (empty:
 // one unit each) for the progress callback. Deterministic output is the caller's: a bucket writes only its
-// target pixels.
+// target pixels. `image`: where the buckets write their final pixels, handed to the settings' bucketDone
+// after each bucket (null: a pass whose buckets make no image pixels, e.g. a shadow map).
 template <class Worker, class Fn>
-TileLoopResult runTileLoop(const BucketLayout& layout, std::span<const uint64_t> work, const RenderSettings& s,
-                           tbb::enumerable_thread_specific<Worker>& workers, Fn&& renderBucket) {
+TileLoopResult runTileLoop(const BucketLayout& layout, std::span<const uint64_t> work,
+                           const RenderSettings& s, tbb::enumerable_thread_specific<Worker>& workers,
+                           Fn&& renderBucket, const Image* image = nullptr) {
     const int nb = layout.count();
     uint64_t totalWork = 0;
     for (int b = 0; b < nb; ++b) totalWork += work.empty() ? 1 : work[b];
@@ -81,6 +90,7 @@ TileLoopResult runTileLoop(const BucketLayout& layout, std::span<const uint64_t>
                 renderBucket(b, w);
                 ++rendered;
                 const uint64_t done = doneWork += work.empty() ? 1 : work[b];
+                if (image && s.bucketDone) s.bucketDone(*image, layout.target(b));
                 if (s.progress) s.progress(done, totalWork);
             }
         },

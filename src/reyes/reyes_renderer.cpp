@@ -190,7 +190,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         reconstruct(tc.tile, frame.filter, target, result.image);
         tc.filterMs += msSince(tf);
     };
-    const TileLoopResult loop = runTileLoop(layout, binned.work, settings, counters, renderBucket);
+    const TileLoopResult loop = runTileLoop(layout, binned.work, settings, counters, renderBucket, &result.image);
 
     ThreadCounters total;
     for (const ThreadCounters& tc : counters) {

@@ -938,7 +938,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
         reconstruct(ws.tile, frame.filter, target, result.image);
         ws.filterMs += msSince(tf);
     };
-    const TileLoopResult loop = runTileLoop(layout, work, settings, workspaces, renderTile);
+    const TileLoopResult loop = runTileLoop(layout, work, settings, workspaces, renderTile, &result.image);
     const double traceMs = loop.wallMs;
 
     TraceCounters total;

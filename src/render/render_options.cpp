@@ -1,0 +1,86 @@
+#include "render/render_options.h"
+
+#include <initializer_list>
+#include <stdexcept>
+
+namespace tessera {
+namespace {
+
+void requireOneOf(const char* option, const std::string& value, std::initializer_list<const char*> names) {
+    std::string list;
+    for (const char* n : names) {
+        if (value == n) return;
+        list += list.empty() ? n : std::string(", ") + n;
+    }
+    throw std::invalid_argument(std::string(option) + " must be one of " + list + ", got '" + value + "'");
+}
+
+}  // namespace
+
+void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettings& s) {
+    requireOneOf("engine", o.engine, {"reyes", "rt"});
+    if (!o.sampler.empty()) requireOneOf("sampler", o.sampler, {"sobol", "jittered", "centred"});
+    requireOneOf("shadows", o.shadows, {"on", "off", "scene"});
+    requireOneOf("reyes shadows", o.reyesShadows, {"map", "raytrace"});
+    requireOneOf("integrator", o.integrator, {"direct", "path", "ao"});
+    requireOneOf("ao weighting", o.aoWeighting, {"cosine", "paper"});
+    requireOneOf("gloss", o.gloss, {"paper", "microfacet"});
+    if (!o.blurSampling.empty())
+        requireOneOf("blur sampling", o.blurSampling, {"simple", "interleaved", "bbox"});
+    if (o.threads < 0) throw std::invalid_argument("threads must be >= 0 (0 = all cores)");
+    if (o.bucketSize < 4 || o.bucketSize > 1024) throw std::invalid_argument("bucket size must be 4..1024");
+    if (o.integrator != "direct" && o.engine != "rt")
+        throw std::invalid_argument("integrator " + o.integrator + " is ray traced: use it with engine rt");
+
+    s.engine = o.engine;
+    s.threads = o.threads;
+    s.seed = o.seed;
+    // The sampler asked for, else the scene's Hider "jitter" [0] (strata centres), else Sobol'.
+    s.sampler = o.sampler == "jittered"                      ? SamplerKind::Jittered
+                : o.sampler == "centred"                     ? SamplerKind::Centred
+                : o.sampler == "sobol" || scene.image.jitter ? SamplerKind::Sobol
+                                                             : SamplerKind::Centred;
+    s.bucketSize = o.bucketSize;
+    s.subpatchDepth = o.subpatchDepth;
+    // Bounces: 4 traced lobes for the direct integrator; 16 for the path tracer, whose Russian roulette
+    // ends most paths far earlier (the cap only bounds mirror-and-glass chains).
+    s.maxDepth = o.maxDepth >= 0 ? o.maxDepth : o.integrator == "path" ? 16 : 4;
+    s.lightSamples = o.lightSamples;
+    s.cullBackfaces = o.cullBackfaces;
+    s.rayBinning = !o.noRayBinning;
+    s.maxGridEdge = o.maxGridEdge;
+    s.gloss = o.gloss == "microfacet" ? GlossModel::Microfacet : GlossModel::Paper;
+    s.integrator = o.integrator == "ao"     ? Integrator::AmbientOcclusion
+                   : o.integrator == "path" ? Integrator::Path
+                                            : Integrator::Direct;
+    s.ao.samples = o.aoSamples;
+    if (o.aoDistance > 0) s.ao.maxDistance = float(o.aoDistance);
+    s.ao.paperWeighting = o.aoWeighting == "paper";
+    s.adaptive.enabled = o.adaptive;
+    if (o.adaptiveThresholdGiven) s.adaptive.thresholds.color = float(o.adaptiveThreshold);
+    s.shadows = o.shadows == "on"    ? ShadowOverride::On
+                : o.shadows == "off" ? ShadowOverride::Off
+                                     : ShadowOverride::Scene;
+    s.reyesShadows = o.reyesShadows == "raytrace" ? ReyesShadows::Raytrace : ReyesShadows::Map;
+    // Blur: the options, else the scene's Hider "hidden" parameters, else the defaults of BlurSettings.
+    s.blur.enabled = !o.noBlur;
+    const std::string sampling = !o.blurSampling.empty() ? o.blurSampling : scene.image.blurSampling;
+    if (sampling == "simple") s.blur.sampling = BlurSampling::Simple;
+    if (sampling == "interleaved") s.blur.sampling = BlurSampling::Interleaved;
+    if (sampling == "bbox") s.blur.sampling = BlurSampling::BoundingBox;
+    s.blur.tileSize = o.blurTile > 0                 ? o.blurTile
+                      : scene.image.blurTileSize > 0 ? scene.image.blurTileSize
+                                                     : s.blur.tileSize;
+    s.blur.permutations = o.blurPermutations > 0             ? o.blurPermutations
+                          : scene.image.blurPermutations > 0 ? scene.image.blurPermutations
+                                                             : s.blur.permutations;
+    const int spp = scene.image.pixelSamplesX * scene.image.pixelSamplesY;
+    if (s.blur.enabled && s.blur.sampling == BlurSampling::Interleaved &&
+        int64_t(spp) * s.blur.tileSize * s.blur.tileSize > 65536)
+        throw std::invalid_argument(
+            "interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, got " +
+            std::to_string(spp) + " x " + std::to_string(s.blur.tileSize) +
+            "^2 (lower the samples per pixel or the blur tile size)");
+}
+
+}  // namespace tessera

@@ -1,0 +1,44 @@
+// The words a user renders with (the CLI's flags, the Python module's keywords) and how they become the
+// engines' RenderSettings over a scene: one function for both front ends, so the same words render the
+// same image. Resolution, samples per pixel, shading rate and the camera's blur overrides edit the Scene;
+// the film region and the output spec are the caller's.
+#pragma once
+#include <string>
+
+#include "engine/settings.h"
+
+namespace tessera {
+
+struct RenderOptions {
+    std::string engine = "reyes";  // reyes, rt
+    int threads = 0;               // 0: all cores
+    unsigned seed = 0;
+    std::string sampler;            // sobol, jittered, centred; "": sobol, or centred for Hider "jitter" [0]
+    std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
+    std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
+    int bucketSize = 32, subpatchDepth = 6, maxGridEdge = 16;
+    int maxDepth = -1;     // -1: 4 for the direct integrator, 16 for the path tracer
+    int lightSamples = 0;  // 0: each area light's own "samples"
+    bool cullBackfaces = false, noRayBinning = false;
+    // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's Hider parameters.
+    bool noBlur = false;
+    std::string blurSampling;
+    int blurTile = 0, blurPermutations = 0;
+    // Ray-traced light transport (docs/light_transport.md).
+    std::string integrator = "direct";   // direct, path, ao
+    std::string aoWeighting = "cosine";  // cosine, paper
+    std::string gloss = "paper";         // paper, microfacet (shading/gloss.h)
+    int aoSamples = 64;
+    double aoDistance = 0;  // 0: unlimited
+    // Selective and adaptive supersampling (docs/adaptive.md).
+    bool adaptive = false;
+    double adaptiveThreshold = 0;
+    bool adaptiveThresholdGiven = false;
+};
+
+// Fills `s` (all but view and output) from `o` and the scene's own render options (Hider "jitter",
+// "blursampling", "blurtilesize", "blurpermutations"). Throws std::invalid_argument for an unknown name or
+// a value out of range, naming the option.
+void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettings& s);
+
+}  // namespace tessera
