@@ -14,7 +14,9 @@ for a in "$@"; do
 done
 
 source scripts/packages.sh
-PACKAGES=("${TESSERA_PACKAGES[@]}" libgtest-dev libgmock-dev libbenchmark-dev python3)
+# The Python module and its tests (apps/python, tests/python): pybind11 on Debian's python3, numpy, pytest.
+PACKAGES=("${TESSERA_PACKAGES[@]}" libgtest-dev libgmock-dev libbenchmark-dev python3 python3-dev pybind11-dev
+          python3-numpy python3-pytest)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "${CMAKE_ARGS[@]}" >/dev/null

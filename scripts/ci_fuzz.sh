@@ -23,7 +23,7 @@ fi
 
 B=build-fuzz
 cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTESSERA_FUZZ=ON \
-  -DTESSERA_TESTS=OFF -DTESSERA_BENCH=OFF >/dev/null
+  -DTESSERA_TESTS=OFF -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF >/dev/null
 cmake --build $B -j"$(nproc)" --target "${TARGETS[@]/#/fuzz_}"
 
 # As scripts/ci_sanitize.sh: OpenImageIO 2.4's TextureSystem::destroy trips the sized-delete check inside

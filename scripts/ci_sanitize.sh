@@ -14,7 +14,7 @@ B=build-asan
 # -O1: fast enough to run the renders, still readable stacks. float-cast-overflow is not part of
 # g++'s "undefined": out-of-range float -> int conversions are exactly what huge inputs cause.
 cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
-  -DTESSERA_SANITIZE=address,undefined,float-cast-overflow -DTESSERA_BENCH=OFF >/dev/null
+  -DTESSERA_SANITIZE=address,undefined,float-cast-overflow -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF >/dev/null
 cmake --build $B -j"$(nproc)"
 
 # new_delete_type_mismatch=0: OpenImageIO 2.4's TextureSystem::destroy deletes its implementation through

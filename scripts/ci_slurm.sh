@@ -2,9 +2,10 @@
 # CI: the Slurm render farm for real. Installs slurm-wlm, starts a one-node cluster on the loopback address
 # (slurmctld + slurmd as root, AuthType=auth/none, CredType=cred/none, free high ports, its own slurm.conf
 # via SLURM_CONF, state, spool, logs and pid files under a mktemp -d; /etc/slurm is never read), then
-#   1. scripts/slurm_render.sh SCENE 4 (job array + dependent assemble, TESSERA_SLURM_WAIT=1) equals the
-#      single render pixel for pixel (tessera_imgdiff: max colour and alpha difference 0), and so does
-#      scripts/render_tiles.sh (the same contract on xargs -P);
+#   1. scripts/slurm_render.sh SCENE 4 (shadow-map job, job array, dependent assemble, TESSERA_SLURM_WAIT=1)
+#      equals the single render pixel for pixel (tessera_imgdiff: max colour and alpha difference 0), the
+#      maps were rendered once into the tiles' cache, and scripts/render_tiles.sh (the same contract on
+#      xargs -P) equals it too;
 #   2. a tile whose first render fails is retried and the image is still exact;
 #   3. a tile that always fails is reported (index, exit status) and the assemble job refuses the incomplete
 #      set (tessera assemble: "tile 2 of 4 is missing"), slurm_render.sh exits nonzero, no image is written;
@@ -158,6 +159,10 @@ t0=$SECONDS
 farm bash scripts/slurm_render.sh "$scene" 4 "$work/farm.exr" "${opts[@]}" || fail "slurm_render.sh failed"
 echo "  took $((SECONDS - t0)) s"
 same_pixels "$work/farm.exr" "$work/single.exr"
+# Reyes: the shadow maps were rendered once, by the job before the array, into the tiles' cache.
+grep -Eq "shadow maps: 0 read, [1-9][0-9]* rendered" "$work/farm.tiles/maps.log" ||
+    fail "the shadow-map job did not render the maps (maps.log: $(cat "$work/farm.tiles/maps.log"))"
+ls "$work"/farm.tiles/shadowmaps/shadow-*.tsm >/dev/null 2>&1 || fail "no shadow map in the tiles' cache"
 TESSERA_JOBS=2 bash scripts/render_tiles.sh "$scene" 4 "$work/local.exr" "${opts[@]}"
 same_pixels "$work/local.exr" "$work/single.exr"
 

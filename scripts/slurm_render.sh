@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Slurm render farm: scripts/slurm_render.sh SCENE N OUT.exr [tessera render options...]
-# Submits a job array of N tasks (sbatch --array=0-(N-1)); task I runs
+# With Reyes (the default engine) it first submits a job that renders the scene's shadow maps once
+# (tessera render --shadow-maps-only) into OUT.tiles/shadowmaps, which the tiles read (--shadow-map-cache)
+# instead of each rendering them again; the array runs after it (afterany: if it failed, each tile makes
+# its own maps). Then a job array of N tasks (sbatch --array=0-(N-1)); task I runs
 #   tessera render SCENE --tile I/N -o OUT.tiles/tileI.exr [options] --threads ${SLURM_CPUS_PER_TASK:-1}
 # and retries a failed render (TESSERA_SLURM_RETRIES times, default 1), logging the tile index and exit status
 # of each failed attempt; a tile file appears only once its render succeeded. Then it submits an assemble
@@ -28,13 +31,16 @@ n=$((10#$n))
 [ "$n" -ge 1 ] || die "N must be >= 1, got $n"
 [ -f "$scene" ] || die "no such scene file: '$scene'"
 case $out in *.exr) ;; *) die "OUT must be an .exr file (tiles carry their place in the image), got '$out'" ;; esac
-threads=1
+threads=1 engine=reyes prev=
 for a in "$@"; do
     case $a in
-        -o | --output | --tile | --tile=* | --frames | --frames=*)
+        -o | --output | --tile | --tile=* | --frames | --frames=* | --shadow-map-cache | --shadow-maps-only)
             die "option '$a' is set by the farm (each task renders --tile I/N into OUT.tiles/)" ;;
         --threads | --threads=*) threads= ;;  # the caller's --threads wins over SLURM_CPUS_PER_TASK
+        --engine=*) engine=${a#--engine=} ;;
     esac
+    [ "$prev" = --engine ] && engine=$a
+    prev=$a
 done
 retries=${TESSERA_SLURM_RETRIES:-1}
 case $retries in '' | *[!0-9]*) die "TESSERA_SLURM_RETRIES must be a count, got '$retries'" ;; esac
@@ -58,6 +64,16 @@ rm -f "$dir"/tile*.exr "$dir"/tile*.status "$dir"/tile-*.log "$dir"/assemble.log
 # The job scripts, with every path and option quoted into them.
 q() { printf '%q' "$1"; }                           # one word
 qs() { local a; for a in "$@"; do printf '%q ' "$a"; done; }  # words, each followed by a space
+maps=()
+[ "$engine" = reyes ] && maps=(--shadow-map-cache "$dir/shadowmaps")
+if [ ${#maps[@]} -gt 0 ]; then
+    cat >"$dir/maps.sbatch" <<EOF
+#!/usr/bin/env bash
+# Written by scripts/slurm_render.sh: the scene's shadow maps, once, for the $n tiles.
+exec $(q "$tessera") render $(q "$scene") $(qs "$@")$(qs "${maps[@]}")--shadow-maps-only
+EOF
+    chmod +x "$dir/maps.sbatch"
+fi
 cat >"$dir/tile.sbatch" <<EOF
 #!/usr/bin/env bash
 # Written by scripts/slurm_render.sh: renders tile \$SLURM_ARRAY_TASK_ID of $n, retried $retries time(s).
@@ -73,7 +89,7 @@ attempt=0
 while :; do
     attempt=\$((attempt + 1))
     echo "tile \$i of $n: attempt \$attempt on \$(hostname) (job \${SLURM_ARRAY_JOB_ID:-?}_\$i)"
-    $(q "$tessera") render $(q "$scene") -q "\${threads[@]}" $(qs "$@")--tile "\$i/$n" -o "\$part"
+    $(q "$tessera") render $(q "$scene") -q "\${threads[@]}" $(qs "$@")$(qs "${maps[@]}")--tile "\$i/$n" -o "\$part"
     rc=\$?
     if [ \$rc -eq 0 ] && [ -f "\$part" ]; then
         mv -f "\$part" "\$tile"
@@ -130,6 +146,13 @@ common=(--parsable --open-mode=append)
 tilearg=(--array="0-$((n - 1))" --requeue --job-name=tessera-tiles -o "$dir/tile-%A_%a.log")
 [ -n "$cpus" ] && tilearg+=(--cpus-per-task="$cpus")
 
+if [ ${#maps[@]} -gt 0 ]; then
+    mapsjob=$(sbatch "${common[@]}" --job-name=tessera-maps -o "$dir/maps.log" "$dir/maps.sbatch") ||
+        die "sbatch of the shadow-map job failed"
+    mapsjob=${mapsjob%%;*}
+    echo "shadow maps: job $mapsjob (log $dir/maps.log)"
+    tilearg+=(--dependency="afterany:$mapsjob")
+fi
 array=$(sbatch "${common[@]}" "${tilearg[@]}" "$dir/tile.sbatch") || die "sbatch of the tile array failed"
 array=${array%%;*}
 echo "tiles: job array $array (tasks 0-$((n - 1)), logs $dir/tile-${array}_I.log)"

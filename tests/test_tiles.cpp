@@ -9,11 +9,14 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -322,4 +325,137 @@ TEST(Tiles, TilesOfDifferentFramesOfOneFileDoNotAssemble) {
     EXPECT_EQ(runTessera("assemble " + a0 + " " + a1 + " -o " + (dir / "one.exr").string(), &output), 0)
         << output;
 }
+}  // namespace
+
+namespace {
+
+// The "shadows" object of a --stats file.
+nlohmann::json shadowStats(const std::string& statsPath) {
+    std::ifstream f(statsPath);
+    return nlohmann::json::parse(f).at("shadows");
+}
+
+std::vector<fs::path> cachedMaps(const fs::path& dir) {
+    std::vector<fs::path> maps;
+    for (const auto& e : fs::directory_iterator(dir))
+        if (e.path().extension() == ".tsm") maps.push_back(e.path());
+    std::sort(maps.begin(), maps.end());
+    return maps;
+}
+
+// A farm's shadow maps (--shadow-map-cache, --shadow-maps-only): one job renders the point light's six
+// cube faces, every tile reads them (no depth pass of its own) and the assembled image equals the single
+// render bit for bit; the maps read are the ones used (a cache of empty maps removes the shadow); a changed
+// scene or a damaged file is a miss that renders and rewrites the map; the options' mistakes exit 2.
+TEST(Tiles, ShadowMapCacheRendersTheMapsOnceForEveryTile) {
+    const std::string rib = writeScene("scene.rib");
+    const fs::path dir = test::testScratchDir(), cache = dir / "maps";
+    const std::string common = rib + " -q --threads 2 --shadows on";
+    std::string out;
+    const std::string full = (dir / "full.exr").string();
+    ASSERT_EQ(runTessera("render " + common + " -o " + full, &out), 0) << out;
+
+    const std::string prepass = (dir / "prepass.json").string();
+    ASSERT_EQ(runTessera("render " + common + " --shadow-map-cache " + cache.string() +
+                             " --shadow-maps-only --stats " + prepass,
+                         &out),
+              0)
+        << out;
+    EXPECT_EQ(shadowStats(prepass)["cache"]["misses"], 6);  // the point light's cube map
+    EXPECT_EQ(shadowStats(prepass)["cache"]["hits"], 0);
+    EXPECT_EQ(cachedMaps(cache).size(), 6u);
+    EXPECT_FALSE(fs::exists(dir / "scene.png"));  // no image
+
+    std::string tiles;
+    for (int i = 0; i < 4; ++i) {
+        const std::string t = (dir / ("tile" + std::to_string(i) + ".exr")).string();
+        const std::string stats = (dir / ("tile" + std::to_string(i) + ".json")).string();
+        ASSERT_EQ(runTessera("render " + common + " --shadow-map-cache " + cache.string() + " --tile " +
+                                 std::to_string(i) + "/4 -o " + t + " --stats " + stats,
+                             &out),
+                  0)
+            << out;
+        const nlohmann::json s = shadowStats(stats);
+        EXPECT_EQ(s["cache"]["hits"], 6) << "tile " << i;
+        EXPECT_EQ(s["cache"]["misses"], 0) << "tile " << i;
+        EXPECT_EQ(s["maps"][0]["micropolygons"], 0) << "tile " << i << " rendered a depth pass";
+        tiles += " " + t;
+    }
+    const std::string joined = (dir / "joined.exr").string();
+    ASSERT_EQ(runTessera("assemble" + tiles + " -o " + joined, &out), 0) << out;
+    const Raw a = readRaw(full), b = readRaw(joined);
+    for (const auto& [name, values] : a.channels) EXPECT_EQ(values, b.channels.at(name)) << name;
+
+    // The tiles read the maps from the files: replaced by maps that see nothing (infinite depth), the
+    // shadow is gone and the image brightens where it was.
+    const std::vector<fs::path> maps = cachedMaps(cache);
+    const std::vector<char> original = [&] {
+        std::ifstream f(maps[0], std::ios::binary);
+        return std::vector<char>(std::istreambuf_iterator<char>(f), {});
+    }();
+    for (const fs::path& m : maps) {
+        std::vector<char> bytes;
+        {
+            std::ifstream f(m, std::ios::binary);
+            bytes.assign(std::istreambuf_iterator<char>(f), {});
+        }
+        ASSERT_GT(bytes.size(), 16u);
+        const float inf = std::numeric_limits<float>::infinity();
+        for (size_t o = 16; o + 4 <= bytes.size(); o += 4) std::memcpy(&bytes[o], &inf, 4);
+        std::ofstream(m, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+    }
+    const std::string unshadowed = (dir / "unshadowed.exr").string();
+    ASSERT_EQ(
+        runTessera("render " + common + " --shadow-map-cache " + cache.string() + " -o " + unshadowed, &out),
+        0)
+        << out;
+    const Image lit = readExr(unshadowed), shadowed = readExr(full);
+    double brighter = 0;
+    for (size_t i = 0; i < lit.rgba.size(); i += 4) brighter += std::max(0.f, lit.rgba[i] - shadowed.rgba[i]);
+    EXPECT_GT(brighter, 1.0) << "the cached maps were not the ones used";
+
+    // A damaged file (cut short) is a miss: rendered again and rewritten whole.
+    fs::resize_file(maps[0], 100);
+    const std::string again = (dir / "again.json").string();
+    ASSERT_EQ(runTessera("render " + common + " --shadow-map-cache " + cache.string() +
+                             " --shadow-maps-only --stats " + again,
+                         &out),
+              0)
+        << out;
+    EXPECT_EQ(shadowStats(again)["cache"]["misses"], 1);
+    EXPECT_EQ(shadowStats(again)["cache"]["hits"], 5);
+    EXPECT_EQ(fs::file_size(maps[0]), original.size());
+    // Another scene (the small plane moved) shares no map with this one.
+    std::string text;
+    {
+        std::ifstream f(rib);
+        text.assign(std::istreambuf_iterator<char>(f), {});
+    }
+    const size_t at = text.find("-1.3 -0.9 5");
+    ASSERT_NE(at, std::string::npos);
+    const std::string other = test::writeTestFile("moved.rib", text.replace(at, 4, "-1.2"));
+    const std::string otherStats = (dir / "other.json").string();
+    ASSERT_EQ(runTessera("render " + other + " -q --shadows on --shadow-map-cache " + cache.string() +
+                             " --shadow-maps-only --stats " + otherStats,
+                         &out),
+              0)
+        << out;
+    EXPECT_EQ(shadowStats(otherStats)["cache"]["misses"], 6);
+    EXPECT_EQ(cachedMaps(cache).size(), 12u);
+
+    // Mistakes: exit 2 with a message, nothing written.
+    const std::string never = (dir / "never.exr").string();
+    const std::pair<std::string, const char*> mistakes[] = {
+        {"--shadow-maps-only", "give it"},
+        {"--shadow-maps-only --engine rt --shadow-map-cache " + cache.string(), "makes no maps"},
+        {"--shadow-maps-only -o " + never + " --shadow-map-cache " + cache.string(), "writes no image"},
+        {"--shadow-map-cache " + rib + " -o " + never, "names a file, not a folder"},
+    };
+    for (const auto& [args, message] : mistakes) {
+        EXPECT_EQ(runTessera("render " + rib + " " + args, &out), 2) << args << ": " << out;
+        EXPECT_NE(out.find(message), std::string::npos) << args << ": " << out;
+    }
+    EXPECT_FALSE(fs::exists(never));
+}
+
 }  // namespace

@@ -65,8 +65,6 @@ double peakRssMb() {
 // then what only the command line has (files, progress, tiles, passes).
 struct RenderArgs : RenderOptions {
     std::string scene, output, res, stats, format = "auto", up;
-    int spp = 0;
-    double shadingRate = 0;
     bool quiet = false, progressLines = false;
     // Motion blur and depth of field overrides of the camera (docs/motion.md): "" = the scene's.
     std::string shutter, dof;
@@ -79,30 +77,15 @@ struct RenderArgs : RenderOptions {
     std::string crop, tile;
     std::string
         displayServer;  // live preview: HOST:PORT of a tev viewer ("": none, or the RIB's framebuffer)
+    std::string shadowMapCache;   // a folder where Reyes keeps its shadow maps for the other tiles of a farm
+    bool shadowMapsOnly = false;  // make the shadow maps into the cache and no image (a farm's first job)
 };
 
-// The OpenEXR header's camera: worldToCamera, and worldToNDC with NDC x, y in [0, 1] from the top-left
-// corner of the image (RenderMan's NDC) and depth 0 at the near plane, 1 at the far plane.
+// The OpenEXR header: the camera's matrices (io/image_io.h), this program's name and the render time.
 ExrMetadata exrMetadata(const Camera& cam, double renderMs) {
-    ExrMetadata m;
-    m.hasCamera = true;
+    ExrMetadata m = cameraExrMetadata(cam);
     m.software = "tessera " TESSERA_VERSION;
     m.renderMs = renderMs;
-    m.worldToCamera = cam.cameraFromWorld;
-    const Projector pr(cam);
-    const double W = cam.width, H = cam.height, n = pr.nearClip, f = pr.farClip;
-    Mat4 p;
-    if (pr.perspective) {  // raster = (x/z sx + ox, y/z sy + oy): divide by w = z
-        p.m[0][0] = pr.sx / W, p.m[0][2] = pr.ox / W;
-        p.m[1][1] = pr.sy / H, p.m[1][2] = pr.oy / H;
-        p.m[2][2] = f / (f - n), p.m[2][3] = -f * n / (f - n);
-        p.m[3][2] = 1, p.m[3][3] = 0;
-    } else {
-        p.m[0][0] = pr.sx / W, p.m[0][3] = pr.ox / W;
-        p.m[1][1] = pr.sy / H, p.m[1][3] = pr.oy / H;
-        p.m[2][2] = 1 / (f - n), p.m[2][3] = -n / (f - n);
-    }
-    m.worldToNDC = p * cam.cameraFromWorld;
     return m;
 }
 
@@ -385,6 +368,25 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
                              a.tile));
         if (a.adaptive) fail("error: --tile and --adaptive cannot be combined yet");
     }
+    if (!a.shadowMapCache.empty()) {
+        std::error_code ec;
+        if (fs::exists(a.shadowMapCache, ec) && !fs::is_directory(a.shadowMapCache, ec))
+            fail(fmt::format("{}: error: --shadow-map-cache names a file, not a folder", a.shadowMapCache));
+        fs::create_directories(a.shadowMapCache, ec);
+        if (ec || access(a.shadowMapCache.c_str(), W_OK) != 0)
+            fail(fmt::format("{}: error: --shadow-map-cache: cannot create or write the folder",
+                             a.shadowMapCache));
+    }
+    if (a.shadowMapsOnly) {
+        if (a.shadowMapCache.empty())
+            fail("error: --shadow-maps-only makes the maps into --shadow-map-cache DIR: give it");
+        if (a.engine != "reyes")
+            fail(
+                "error: --shadow-maps-only: the ray tracer traces its shadows and makes no maps (--engine "
+                "reyes)");
+        if (!a.output.empty() || a.passes > 1 || a.adaptive)
+            fail("error: --shadow-maps-only writes no image: drop -o, --passes and --adaptive");
+    }
     if (!a.displayServer.empty()) {
         std::string host;
         int port = 0;
@@ -436,32 +438,24 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         fmt::print(stderr, "interrupted while loading {}: no image written\n", a.scene);
         return 130;
     }
-    // Command-line options override the scene's.
-    if (!a.res.empty()) {
-        scene.camera.width = resW;
-        scene.camera.height = resH;
+    // Command-line options override the scene's (render_options.h, shared with the Python module).
+    {
+        RenderOptions overrides = a;
+        overrides.width = resW, overrides.height = resH;
+        overrides.shutter = shutter, overrides.dof = dof;
+        try {
+            applySceneOverrides(scene, overrides);
+        } catch (const std::invalid_argument& e) {
+            fail(fmt::format("{}: error: {}", a.scene, e.what()));
+        }
     }
-    if (scene.camera.width < 1 || scene.camera.height < 1 || scene.camera.width > kMaxResolution ||
-        scene.camera.height > kMaxResolution)
-        fail(fmt::format("{}: error: resolution {}x{} outside 1..{} per axis", a.scene, scene.camera.width,
-                         scene.camera.height, kMaxResolution));
-    if (a.spp > 0) splitSamplesPerPixel(a.spp, scene.image.pixelSamplesX, scene.image.pixelSamplesY);
-    if (a.shadingRate > 0)
-        for (auto& attr : scene.attributes) attr.shadingRate = float(a.shadingRate);
     if (scene.patches.empty()) fail(fmt::format("{}: error: the scene has no geometry", a.scene));
-    // The camera overrides: keys outside a new shutter interval are clamped (the motion model).
-    if (shutter) setShutter(scene, float((*shutter)[0]), float((*shutter)[1]));
-    if (dof) {
-        scene.camera.fStop = float((*dof)[0]);
-        scene.camera.focalLength = float((*dof)[1]);
-        scene.camera.focalDistance = float((*dof)[2]);
-    }
 
     // Display "zfile" / "shadow" (RI spec 3.2, sec. 4.1.4): the frame writes a depth map, under the Display
     // name as given (any extension), not an image.
     const bool depthDisplay = scene.image.displayType == "zfile" || scene.image.displayType == "shadow";
     std::string output = a.output;
-    if (output.empty()) {  // named by the scene: checked now, still before the render
+    if (output.empty() && !a.shadowMapsOnly) {  // named by the scene: checked now, still before the render
         output = depthDisplay ? scene.image.displayName : defaultOutput(scene, a.scene);
         checkWritableOrFail(output, "image");
     }
@@ -522,6 +516,10 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
             settings.view.region = tileOf(region, tile->first, tile->second);
         }
     }
+    // --shadow-maps-only: one pixel, for the maps the frame makes before it (the same for any region).
+    if (a.shadowMapsOnly)
+        settings.view.region = Rect{settings.view.region.x0, settings.view.region.y0,
+                                    settings.view.region.x0 + 1, settings.view.region.y0 + 1};
     const bool partial = settings.view.region.width() != scene.camera.width ||
                          settings.view.region.height() != scene.camera.height || tile;
     if (a.adaptive && partial)
@@ -533,6 +531,11 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     }
     settings.output.channels = wanted.channels | (depthDisplay ? kChannelDepth : 0u);
     settings.output.aovs = wanted.planes;
+    if (!a.shadowMapCache.empty()) {
+        settings.shadowMapCacheDir = a.shadowMapCache;
+        settings.shadowMapCacheKey =
+            sceneHash(a, scene) + (ribFrameOrdinal ? fmt::format("-frame{}", *ribFrameOrdinal) : "");
+    }
     Progress::Mode mode = a.progressLines                       ? Progress::Mode::Lines
                           : (!a.quiet && isatty(STDERR_FILENO)) ? Progress::Mode::Bar
                                                                 : Progress::Mode::Off;
@@ -646,27 +649,24 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     s["output"] = output;
     s["render_ms"] = renderMs;
     s["peak_rss_mb"] = peakRssMb();
-    {  // which lights cast shadows (the engines may add their own counters under "shadows")
-        nlohmann::json& sh = s["shadows"];
-        if (!sh.is_object()) sh = nlohmann::json::object();
-        int casting = 0;
-        for (const Light& l : scene.lights) casting += lightCastsShadows(l, settings.shadows);
-        sh["mode"] = shadowOverrideName(settings.shadows);
-        if (a.engine == "reyes") sh["reyes_shadows"] = reyesShadowsName(settings.reyesShadows);
-        sh["casting_lights"] = casting;
-    }
-    {  // what the blur was asked for (the engines may add their own counters under "blur")
-        nlohmann::json& b = s["blur"];
-        if (!b.is_object()) b = nlohmann::json::object();
-        const MotionSummary ms = motionSummary(scene);
-        b["enabled"] = settings.blur.enabled;
-        b["sampling"] = blurSamplingName(settings.blur.sampling);
-        b["tile_size"] = settings.blur.tileSize;
-        b["permutations"] = settings.blur.permutations;
-        b["shutter"] = {scene.camera.shutterOpen, scene.camera.shutterClose};
-        b["lens_radius"] = scene.camera.lensRadius();
-        b["moving_patches"] = ms.movingPatches;
-        b["camera_keys"] = ms.cameraKeys;
+    describeRender(s, scene, settings);
+    if (a.shadowMapsOnly) {
+        const nlohmann::json& cache = s["shadows"].value("cache", nlohmann::json::object());
+        try {
+            if (!a.stats.empty()) fs::rename(writeTemporary(a.stats, s.dump(2) + "\n"), a.stats);
+        } catch (const std::exception& e) {
+            fmt::print(stderr, "error: {}\n", e.what());
+            return 1;
+        }
+        if (!a.quiet)
+            fmt::print(stderr, "{}: shadow maps: {} read, {} rendered ({:.0f} ms)\n", a.shadowMapCache,
+                       cache.value("hits", 0), cache.value("misses", 0), s["shadows"].value("maps_ms", 0.0));
+        if (cache.value("write_failures", 0) > 0) {
+            fmt::print(stderr, "{}: error: {} shadow maps could not be written\n", a.shadowMapCache,
+                       cache.value("write_failures", 0));
+            return 1;
+        }
+        return 0;
     }
     // The statistics go to a temporary file first and are renamed only once the image is in place, so a
     // failed write leaves neither file changed.
@@ -1083,6 +1083,14 @@ int main(int argc, char** argv) {
     render->add_option("--tile", ra.tile,
                        "Render tile I (0-based) of an N-tile split I/N of the image (or crop window) into "
                        "near-square tiles; join them with tessera assemble");
+    render->add_option(
+        "--shadow-map-cache", ra.shadowMapCache,
+        "Reyes: keep the shadow maps this render makes in folder DIR and read them from there "
+        "when another render of the same scene and options (e.g. another farm tile) made them");
+    render->add_flag(
+        "--shadow-maps-only", ra.shadowMapsOnly,
+        "Reyes: render only the shadow maps into --shadow-map-cache DIR, no image (a farm's first "
+        "job, so that its tiles read the maps instead of each rendering them)");
     render->add_option("--display-server", ra.displayServer,
                        "Stream the buckets as they finish to a tev viewer at HOST:PORT (the RIB's Display "
                        "\"framebuffer\" streams to 127.0.0.1:14158, tev's default)");

@@ -117,6 +117,9 @@ struct RenderSettings {
     bool rayBinning = true;
     ShadowOverride shadows = ShadowOverride::Scene;
     ReyesShadows reyesShadows = ReyesShadows::Map;
+    // Reyes shadow maps shared by the processes of a farm (--shadow-map-cache, reyes/shadow_maps.h): a
+    // folder, and a key of the scene and options they belong to (the app's scene hash); "" = no cache.
+    std::string shadowMapCacheDir, shadowMapCacheKey;
     RenderView view;
     OutputSpec output;
     BlurSettings blur;

@@ -5,11 +5,13 @@
 #include <string>
 #include <string_view>
 
+#include "scene/scene.h"  // the input limits kMaxImageSize, kMaxPixelSamples
+
 namespace tessera {
 
 // Thrown for any malformed input; what() is the full `file:line: error: message` text.
 class InputError : public std::runtime_error {
-public:
+  public:
     InputError(std::string file, int line, const std::string& message)
         : std::runtime_error(format(file, line, message)), file_(std::move(file)), line_(line) {}
     const std::string& file() const { return file_; }
@@ -19,7 +21,7 @@ public:
                         : file + ": error: " + message;
     }
 
-private:
+  private:
     std::string file_;
     int line_;
 };
@@ -41,10 +43,6 @@ inline std::string printable(std::string_view s, size_t max = 40) {
     if (s.size() > max) out += "...";
     return out;
 }
-
-// Input limits (docs/errors.md): larger values are rejected before anything is allocated for them.
-inline constexpr int kMaxImageSize = 16384;     // pixels per axis (RIB Format, --res)
-inline constexpr int kMaxPixelSamples = 1024;  // samples per pixel (RIB PixelSamples x * y, --spp)
 
 // Receives `file:line: warning: message` lines; the CLI prints them to stderr.
 using WarningSink = std::function<void(const std::string&)>;

@@ -498,4 +498,25 @@ void assembleExrTiles(const std::vector<std::string>& tiles, const std::string& 
     });
 }
 
+ExrMetadata cameraExrMetadata(const Camera& cam) {
+    ExrMetadata m;
+    m.hasCamera = true;
+    m.worldToCamera = cam.cameraFromWorld;
+    const Projector pr(cam);
+    const double W = cam.width, H = cam.height, n = pr.nearClip, f = pr.farClip;
+    Mat4 p;
+    if (pr.perspective) {  // raster = (x/z sx + ox, y/z sy + oy): divide by w = z
+        p.m[0][0] = pr.sx / W, p.m[0][2] = pr.ox / W;
+        p.m[1][1] = pr.sy / H, p.m[1][2] = pr.oy / H;
+        p.m[2][2] = f / (f - n), p.m[2][3] = -f * n / (f - n);
+        p.m[3][2] = 1, p.m[3][3] = 0;
+    } else {
+        p.m[0][0] = pr.sx / W, p.m[0][3] = pr.ox / W;
+        p.m[1][1] = pr.sy / H, p.m[1][3] = pr.oy / H;
+        p.m[2][2] = 1 / (f - n), p.m[2][3] = -n / (f - n);
+    }
+    m.worldToNDC = p * cam.cameraFromWorld;
+    return m;
+}
+
 }  // namespace tessera

@@ -8,6 +8,7 @@
 
 #include "core/transform.h"
 #include "film/film.h"
+#include "scene/camera.h"
 
 namespace tessera {
 
@@ -33,6 +34,10 @@ struct OutputEncoding {
 };
 
 // Throws std::runtime_error with a message naming the file on failure.
+// The header's camera: worldToCamera, and worldToNDC with NDC x, y in [0, 1] from the top-left corner of the
+// image (RenderMan's NDC) and depth 0 at the near plane, 1 at the far plane; software and time left unset.
+ExrMetadata cameraExrMetadata(const Camera& cam);
+
 void writeImage(const std::string& path, const Image& image, const OutputEncoding& enc);
 void writePng(const std::string& path, const Image& image, const OutputEncoding& enc);
 // RGBA as half; the planes as float channels ("z" as Z, "N" as N.X, N.Y, N.Z, "id" as a uint channel, any

@@ -147,23 +147,4 @@ Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat fo
     }
 }
 
-void setShutter(Scene& scene, float open, float close) {
-    scene.camera.shutterOpen = open;
-    scene.camera.shutterClose = close;
-    for (size_t i = 0; i < scene.patches.size(); ++i)
-        if (scene.attributes[i].motion.moving()) scene.patches[i] = patchAtTime(scene, i, open);
-    if (scene.camera.motion.size() > 1) scene.camera.cameraFromWorld = transformAt(scene.camera.motion, open);
-}
-
-MotionSummary motionSummary(const Scene& scene) {
-    MotionSummary m;
-    for (const PatchAttributes& a : scene.attributes)
-        if (a.motion.moving()) {
-            ++m.movingPatches;
-            m.patchKeys += a.motion.count;
-        }
-    m.cameraKeys = scene.camera.motion.size() > 1 ? scene.camera.motion.size() : 0;
-    return m;
-}
-
 }  // namespace tessera

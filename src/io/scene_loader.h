@@ -36,15 +36,4 @@ Scene loadObj(const std::string& path, const WarningSink& warn, std::optional<Up
 Scene loadMicropolis(const std::string& path, const WarningSink& warn,
                      std::optional<UpAxis> up = std::nullopt);
 
-// Overrides the scene's Shutter (tessera render --shutter): the motion keys stay as they are (keys outside
-// the new interval are clamped by the motion model, scene/scene.h), Scene::patches and the camera transform
-// move to the new shutter-open time.
-void setShutter(Scene& scene, float open, float close);
-
-// Counts for `tessera info` and the statistics: patches with motion keys, their keys in all, camera keys.
-struct MotionSummary {
-    size_t movingPatches = 0, patchKeys = 0, cameraKeys = 0;
-};
-MotionSummary motionSummary(const Scene& scene);
-
 }  // namespace tessera

@@ -1,7 +1,10 @@
 #include "render/render_options.h"
 
+#include <cmath>
 #include <initializer_list>
 #include <stdexcept>
+
+#include "film/blur_pattern.h"
 
 namespace tessera {
 namespace {
@@ -81,6 +84,74 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
             "interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, got " +
             std::to_string(spp) + " x " + std::to_string(s.blur.tileSize) +
             "^2 (lower the samples per pixel or the blur tile size)");
+}
+
+void applySceneOverrides(Scene& scene, const RenderOptions& o) {
+    const auto size = [](int w, int h) { return std::to_string(w) + "x" + std::to_string(h); };
+    if (o.width != 0 || o.height != 0) {
+        if (o.width < 1 || o.height < 1 || o.width > kMaxImageSize || o.height > kMaxImageSize)
+            throw std::invalid_argument("resolution " + size(o.width, o.height) + " outside 1.." +
+                                        std::to_string(kMaxImageSize) + " per axis");
+        scene.camera.width = o.width;
+        scene.camera.height = o.height;
+    }
+    if (scene.camera.width < 1 || scene.camera.height < 1 || scene.camera.width > kMaxImageSize ||
+        scene.camera.height > kMaxImageSize)
+        throw std::invalid_argument("resolution " + size(scene.camera.width, scene.camera.height) +
+                                    " outside 1.." + std::to_string(kMaxImageSize) + " per axis");
+    if (o.spp != 0) {
+        if (o.spp < 1 || o.spp > kMaxPixelSamples)
+            throw std::invalid_argument("samples per pixel must be between 1 and " +
+                                        std::to_string(kMaxPixelSamples));
+        splitSamplesPerPixel(o.spp, scene.image.pixelSamplesX, scene.image.pixelSamplesY);
+    }
+    if (o.shadingRate != 0) {
+        if (!(o.shadingRate > 0) || !std::isfinite(o.shadingRate))
+            throw std::invalid_argument("shading rate must be > 0");
+        for (auto& attr : scene.attributes) attr.shadingRate = float(o.shadingRate);
+    }
+    if (o.shutter) {
+        const std::vector<double>& t = *o.shutter;
+        if (t.size() != 2 || !std::isfinite(t[0]) || !std::isfinite(t[1]))
+            throw std::invalid_argument("shutter needs two numbers: open, close");
+        if (t[1] < t[0]) throw std::invalid_argument("shutter: close is before open");
+        setShutter(scene, float(t[0]), float(t[1]));  // keys outside the interval are clamped
+    }
+    if (o.dof) {
+        const std::vector<double>& d = *o.dof;
+        if (d.size() != 3)
+            throw std::invalid_argument("dof needs three numbers: fstop, focallength, focaldistance");
+        if (!(d[0] > 0 && d[1] > 0 && d[2] > 0 && std::isfinite(d[0] + d[1] + d[2])))
+            throw std::invalid_argument("dof: fstop, focal length and focal distance must be positive");
+        scene.camera.fStop = float(d[0]);
+        scene.camera.focalLength = float(d[1]);
+        scene.camera.focalDistance = float(d[2]);
+    }
+}
+
+void describeRender(nlohmann::json& stats, const Scene& scene, const RenderSettings& s) {
+    {  // which lights cast shadows (the engines may add their own counters under "shadows")
+        nlohmann::json& sh = stats["shadows"];
+        if (!sh.is_object()) sh = nlohmann::json::object();
+        int casting = 0;
+        for (const Light& l : scene.lights) casting += lightCastsShadows(l, s.shadows);
+        sh["mode"] = shadowOverrideName(s.shadows);
+        if (s.engine == "reyes") sh["reyes_shadows"] = reyesShadowsName(s.reyesShadows);
+        sh["casting_lights"] = casting;
+    }
+    {  // what the blur was asked for (the engines may add their own counters under "blur")
+        nlohmann::json& b = stats["blur"];
+        if (!b.is_object()) b = nlohmann::json::object();
+        const MotionSummary ms = motionSummary(scene);
+        b["enabled"] = s.blur.enabled;
+        b["sampling"] = blurSamplingName(s.blur.sampling);
+        b["tile_size"] = s.blur.tileSize;
+        b["permutations"] = s.blur.permutations;
+        b["shutter"] = {scene.camera.shutterOpen, scene.camera.shutterClose};
+        b["lens_radius"] = scene.camera.lensRadius();
+        b["moving_patches"] = ms.movingPatches;
+        b["camera_keys"] = ms.cameraKeys;
+    }
 }
 
 }  // namespace tessera

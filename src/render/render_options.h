@@ -3,13 +3,22 @@
 // same image. Resolution, samples per pixel, shading rate and the camera's blur overrides edit the Scene;
 // the film region and the output spec are the caller's.
 #pragma once
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "engine/settings.h"
 
 namespace tessera {
 
 struct RenderOptions {
+    // What edits the Scene (applySceneOverrides); 0 / nullopt: the scene's own.
+    int width = 0, height = 0;  // resolution
+    int spp = 0;                // samples per pixel (split into the nearest x, y strata)
+    double shadingRate = 0;
+    std::optional<std::vector<double>> shutter;  // open, close
+    std::optional<std::vector<double>> dof;      // fstop, focal length, focal distance (thin lens)
+
     std::string engine = "reyes";  // reyes, rt
     int threads = 0;               // 0: all cores
     unsigned seed = 0;
@@ -36,9 +45,18 @@ struct RenderOptions {
     bool adaptiveThresholdGiven = false;
 };
 
+// Applies the options that edit the scene (resolution, samples per pixel, shading rate, shutter, depth of
+// field). Throws std::invalid_argument naming the option for a value out of range, and for a scene whose
+// own resolution is outside 1..kMaxImageSize.
+void applySceneOverrides(Scene& scene, const RenderOptions& o);
+
 // Fills `s` (all but view and output) from `o` and the scene's own render options (Hider "jitter",
 // "blursampling", "blurtilesize", "blurpermutations"). Throws std::invalid_argument for an unknown name or
 // a value out of range, naming the option.
 void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettings& s);
+
+// The statistics' record of what was asked for, beside the engines' counters: "shadows" (mode, casting
+// lights) and "blur" (sampling scheme, shutter, lens, moving surfaces).
+void describeRender(nlohmann::json& stats, const Scene& scene, const RenderSettings& s);
 
 }  // namespace tessera

@@ -1,11 +1,19 @@
 #include "reyes/shadow_maps.h"
 
 #include <tbb/enumerable_thread_specific.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 #include <numbers>
+#include <optional>
+#include <thread>
+#include <type_traits>
 
 #include "engine/clock.h"
 #include "reyes/displace.h"
@@ -139,11 +147,121 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     return depth;
 }
 
+namespace {
+
+// FNV-1a, 64 bits, over raw bytes: the shadow-map cache's keys.
+struct Fnv64 {
+    uint64_t h = 1469598103934665603ull;
+    void bytes(const void* data, size_t n) {
+        const auto* p = static_cast<const unsigned char*>(data);
+        for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    }
+    template <typename T>
+    void value(const T& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        bytes(&v, sizeof v);
+    }
+};
+
+// A cached depth map: "TSHM", version, width, height, then width * height floats (host byte order: the
+// cache is for the machines of one farm).
+constexpr char kCacheMagic[4] = {'T', 'S', 'H', 'M'};
+constexpr uint32_t kCacheVersion = 1;
+
+std::filesystem::path cacheFile(const std::string& dir, uint64_t key) {
+    char name[40];
+    std::snprintf(name, sizeof name, "shadow-%016llx.tsm", static_cast<unsigned long long>(key));
+    return std::filesystem::path(dir) / name;
+}
+
+// The map of `key` if the folder has a whole one of that size; nullopt otherwise (a miss).
+std::optional<std::vector<float>> readCachedMap(const std::filesystem::path& file, int width, int height) {
+    std::ifstream f(file, std::ios::binary);
+    if (!f) return std::nullopt;
+    char magic[4];
+    uint32_t version = 0;
+    int32_t w = 0, h = 0;
+    f.read(magic, 4);
+    f.read(reinterpret_cast<char*>(&version), 4);
+    f.read(reinterpret_cast<char*>(&w), 4);
+    f.read(reinterpret_cast<char*>(&h), 4);
+    if (!f || std::memcmp(magic, kCacheMagic, 4) != 0 || version != kCacheVersion || w != width ||
+        h != height)
+        return std::nullopt;
+    std::vector<float> depth(size_t(w) * size_t(h));
+    f.read(reinterpret_cast<char*>(depth.data()), std::streamsize(depth.size() * sizeof(float)));
+    if (!f || f.peek() != std::char_traits<char>::eof()) return std::nullopt;
+    return depth;
+}
+
+// Written to a temporary name and renamed: concurrent tiles writing the same map leave one whole file.
+bool writeCachedMap(const std::filesystem::path& file, const std::vector<float>& depth, int width,
+                    int height) {
+    std::error_code ec;
+    std::filesystem::create_directories(file.parent_path(), ec);
+    std::string tmpName(1, '.');  // appended piecewise: "." + string trips g++ 12's -Wrestrict
+    tmpName.append(file.filename().string()).append(".tmp").append(std::to_string(getpid()));
+    tmpName.append("-").append(std::to_string(std::hash<std::thread::id>{}(std::this_thread::get_id())));
+    const std::filesystem::path tmp = file.parent_path() / tmpName;
+    {
+        std::ofstream f(tmp, std::ios::binary);
+        const int32_t w = width, h = height;
+        f.write(kCacheMagic, 4);
+        f.write(reinterpret_cast<const char*>(&kCacheVersion), 4);
+        f.write(reinterpret_cast<const char*>(&w), 4);
+        f.write(reinterpret_cast<const char*>(&h), 4);
+        f.write(reinterpret_cast<const char*>(depth.data()), std::streamsize(depth.size() * sizeof(float)));
+        f.close();
+        if (!f) {
+            std::filesystem::remove(tmp, ec);
+            return false;
+        }
+    }
+    std::filesystem::rename(tmp, file, ec);
+    if (ec) std::filesystem::remove(tmp, ec);
+    return !ec;
+}
+
+// What a depth pass depends on besides the light's view: the app's key (scene file and options) and the
+// surfaces themselves (archives and procedural input included), at shutter open.
+uint64_t sceneCacheKey(const Scene& scene, const RenderSettings& settings) {
+    Fnv64 h;
+    h.bytes(settings.shadowMapCacheKey.data(), settings.shadowMapCacheKey.size());
+    static_assert(sizeof(BezierPatch) == 16 * 3 * sizeof(float));  // no padding to hash
+    h.bytes(scene.patches.data(), scene.patches.size() * sizeof(BezierPatch));
+    for (const SceneQuadric& sq : scene.quadrics) {  // field by field: Quadric has padding
+        const Quadric& q = sq.q;
+        h.value(q.kind), h.value(q.radius), h.value(q.minorRadius), h.value(q.zMin), h.value(q.zMax);
+        h.value(q.height), h.value(q.angle0), h.value(q.angle1), h.value(q.point1), h.value(q.point2);
+        h.value(q.thetaMax), h.value(q.closedU), h.value(q.closedV), h.value(sq.worldFromObject);
+    }
+    for (const PatchAttributes& a : scene.attributes) h.value(a.displacement), h.value(a.displacementBound);
+    for (const DisplacementShader& d : scene.displacements)
+        h.value(d.type), h.value(d.Km), h.value(d.texture);
+    h.value(scene.camera.shutterOpen);
+    h.value(settings.maxGridEdge);
+    return h.h;
+}
+
+uint64_t faceCacheKey(uint64_t sceneKey, const Camera& c, float shadingRate) {
+    Fnv64 h;
+    h.value(sceneKey);
+    const Projector pr(c);
+    h.value(c.cameraFromWorld);
+    h.value(c.width), h.value(c.height), h.value(pr.perspective);
+    h.value(pr.sx), h.value(pr.sy), h.value(pr.ox), h.value(pr.oy), h.value(pr.nearClip), h.value(pr.farClip);
+    h.value(shadingRate);
+    return h.h;
+}
+
+}  // namespace
+
 ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const Camera& shadingCamera,
                        std::span<const ShadingLight> lights, const Textures* textures,
                        const LightVisibility* rays)
-    : rays_(rays) {
+    : rays_(rays), cacheDir_(settings.shadowMapCacheDir) {
     const auto t0 = EngineClock::now();
+    const uint64_t sceneKey = cacheDir_.empty() ? 0 : sceneCacheKey(scene, settings);
     const Mat4 worldFromShading = shadingCamera.cameraFromWorld.inverse();
     const Bounds3 bounds = scene.worldBounds();
     const float sceneSize = bounds.empty() ? 1.f : std::max(length(bounds.diagonal()), 1e-6f);
@@ -202,7 +320,20 @@ ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const
         }
         for (const Camera& c : faces) {
             DepthPassStats st;
-            map->depth.push_back(renderDepthMap(scene, c, p.shadingRate, settings, st, textures));
+            std::optional<std::vector<float>> cached;
+            std::filesystem::path file;
+            if (!cacheDir_.empty()) {
+                file = cacheFile(cacheDir_, faceCacheKey(sceneKey, c, p.shadingRate));
+                cached = readCachedMap(file, c.width, c.height);
+                ++(cached ? cacheHits_ : cacheMisses_);
+            }
+            if (cached) {
+                map->depth.push_back(std::move(*cached));
+            } else {
+                map->depth.push_back(renderDepthMap(scene, c, p.shadingRate, settings, st, textures));
+                if (!file.empty() && !writeCachedMap(file, map->depth.back(), c.width, c.height))
+                    ++cacheWriteFailures_;
+            }
             map->stats.pieces += st.pieces, map->stats.grids += st.grids;
             map->stats.micropolygons += st.micropolygons, map->stats.sampleTests += st.sampleTests;
             map->stats.ms += st.ms;
@@ -259,6 +390,11 @@ void ShadowMaps::writeStats(nlohmann::json& s) const {
     s["method"] = rays_ ? "map+raytrace" : "map";
     s["maps_ms"] = renderMs_;
     s["lookups"] = lookups_.load();
+    if (!cacheDir_.empty())
+        s["cache"] = {{"dir", cacheDir_},
+                      {"hits", cacheHits_},
+                      {"misses", cacheMisses_},
+                      {"write_failures", cacheWriteFailures_}};
     nlohmann::json maps = nlohmann::json::array();
     for (size_t l = 0; l < maps_.size(); ++l) {
         if (!maps_[l]) continue;

@@ -6,6 +6,9 @@
 // spot lights a perspective one around their cone (a cube map when the cone is wider than 60 degrees),
 // point lights a cube map of six faces. The maps are rendered once per light and frame and answer the
 // frame's visibility queries with percentage-closer filtered lookups (shading/shadow_map.h).
+// With RenderSettings::shadowMapCacheDir, a map is first looked for in that folder under a key of the
+// scene (the app's key and the surfaces' control points), the light's view and the map's parameters, and
+// written there after it is rendered: the tiles of a farm render the maps once instead of once each.
 #pragma once
 #include <atomic>
 #include <memory>
@@ -63,6 +66,8 @@ class ShadowMaps final : public LightVisibility {
     std::vector<std::unique_ptr<Map>> maps_;  // per light
     const LightVisibility* rays_ = nullptr;
     double renderMs_ = 0;
+    std::string cacheDir_;
+    uint64_t cacheHits_ = 0, cacheMisses_ = 0, cacheWriteFailures_ = 0;
     mutable std::atomic<uint64_t> lookups_{0};
 };
 

@@ -13,6 +13,11 @@
 
 namespace tessera {
 
+// Input limits (docs/errors.md): larger values are rejected (by the readers, the CLI, the Python module)
+// before anything is allocated for them.
+inline constexpr int kMaxImageSize = 16384;    // pixels per axis (RIB Format, --res)
+inline constexpr int kMaxPixelSamples = 1024;  // samples per pixel (RIB PixelSamples x * y, --spp)
+
 enum class FilterType { Box, Triangle, Gaussian, CatmullRom };
 
 struct ImageOptions {
@@ -270,6 +275,17 @@ inline PatchTexCoords texCoordsOf(const Scene& scene, size_t i) {
 
 // World-space control points of patch `i` at scene time `time` (linear between its keys).
 BezierPatch patchAtTime(const Scene& scene, size_t i, float time);
+
+// Overrides the scene's Shutter (tessera render --shutter, the Python module's shutter=): the motion keys
+// stay as they are (keys outside the new interval are clamped by the motion model), Scene::patches and the
+// camera transform move to the new shutter-open time.
+void setShutter(Scene& scene, float open, float close);
+
+// Counts for `tessera info` and the statistics: patches with motion keys, their keys in all, camera keys.
+struct MotionSummary {
+    size_t movingPatches = 0, patchKeys = 0, cameraKeys = 0;
+};
+MotionSummary motionSummary(const Scene& scene);
 
 enum class UpAxis { X, Y, Z };
 
