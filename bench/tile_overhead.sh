@@ -2,7 +2,10 @@
 # Farm tiles' overhead (issue 17): the CPU time (user + system) of rendering a scene as N tiles, one
 # `tessera render --tile I/N` process each with one thread, against the single render, for N = 1, 4, 16,
 # 64. What a tile repeats: loading the scene, the engine's set-up (split and bound in Reyes, the BVH in the
-# ray tracer) and the filter margin's samples around the tile. Writes bench/results/tile_overhead.json.
+# ray tracer), the shadow maps (Reyes) and the filter margin's samples around the tile. Reyes is measured
+# twice: each tile rendering its own shadow maps ("maps": "per tile"), and the farm scripts' way, one
+# --shadow-maps-only job into a --shadow-map-cache that the tiles read ("maps": "cached", the job's CPU
+# counted). Writes bench/results/tile_overhead.json.
 # Usage: bench/tile_overhead.sh [SCENE] [render options...]   (default: scenes/teapot.rib --res 640x480)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,18 +23,27 @@ cpu_of() {  # CPU seconds (user + sys) of the command
     awk '{print $1 + $2}' "$dir/t"
 }
 rows=()
-for engine in reyes rt; do
+for mode in reyes reyes-cached rt; do
+    engine=${mode%-cached}
+    maps="per tile" cache=()
+    [ "$engine" = rt ] && maps="none (traced)"
     single=$(cpu_of "$tessera" render "$scene" -q --threads 1 --engine "$engine" "${opts[@]}" -o "$dir/one.exr")
     for n in 1 4 16 64; do
         total=0
+        if [ "$mode" = reyes-cached ]; then
+            maps=cached
+            rm -rf "$dir/maps"
+            cache=(--shadow-map-cache "$dir/maps")
+            total=$(cpu_of "$tessera" render "$scene" -q --threads 1 "${opts[@]}" "${cache[@]}" --shadow-maps-only)
+        fi
         for ((i = 0; i < n; ++i)); do
-            t=$(cpu_of "$tessera" render "$scene" -q --threads 1 --engine "$engine" "${opts[@]}" \
+            t=$(cpu_of "$tessera" render "$scene" -q --threads 1 --engine "$engine" "${opts[@]}" "${cache[@]}" \
                 --tile "$i/$n" -o "$dir/t$i.exr")
             total=$(awk -v a="$total" -v b="$t" 'BEGIN {print a + b}')
         done
         ratio=$(awk -v a="$total" -v b="$single" 'BEGIN {printf "%.3f", a / b}')
-        echo "$engine: $n tiles: ${total} s CPU, single ${single} s: x$ratio"
-        rows+=("{\"engine\": \"$engine\", \"tiles\": $n, \"cpu_s\": $total, \"single_cpu_s\": $single, \"ratio\": $ratio}")
+        echo "$engine (maps: $maps): $n tiles: ${total} s CPU, single ${single} s: x$ratio"
+        rows+=("{\"engine\": \"$engine\", \"maps\": \"$maps\", \"tiles\": $n, \"cpu_s\": $total, \"single_cpu_s\": $single, \"ratio\": $ratio}")
     done
 done
 {

@@ -145,6 +145,7 @@ struct Request {
     RenderOptions options;
     std::string aovs;
     std::optional<std::vector<double>> crop;
+    py::object progress;  // a callable taking the fraction done, or None
 };
 
 // The keyword options of render(): the CLI's long option names with '_' for '-'.
@@ -229,7 +230,10 @@ Request parseOptions(const py::kwargs& kw) {
             o.dof = numbers(k, v, 3);
         else if (key == "crop")
             r.crop = numbers(k, v, 4);
-        else if (key == "aovs") {
+        else if (key == "progress") {
+            if (!PyCallable_Check(v.ptr())) throw py::type_error("option progress: must be callable");
+            r.progress = py::reinterpret_borrow<py::object>(v);
+        } else if (key == "aovs") {
             if (py::isinstance<py::str>(v))
                 r.aovs = v.cast<std::string>();
             else
@@ -277,13 +281,20 @@ PyResult renderPy(const PyScene& loaded, const py::kwargs& kw) {
     // Ctrl-C: the render stops at the next bucket and the interpreter raises KeyboardInterrupt.
     std::atomic<bool> cancel{false};
     settings.cancel = &cancel;
+    // Progress: the workers store it; the interpreter's thread hands it to the callable (below).
+    std::atomic<uint64_t> workDone{0}, workTotal{0};
+    if (req.progress)
+        settings.progress = [&workDone, &workTotal](uint64_t d, uint64_t t) {
+            workTotal.store(t);
+            workDone.store(d);
+        };
 
     PyResult out;
     const auto t0 = std::chrono::steady_clock::now();
     RenderResult r;
     {
         // The render runs on a thread of its own while this one, the interpreter's, looks for Ctrl-C
-        // (Python's handler only flags the signal; PyErr_CheckSignals runs it).
+        // (Python's handler only flags the signal; PyErr_CheckSignals runs it) and calls `progress`.
         py::gil_scoped_release release;
         std::exception_ptr failure;
         std::atomic<bool> done{false};
@@ -296,6 +307,18 @@ PyResult renderPy(const PyScene& loaded, const py::kwargs& kw) {
             done.store(true);
         });
         bool interrupted = false;
+        std::optional<py::error_already_set> callbackError;
+        double reported = -1;
+        const auto report = [&](double fraction) {
+            if (!req.progress || callbackError || fraction <= reported) return;
+            reported = fraction;
+            try {
+                req.progress(fraction);
+            } catch (py::error_already_set& e) {  // stop the render, raise it afterwards
+                callbackError.emplace(std::move(e));
+                cancel.store(true);
+            }
+        };
         while (!done.load()) {
             std::this_thread::sleep_for(std::chrono::milliseconds(20));
             py::gil_scoped_acquire acquire;
@@ -304,9 +327,20 @@ PyResult renderPy(const PyScene& loaded, const py::kwargs& kw) {
                 cancel.store(true);
                 PyErr_Clear();
             }
+            const uint64_t total = workTotal.load();
+            if (total > 0) report(std::min(1.0, double(workDone.load()) / double(total)));
         }
         worker.join();
         if (failure) std::rethrow_exception(failure);
+        if (callbackError) {
+            py::gil_scoped_acquire acquire;
+            throw std::move(*callbackError);
+        }
+        if (!interrupted && !r.cancelled) {
+            py::gil_scoped_acquire acquire;
+            report(1.0);
+            if (callbackError) throw std::move(*callbackError);
+        }
         if (interrupted || r.cancelled) {
             py::gil_scoped_acquire acquire;
             PyErr_SetNone(PyExc_KeyboardInterrupt);
@@ -382,7 +416,7 @@ Options (None or absent: the scene's own value), the CLI's long names with '_' f
   integrator='direct'|'path'|'ao', ao_samples, ao_distance, ao_weighting='cosine'|'paper',
   gloss='paper'|'microfacet', adaptive, adaptive_threshold,
   aovs=['z', 'N', 'id', 'shadows', 'textured', 'occlusion', 'albedo', 'P', 'Cs', 'Ci', 'a'],
-  crop=(xmin, xmax, ymin, ymax) in NDC.
+  crop=(xmin, xmax, ymin, ymax) in NDC, progress=callable(fraction done, 0..1; raising in it stops the render).
 Raises tessera.InputError for a malformed scene file, ValueError for a bad option value, TypeError for an
 unknown option.)";
 

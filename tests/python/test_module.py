@@ -175,3 +175,22 @@ def test_ctrl_c_stops_a_render():
             scene.render(res=(1600, 1200), spp=256, engine="rt")
     finally:
         timer.cancel()
+
+
+def test_progress_reports_increasing_fractions_and_can_stop_the_render():
+    seen = []
+    tessera.render(TEAPOT, res=(160, 120), spp=4, progress=seen.append)
+    assert seen and seen[-1] == 1.0
+    assert all(0.0 <= a < b <= 1.0 for a, b in zip(seen, seen[1:]))
+
+    class Stop(Exception):
+        pass
+
+    def stop(fraction):
+        raise Stop(fraction)
+
+    scene = tessera.load(TEAPOT)
+    with pytest.raises(Stop):
+        scene.render(res=(1600, 1200), spp=256, engine="rt", progress=stop)
+    with pytest.raises(TypeError, match="progress: must be callable"):
+        scene.render(res=(16, 12), progress=3)
