@@ -45,6 +45,7 @@ struct PyResult {
     Image image;
     nlohmann::json stats;
     std::vector<std::string> warnings;
+    std::vector<uint8_t> refined;  // adaptive: (2 height) x (2 width) subpixels, 1 = refined
     AovRequest aovs;
     Camera camera;
     OutputEncoding encoding;
@@ -356,6 +357,7 @@ PyResult renderPy(const PyScene& loaded, const py::kwargs& kw) {
     out.warnings = loaded.warnings;
     out.warnings.insert(out.warnings.end(), r.warnings.begin(), r.warnings.end());
     out.aovs = *aovs;
+    out.refined = std::move(r.refinedSubpixels);
     out.camera = scene.camera;
     out.encoding = {scene.image.exposureGain, scene.image.exposureGamma, scene.image.srgbOutput, nullptr};
     return out;
@@ -461,6 +463,13 @@ PYBIND11_MODULE(tessera, m) {
             "stats", [](const PyResult& r) { return jsonToPython(r.stats); },
             "the statistics, as `tessera render --stats` writes them")
         .def_property_readonly("warnings", [](const PyResult& r) { return r.warnings; })
+        .def_property_readonly(
+            "refined",
+            [](const PyResult& r) -> py::object {
+                if (r.refined.empty()) return py::none();
+                return toArray(r.refined, 2 * r.image.height, 2 * r.image.width, 1);
+            },
+            "adaptive=True: which subpixels (2 H x 2 W, uint8, 1 = refined) got extra samples; else None")
         .def_property_readonly(
             "origin", [](const PyResult& r) { return py::make_tuple(r.image.x0, r.image.y0); },
             "the raster position of the first pixel (a crop window's corner)")

@@ -34,6 +34,12 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     if (o.bucketSize < 4 || o.bucketSize > 1024) throw std::invalid_argument("bucket size must be 4..1024");
     if (o.integrator != "direct" && o.engine != "rt")
         throw std::invalid_argument("integrator " + o.integrator + " is ray traced: use it with engine rt");
+    if (o.adaptive && o.engine != "rt")
+        throw std::invalid_argument("adaptive sampling is ray traced: use it with engine rt");
+    if (o.adaptive && o.spp > 0)
+        throw std::invalid_argument("adaptive sampling chooses the samples per pixel itself: give no spp");
+    if (o.adaptiveThresholdGiven && !(o.adaptiveThreshold >= 0 && std::isfinite(o.adaptiveThreshold)))
+        throw std::invalid_argument("adaptive threshold must be a number >= 0");
 
     s.engine = o.engine;
     s.threads = o.threads;

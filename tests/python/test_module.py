@@ -194,3 +194,18 @@ def test_progress_reports_increasing_fractions_and_can_stop_the_render():
         scene.render(res=(1600, 1200), spp=256, engine="rt", progress=stop)
     with pytest.raises(TypeError, match="progress: must be callable"):
         scene.render(res=(16, 12), progress=3)
+
+
+def test_adaptive_sampling_reports_its_refined_subpixels():
+    # The two planes in two colours: refinement only along the seam between them (docs/adaptive.md).
+    two_colours = PLANES.replace('Patch "bilinear" "P" [0 -20 7', 'Color [1 0.2 0.1]\nPatch "bilinear" "P" [0 -20 7')
+    r = tessera.render(rib=two_colours, engine="rt", adaptive=True)
+    refined = r.refined
+    assert refined.shape == (96, 128) and refined.dtype == np.uint8
+    cols = np.nonzero(refined.any(axis=0))[0]
+    assert len(cols) > 0 and all(abs(c + 0.5 - 64) <= 4 for c in cols), cols
+    assert tessera.render(rib=PLANES, engine="rt").refined is None
+    with pytest.raises(ValueError, match="engine rt"):
+        tessera.render(rib=PLANES, adaptive=True)
+    with pytest.raises(ValueError, match="give no spp"):
+        tessera.render(rib=PLANES, engine="rt", adaptive=True, spp=4)
