@@ -66,7 +66,8 @@ py::array_t<T> toArray(const std::vector<T>& values, int rows, int cols, int com
     return a;
 }
 
-PyScene loadScenePy(const std::filesystem::path& file, const std::string& format, const std::string& up) {
+PyScene loadScenePy(const std::filesystem::path& file, const std::string& format, const std::string& up,
+                    std::optional<int> frame = std::nullopt) {
     const std::string path = file.string();
     const std::optional<SceneFormat> f = parseSceneFormat(format);
     if (!f) throw std::invalid_argument("unknown format '" + format + "' (auto, rib, bpt, obj, micropolis)");
@@ -86,8 +87,18 @@ PyScene loadScenePy(const std::filesystem::path& file, const std::string& format
     auto scene = std::make_shared<Scene>();
     {
         py::gil_scoped_release release;
-        *scene = loadScene(
-            path, [&s](const std::string& w) { s.warnings.push_back(w); }, *f, axis);
+        const WarningSink warn = [&s](const std::string& w) { s.warnings.push_back(w); };
+        if (frame) {  // RI FrameBegin n: the frame's ordinal in the file (multi-frame RIB, docs/inputs.md)
+            const std::vector<RibFrame> frames = ribFrames(path);
+            const auto it = std::find_if(frames.begin(), frames.end(),
+                                         [&](const RibFrame& fr) { return fr.number == *frame; });
+            if (it == frames.end())
+                throw std::invalid_argument(path + ": no FrameBegin " + std::to_string(*frame) +
+                                            " in the file");
+            readRibFrame(path, int(it - frames.begin()), *scene, warn);
+        } else {
+            *scene = loadScene(path, warn, *f, axis);
+        }
     }
     s.scene = std::move(scene);
     return s;
@@ -500,7 +511,17 @@ PYBIND11_MODULE(tessera, m) {
         "PNG's "
         "in [0, 1]");
     m.def("load", &loadScenePy, py::arg("path"), py::arg("format") = "auto", py::arg("up") = "",
-          "Load a scene file (RIB, .bpt, OBJ, Micropolis; format='auto' detects it)");
+          py::arg("frame") = py::none(),
+          "Load a scene file (RIB, .bpt, OBJ, Micropolis; format='auto' detects it); frame=n: the RIB frame "
+          "of FrameBegin n (default: the first)");
+    m.def(
+        "frames",
+        [](const std::filesystem::path& file) {
+            std::vector<int> numbers;
+            for (const RibFrame& f : ribFrames(file.string())) numbers.push_back(f.number);
+            return numbers;
+        },
+        py::arg("path"), "The frame numbers of a RIB file's FrameBegin blocks, in file order");
     m.def("load_rib", &ribTextScene, py::arg("text"), py::arg("path") = "<rib>",
           "Load a scene from RIB text; `path` names it in messages and is the base of relative file names");
     m.def(
@@ -512,7 +533,8 @@ PYBIND11_MODULE(tessera, m) {
             }
             if (py::isinstance<PyScene>(scene)) return renderPy(scene.cast<const PyScene&>(), kw);
             if (py::isinstance<py::str>(scene) || py::hasattr(scene, "__fspath__"))
-                return renderPy(loadScenePy(scene.cast<std::filesystem::path>(), "auto", ""), kw);
+                return renderPy(loadScenePy(scene.cast<std::filesystem::path>(), "auto", "", std::nullopt),
+                                kw);
             throw py::type_error("render(): scene must be a path, a tessera.Scene, or give rib=\"...\"");
         },
         py::arg("scene") = py::none(), py::arg("rib") = py::none(), kRenderDoc);

@@ -209,3 +209,16 @@ def test_adaptive_sampling_reports_its_refined_subpixels():
         tessera.render(rib=PLANES, adaptive=True)
     with pytest.raises(ValueError, match="give no spp"):
         tessera.render(rib=PLANES, engine="rt", adaptive=True, spp=4)
+
+
+def test_frames_of_a_multi_frame_rib(tmp_path):
+    rib = tmp_path / "frames.rib"
+    frame = 'FrameBegin {n}\nFormat {w} 24 1\nProjection "perspective" "fov" 40\nWorldBegin\n' \
+            'Translate 0 0 5\nSphere 1 -1 1 360\nWorldEnd\nFrameEnd\n'
+    rib.write_text(frame.format(n=3, w=32) + frame.format(n=7, w=48))
+    assert tessera.frames(rib) == [3, 7]
+    assert tessera.load(rib).width == 32  # the first frame, with a warning
+    assert any("only the first frame" in w for w in tessera.load(rib).warnings)
+    assert tessera.load(rib, frame=7).width == 48
+    with pytest.raises(ValueError, match="no FrameBegin 5"):
+        tessera.load(rib, frame=5)
