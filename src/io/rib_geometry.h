@@ -45,9 +45,11 @@ bool isQuadricRequest(const std::string& name);
 // Degenerate parameters that RI defines as an empty surface (radius, height range or sweep of 0) add
 // nothing and warn; malformed ones (wrong counts, non-finite values, a paraboloid crossing z = 0) fail.
 void addQuadric(const Request& r, const PrimitiveContext& c);
-// Reads Patch, PatchMesh, NuPatch, SubdivisionMesh, Polygon or PointsPolygons (r.name) without adding
-// it to the scene. Polygons become bilinear patches (a convex quadrilateral) or degenerate bilinear
-// patches (the triangles of an ear-clipping triangulation), exact for planar polygons.
+// Reads Patch, PatchMesh, NuPatch, SubdivisionMesh, Polygon, GeneralPolygon, PointsPolygons or
+// PointsGeneralPolygons (r.name) without adding it to the scene. Polygons become bilinear patches (a convex
+// quadrilateral without holes) or degenerate bilinear patches (the triangles of an ear-clipping
+// triangulation, holes bridged into the outer loop), exact for planar polygons; their "st" / "s" "t"
+// (vertex, varying or facevarying) become the pieces' texture coordinates.
 PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c);
 // Adds one primitive to the scene with the attributes and the CTM of the graphics state. `keys` holds one
 // shape (no deformation) or one per time of `times` (a deformation block; the caller has checked that
