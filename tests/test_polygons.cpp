@@ -227,6 +227,59 @@ TEST(Polygons, PointsGeneralPolygonsMeshHasNoPinholesAndHolesStayOpen) {
     }
 }
 
+// Polygons of one mesh that share an edge (walked in opposite directions) get bit-identical boundary
+// control points for it, before any weld: the ray tracer, which does not weld, sees no crack either.
+TEST(Polygons, SharedEdgesAreBitIdentical) {
+    std::string P, nverts, verts;
+    const int n = 6;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i)
+            for (double c :
+                 {0.37 * i + 0.05 * j, 0.29 * j - 0.03 * i * i, 0.11 * std::sin(1.7 * i + 2.3 * j)})
+                P.append(" ").append(std::to_string(c));
+    auto id = [&](int i, int j) { return std::to_string(j * (n + 1) + i); };
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            const std::string a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+            if ((i + j) % 2 == 0) {
+                nverts += " 3 3";
+                verts += " " + a + " " + b + " " + c + " " + a + " " + c + " " + d;
+            } else {
+                nverts += " 4";
+                verts += " " + a + " " + b + " " + c + " " + d;
+            }
+        }
+    const Scene s =
+        load("WorldBegin\nPointsPolygons [" + nverts + "] [" + verts + "] \"P\" [" + P + "]\nWorldEnd\n")
+            .scene;
+    // Every boundary curve of every patch (4 control points), and the curves with the same two ends.
+    struct Curve {
+        Vec3 p[4];
+    };
+    std::vector<Curve> curves;
+    for (const BezierPatch& b : s.patches) {
+        Curve c[4];
+        for (int k = 0; k < 4; ++k) {
+            c[0].p[k] = b.at(k, 0);
+            c[1].p[k] = b.at(3, k);
+            c[2].p[k] = b.at(3 - k, 3);
+            c[3].p[k] = b.at(0, 3 - k);
+        }
+        for (const Curve& e : c)
+            if (!(e.p[0] == e.p[3])) curves.push_back(e);
+    }
+    int shared = 0, differ = 0;
+    for (size_t i = 0; i < curves.size(); ++i)
+        for (size_t j = i + 1; j < curves.size(); ++j) {
+            const Curve &a = curves[i], &b = curves[j];
+            if (!(a.p[0] == b.p[3] && a.p[3] == b.p[0])) continue;
+            ++shared;
+            for (int k = 0; k < 4; ++k) differ += !(a.p[k] == b.p[3 - k]);
+        }
+    EXPECT_EQ(shared, 2 * n * (n - 1) + n * n / 2);  // inner grid edges + the triangles' diagonals
+    EXPECT_EQ(differ, 0);
+}
+
 // "st" on polygons: the pieces' corner s, t are the given values of their corners (vertex/varying: per
 // point, facevarying: per corner), checked against a linear function of the corner's position.
 TEST(Polygons, TexCoordsFollowTheVertices) {

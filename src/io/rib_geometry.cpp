@@ -206,7 +206,29 @@ class PrimitiveReader {
     void addPolygonPiece(const std::vector<Vec3>& pts, const Corner (&k)[4]) {
         const Vec3 g[4] = {pts[size_t(k[0].point)], pts[size_t(k[1].point)], pts[size_t(k[2].point)],
                            pts[size_t(k[3].point)]};
-        addPatch(g, false);
+        // Degree elevation as addPatch's, but every edge point is (2 near + far) / 3 of its edge's two
+        // ends, which does not depend on the direction the edge is walked: a polygon sharing the edge
+        // (reversed) gets the same four points bit for bit, in both engines (no weld needed).
+        auto third = [](Vec3 nearEnd, Vec3 farEnd) {
+            return nearEnd == farEnd ? nearEnd
+                                     : (nearEnd * 2.f + farEnd) / 3.f;  // a collapsed edge stays a point
+        };
+        BezierPatch b;
+        for (int u = 0; u < 4; u += 3)
+            for (int v = 0; v < 4; v += 3) b.at(u, v) = g[(u ? 1 : 0) + (v ? 2 : 0)];
+        for (int v = 0; v < 4; v += 3) {  // the u edges (v = 0: g0 g1, v = 3: g2 g3)
+            const Vec3 a = g[v ? 2 : 0], c = g[v ? 3 : 1];
+            b.at(1, v) = third(a, c);
+            b.at(2, v) = third(c, a);
+        }
+        for (int u = 0; u < 4; u += 3) {  // the v edges (u = 0: g0 g2, u = 3: g1 g3)
+            const Vec3 a = g[u ? 1 : 0], c = g[u ? 3 : 2];
+            b.at(u, 1) = third(a, c);
+            b.at(u, 2) = third(c, a);
+        }
+        for (int u = 1; u < 3; ++u)  // inside: the bilinear map at thirds, between the u edges
+            for (int v = 1; v < 3; ++v) b.at(u, v) = lerp(b.at(u, 0), b.at(u, 3), v / 3.f);
+        shape_.patches.push_back(b);
         if (!polygonTexCoords_.st.empty()) {
             PatchTexCoords tc;
             for (int q = 0; q < 4; ++q) tc.st[q] = polygonTexCoords_.at(k[q]);
