@@ -1305,13 +1305,13 @@ class RibReader {
         }
     }
 
-    // ---- retained geometry (RI spec 3.2, sec. 5, "Retained Geometry")
-    // ----------------------------------------------- ObjectBegin handle ... ObjectEnd records the requests
-    // of an object; ObjectInstance handle replays them inside an implicit attribute block, under the
-    // transformation and attributes current at the instance (RI: "the object inherits the current set of
-    // attributes"); transformations and attributes inside the definition are relative to / override those (as
-    // PRMan, which resets the graphics state at ObjectBegin). The CTM at ObjectBegin plays no part. Every
-    // instance is a copy of the object's surfaces in the scene.
+    // ---- retained geometry (RI spec 3.2, sec. 5, "Retained Geometry") -----------------------------
+    // ObjectBegin handle ... ObjectEnd records the requests of an object; ObjectInstance handle replays them
+    // inside an implicit attribute block, under the transformation and attributes current at the instance
+    // (RI: "the object inherits the current set of attributes"); transformations and attributes inside the
+    // definition are relative to / override those (as PRMan, which resets the graphics state at
+    // ObjectBegin). The CTM at ObjectBegin plays no part. Every instance is a copy of the object's surfaces
+    // in the scene.
     struct RetainedObject;
     struct RecordedRequest {
         Request request;
