@@ -209,9 +209,9 @@ class PrimitiveReader {
         // Degree elevation as addPatch's, but every edge point is (2 near + far) / 3 of its edge's two
         // ends, which does not depend on the direction the edge is walked: a polygon sharing the edge
         // (reversed) gets the same four points bit for bit, in both engines (no weld needed).
+        // (A collapsed edge stays a point; 2 near is exact, so a fused multiply-add rounds the same.)
         auto third = [](Vec3 nearEnd, Vec3 farEnd) {
-            return nearEnd == farEnd ? nearEnd
-                                     : (nearEnd * 2.f + farEnd) / 3.f;  // a collapsed edge stays a point
+            return nearEnd == farEnd ? nearEnd : (nearEnd * 2.f + farEnd) / 3.f;
         };
         BezierPatch b;
         for (int u = 0; u < 4; u += 3)
@@ -242,8 +242,8 @@ class PrimitiveReader {
     // loop's Newell normal (so nearly planar polygons work), its holes are bridged into the outer loop
     // (each from a vertex to the nearest outer vertex it sees), and the one loop is cut into triangles by
     // ear clipping, each a bilinear patch with its last edge collapsed (a, b, c, c). Corners are the
-    // request's points, so polygons sharing an edge share its end points bit for bit (the weld then makes
-    // the degree-elevated edges identical). An outer loop with fewer than 3 distinct vertices or no area:
+    // request's points, so polygons sharing an edge share its end points and (addPolygonPiece) its edge
+    // control points bit for bit. An outer loop with fewer than 3 distinct vertices or no area:
     // warned and skipped; a degenerate hole or one outside the outer loop: warned and ignored.
     void addPolygon(int line, const std::vector<Vec3>& pts, const std::vector<std::vector<Corner>>& loopsIn,
                     const std::string& what) {
