@@ -313,6 +313,47 @@ TEST(Polygons, TexCoordsFollowTheVertices) {
     }
 }
 
+// "Cs" per polygon (uniform) or for all (constant) colours the pieces (the surface with that Cs, checked with
+// RI "constant" in both engines); per-vertex "Cs" is warned about and ignored (no per-vertex colours).
+TEST(Polygons, UniformAndConstantColours) {
+    const std::string quads =
+        "PointsPolygons [4 4] [0 1 4 3 1 2 5 4] \"P\" [-1.2 -1 0  0 -1 0  1.2 -1 0 "
+        " -1.2 1 0  0 1 0  1.2 1 0]";
+    const int res = 32;
+    struct Case {
+        std::string params;
+        Color left, right;
+    };
+    for (const Case& c :
+         {Case{" \"uniform color Cs\" [1 0 0  0 0.5 1]", {1, 0, 0}, {0, 0.5f, 1}},
+          Case{" \"constant color Cs\" [0.2 0.9 0.4]", {0.2f, 0.9f, 0.4f}, {0.2f, 0.9f, 0.4f}},
+          Case{" \"Cs\" [1 0 0  1 0 0  1 0 0  1 0 0  1 0 0  1 0 0]",
+               {0.6f, 0.6f, 0.6f},
+               {0.6f, 0.6f, 0.6f}}}) {
+        SCOPED_TRACE(c.params);
+        Loaded l = load(topView("Surface \"constant\"\nColor [0.6 0.6 0.6]\n" + quads + c.params, res));
+        const bool perVertex = contains(c.params, "\"Cs\" [");
+        int warned = 0;
+        for (const std::string& w : l.warnings)
+            warned += contains(w, "\"Cs\" is used as a uniform or constant");
+        EXPECT_EQ(warned, perVertex ? 1 : 0);
+        for (const char* engine : {"reyes", "rt"}) {
+            SCOPED_TRACE(engine);
+            RenderSettings rs;
+            rs.engine = engine;
+            rs.threads = 2;
+            const Image img = render(l.scene, rs).image;
+            for (int k = 0; k < 3; ++k) {
+                EXPECT_NEAR(img.pixel(8, 16)[k], (&c.left.x)[k], 1e-3);
+                EXPECT_NEAR(img.pixel(24, 16)[k], (&c.right.x)[k], 1e-3);
+            }
+        }
+    }
+    // Wrong counts name the line.
+    EXPECT_TRUE(contains(
+        expectError("WorldBegin\n" + quads + "\n\"uniform color Cs\" [1 0 0]\nWorldEnd\n", 3), "Cs"));
+}
+
 TEST(Polygons, GeneralPolygonBadInputFailsNamingTheLine) {
     const std::string w = "WorldBegin\n";
     EXPECT_TRUE(contains(expectError(w + "GeneralPolygon [3 3] \"P\" [0 0 0 1 0 0 1 1 0]\nWorldEnd\n", 2),

@@ -1,8 +1,10 @@
 #include "io/rib_geometry.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -88,7 +90,7 @@ class PrimitiveReader {
                 diag_.warnOnce("Pz", p.line,
                                what + ": \"Pz\" height fields are not supported; primitive skipped");
                 return std::nullopt;
-            } else if (!isTexCoordParam(p.name)) {
+            } else if (!isTexCoordParam(p.name) && !(p.name == "Cs" && polygonColorsRead_)) {
                 warnIgnoredParam(p, r.name, diag_);
             }
         }
@@ -201,6 +203,41 @@ class PrimitiveReader {
         Vec2 at(const Corner& c) const { return st[size_t(faceVarying ? c.fv : c.point)]; }
     };
     PolygonTexCoords polygonTexCoords_;
+    // "Cs" of the polygon primitives: one colour per polygon (uniform) or one for all (constant); empty:
+    // none. polygonColorsRead_: the primitive's "Cs" was looked at (positions() does not warn about it).
+    std::vector<Color> polygonColors_;
+    bool polygonColorsRead_ = false;
+    size_t polygonIndex_ = 0;  // the polygon whose pieces are being added
+
+    void readPolygonColors(const std::vector<Param>& ps, size_t npolygons, const std::string& what) {
+        polygonColorsRead_ = true;
+        for (const Param& p : ps) {
+            if (p.name != "Cs") continue;
+            const std::string cls = p.decl ? p.decl->cls : "";
+            if (!p.decl || p.decl->type != "color" || p.decl->arraySize != 1 || !p.value->numeric() ||
+                (cls != "uniform" && cls != "constant")) {
+                diag_.warnOnce(
+                    "Cs:" + what, p.line,
+                    what +
+                        ": \"Cs\" is used as a uniform or constant color only (one colour per polygon "
+                        "or for all: the scene has no per-vertex colours); ignored");
+                continue;
+            }
+            const size_t n = cls == "uniform" ? npolygons : 1;
+            if (p.value->nums.size() != 3 * n)
+                diag_.fail(p.line, what + ": \"Cs\" needs " + std::to_string(3 * n) + " numbers (" +
+                                       std::to_string(n) + " " + cls + " colours), got " +
+                                       std::to_string(p.value->nums.size()));
+            polygonColors_.clear();
+            for (size_t i = 0; i < n; ++i) {
+                const Color c{float(p.value->nums[3 * i]), float(p.value->nums[3 * i + 1]),
+                              float(p.value->nums[3 * i + 2])};
+                if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
+                    diag_.fail(p.line, what + ": \"Cs\" must be finite numbers");
+                polygonColors_.push_back(c);
+            }
+        }
+    }
 
     // One bilinear piece of a polygon with the s, t of its corners g[0..3] (when the primitive has them).
     void addPolygonPiece(const std::vector<Vec3>& pts, const Corner (&k)[4]) {
@@ -229,6 +266,8 @@ class PrimitiveReader {
         for (int u = 1; u < 3; ++u)  // inside: the bilinear map at thirds, between the u edges
             for (int v = 1; v < 3; ++v) b.at(u, v) = lerp(b.at(u, 0), b.at(u, 3), v / 3.f);
         shape_.patches.push_back(b);
+        if (!polygonColors_.empty())
+            shape_.colors.push_back(polygonColors_[polygonColors_.size() == 1 ? 0 : polygonIndex_]);
         if (!polygonTexCoords_.st.empty()) {
             PatchTexCoords tc;
             for (int q = 0; q < 4; ++q) tc.st[q] = polygonTexCoords_.at(k[q]);
@@ -603,6 +642,7 @@ class PrimitiveReader {
         requireWorld(r);
         std::vector<double> topo(loopSizes.begin(), loopSizes.end());
         setTopology(what + " with " + std::to_string(n) + " vertices", topo);
+        readPolygonColors(ps, 1, what);
         auto pts = positions(r, ps, n, what);
         if (!pts) return skip();
         readPolygonTexCoords(r, ps, n, n, what);
@@ -681,11 +721,14 @@ class PrimitiveReader {
         topo.insert(topo.end(), nverts.begin(), nverts.end());
         topo.insert(topo.end(), verts.begin(), verts.end());
         setTopology(what + " with " + std::to_string(nloops.size()) + " polygons", topo);
+        readPolygonColors(ps, nloops.size(), what);
         auto pts = positions(r, ps, npoints, what);
         if (!pts) return skip();
         readPolygonTexCoords(r, ps, npoints, verts.size(), what);
         size_t at = 0, loop = 0;
-        for (int nl : nloops) {
+        for (size_t f = 0; f < nloops.size(); ++f) {
+            const int nl = nloops[f];
+            polygonIndex_ = f;
             std::vector<std::vector<Corner>> loops;
             for (int l = 0; l < nl; ++l, ++loop) {
                 loops.emplace_back();
@@ -1287,6 +1330,27 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
     // Texture coordinates do not move: the first key's. Scene::texCoords stays empty while every patch
     // has the default.
     const std::vector<PatchTexCoords>& st = keys.front().texCoords;
+    // Colours per patch (a polygon's uniform or constant "Cs"): the surface with that Cs, one material per
+    // distinct colour. Colours do not move: the first key's.
+    const std::vector<Color>& colors = keys.front().colors;
+    std::vector<uint32_t> patchMaterial;
+    if (colors.size() == n) {
+        std::map<std::array<float, 3>, uint32_t> byColor;
+        for (const Color& col : colors) {
+            auto [it, added] = byColor.try_emplace({col.x, col.y, col.z}, 0);
+            if (added) {
+                Material m = c.state.attributes().surface;
+                m.Cs = col;
+                it->second = materialIndex(scene, m);
+            }
+            patchMaterial.push_back(it->second);
+        }
+    }
+    auto attributesOf = [&](size_t j) {
+        PatchAttributes pa = a;
+        if (!patchMaterial.empty()) pa.material = patchMaterial[j];
+        return pa;
+    };
     auto addTexCoords = [&](size_t j) {
         if (st.size() != n && scene.texCoords.empty()) return;
         scene.texCoords.resize(scene.patches.size() - 1);
@@ -1296,7 +1360,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         const Mat4 m = ctm.at(open);
         for (size_t j = 0; j < n; ++j) {
             scene.patches.push_back(transformed(m, keys.front().patches[j]));
-            scene.attributes.push_back(a);
+            scene.attributes.push_back(attributesOf(j));
             addTexCoords(j);
         }
         return;
@@ -1322,7 +1386,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
             world[k] = transformed(worldFromObject[k], objectAt(j, T[k]));
             for (int q = 0; q < 16 && same && k > 0; ++q) same = world[k].cp[q] == world[0].cp[q];
         }
-        PatchAttributes pa = a;
+        PatchAttributes pa = attributesOf(j);
         if (!same) {
             pa.motion = {uint32_t(scene.motionPatches.size()), uint32_t(T.size())};
             scene.motionPatches.insert(scene.motionPatches.end(), world.begin(), world.end());

@@ -31,6 +31,9 @@ struct PrimitiveShape {
     // The s, t of each patch (RI "st" / "s" "t" varying primitive variables, or TextureCoordinates);
     // empty: every patch has the default s = u, t = v.
     std::vector<PatchTexCoords> texCoords;
+    // The colour (RI "Cs") of each patch where the primitive gives one per polygon (uniform) or one for all
+    // (constant); empty: the graphics state's Color.
+    std::vector<Color> colors;
     // What the keys of a deformation block must share, in words (e.g. `PatchMesh "bicubic" 7
     // "nonperiodic" 4 "nonperiodic"`) and as a hash that also covers vertex indices, knots and tags.
     std::string topology;
