@@ -354,6 +354,28 @@ TEST(Polygons, UniformAndConstantColours) {
         expectError("WorldBegin\n" + quads + "\n\"uniform color Cs\" [1 0 0]\nWorldEnd\n", 3), "Cs"));
 }
 
+// Deformation blur of a polygon whose shape changes from concave (a dart: 2 triangles) to convex (a square,
+// which alone would be one bilinear patch): the later key is cut into the first key's pieces, so the keys
+// correspond; the pieces cover the dart at shutter open and the square at shutter close.
+TEST(Polygons, DeformingPolygonKeepsTheFirstKeysPieces) {
+    for (const std::string& prim : {std::string("Polygon \"P\" "), std::string("GeneralPolygon [4] \"P\" "),
+                                    std::string("PointsPolygons [4] [0 1 2 3] \"P\" ")}) {
+        SCOPED_TRACE(prim);
+        Loaded l = load("Shutter 0 1\nWorldBegin\nMotionBegin [0 1]\n" + prim +
+                        "[0 0 0  2 0 0  0.3 0.3 0  0 2 0]\n" + prim +
+                        "[0 0 0  2 0 0  2 2 0  0 2 0]\nMotionEnd\nWorldEnd\n");
+        ASSERT_EQ(l.scene.patches.size(), 2u);
+        for (float time : {0.f, 1.f}) {
+            double area = 0;
+            for (size_t i = 0; i < 2; ++i) {
+                const BezierPatch b = patchAtTime(l.scene, i, time);
+                area += 0.5 * length(cross(b.cp[3] - b.cp[0], b.cp[12] - b.cp[0]));
+            }
+            EXPECT_NEAR(area, time == 0.f ? 0.6 : 4.0, 1e-5) << time;
+        }
+    }
+}
+
 TEST(Polygons, GeneralPolygonBadInputFailsNamingTheLine) {
     const std::string w = "WorldBegin\n";
     EXPECT_TRUE(contains(expectError(w + "GeneralPolygon [3 3] \"P\" [0 0 0 1 0 0 1 1 0]\nWorldEnd\n", 2),

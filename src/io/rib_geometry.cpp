@@ -266,6 +266,10 @@ class PrimitiveReader {
         for (int u = 1; u < 3; ++u)  // inside: the bilinear map at thirds, between the u edges
             for (int v = 1; v < 3; ++v) b.at(u, v) = lerp(b.at(u, 0), b.at(u, 3), v / 3.f);
         shape_.patches.push_back(b);
+        PrimitiveShape::PolygonPiece piece{};
+        for (int q = 0; q < 4; ++q) piece.point[q] = k[q].point, piece.fv[q] = k[q].fv;
+        piece.polygon = polygonIndex_;
+        shape_.polygonPieces.push_back(piece);
         if (!polygonColors_.empty())
             shape_.colors.push_back(polygonColors_[polygonColors_.size() == 1 ? 0 : polygonIndex_]);
         if (!polygonTexCoords_.st.empty()) {
@@ -550,6 +554,26 @@ class PrimitiveReader {
     }
     void skip() { shape_.skipped = true; }
 
+    // A later key of a deformation block with the first key's topology: the first key's pieces, at this
+    // key's points (true), so that the keys' patches correspond.
+    const PrimitiveShape* firstKey_ = nullptr;
+    void setFirstKey(const PrimitiveShape* first) { firstKey_ = first; }
+    bool reuseFirstKeyPieces(const std::vector<Vec3>& pts) {
+        if (!firstKey_ || firstKey_->skipped || firstKey_->request != shape_.request ||
+            firstKey_->topology != shape_.topology || firstKey_->topologyHash != shape_.topologyHash)
+            return false;
+        for (const PrimitiveShape::PolygonPiece& p : firstKey_->polygonPieces) {
+            Corner k[4];
+            for (int q = 0; q < 4; ++q) {
+                if (p.point[q] < 0 || size_t(p.point[q]) >= pts.size()) return false;
+                k[q] = {p.point[q], p.fv[q]};
+            }
+            polygonIndex_ = p.polygon;
+            addPolygonPiece(pts, k);
+        }
+        return true;
+    }
+
     // The s, t of a polygon primitive ("st" or "s" and "t"; vertex or varying: one per point, facevarying:
     // one per corner), into polygonTexCoords_; nothing: the pieces keep the default s = u, t = v. Other
     // storage classes are warned about and ignored.
@@ -646,6 +670,7 @@ class PrimitiveReader {
         auto pts = positions(r, ps, n, what);
         if (!pts) return skip();
         readPolygonTexCoords(r, ps, n, n, what);
+        if (reuseFirstKeyPieces(*pts)) return;
         std::vector<std::vector<Corner>> loops;
         int at = 0;
         for (int k : loopSizes) {
@@ -725,6 +750,7 @@ class PrimitiveReader {
         auto pts = positions(r, ps, npoints, what);
         if (!pts) return skip();
         readPolygonTexCoords(r, ps, npoints, verts.size(), what);
+        if (reuseFirstKeyPieces(*pts)) return;
         size_t at = 0, loop = 0;
         for (size_t f = 0; f < nloops.size(); ++f) {
             const int nl = nloops[f];
@@ -1113,8 +1139,10 @@ bool isPrimitiveRequest(const std::string& name) {
            name == "PointsGeneralPolygons";
 }
 
-PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c) {
+PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c,
+                                  const PrimitiveShape* firstKey) {
     PrimitiveReader reader(c, r);
+    reader.setFirstKey(firstKey);
     if (r.name == "Patch")
         reader.patch(r);
     else if (r.name == "PatchMesh")

@@ -1227,7 +1227,9 @@ class RibReader {
                 m.rotations.push_back({v[0], v[1], v[2], v[3]});
             }
         } else if (primitive) {
-            m.shapes.push_back(readPrimitiveShape(r, primitiveContext()));
+            PrimitiveShape key =
+                readPrimitiveShape(r, primitiveContext(), m.shapes.empty() ? nullptr : &m.shapes.front());
+            m.shapes.push_back(std::move(key));
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
             if (b.topology != a.topology || b.topologyHash != a.topologyHash ||
                 (!a.skipped && !b.skipped && a.patches.size() != b.patches.size()))
