@@ -1,6 +1,7 @@
-// RIB Polygon and PointsPolygons (RI spec 3.2, sec. 5.1), read as bilinear patches (convex quadrilaterals)
-// and triangles of an ear-clipping triangulation: coverage against the exact polygon (point in polygon),
-// meshes without pinholes in both engines, and the reader's errors.
+// RIB Polygon, GeneralPolygon, PointsPolygons and PointsGeneralPolygons (RI spec 3.2, sec. 5.1), read as
+// bilinear patches (convex quadrilaterals) and triangles of an ear-clipping triangulation (holes bridged
+// into the outer loop): coverage against the exact polygon (point in polygon), meshes without pinholes in
+// both engines, texture coordinates, and the reader's errors.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -93,8 +94,7 @@ TEST(Polygons, PointsPolygonsMeshHasNoPinholes) {
     for (int j = 0; j <= n; ++j)
         for (int i = 0; i <= n; ++i) {
             const double x = -1.3 + 2.6 * i / n, y = -1.3 + 2.6 * j / n;
-            P += " " + std::to_string(x) + " " + std::to_string(y) + " " +
-                 std::to_string(0.3 * std::sin(2 * x + 3 * y));
+            for (double c : {x, y, 0.3 * std::sin(2 * x + 3 * y)}) P.append(" ").append(std::to_string(c));
         }
     for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i) {
@@ -125,6 +125,303 @@ TEST(Polygons, PointsPolygonsMeshHasNoPinholes) {
             EXPECT_EQ(uncovered, 0);
         }
     }
+}
+
+// Renders `s` in both engines and checks every pixel whose 3x3 neighbourhood the exact coverage `truth`
+// says is fully inside (outside) is covered (empty), and the covered area against the exact one.
+void expectCoverage(const Scene& s, const std::vector<double>& truth, int res, double areaTolerance = 0.01) {
+    double truthSum = 0;
+    for (double t : truth) truthSum += t;
+    for (const char* engine : {"reyes", "rt"}) {
+        SCOPED_TRACE(engine);
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        const Image img = render(s, rs).image;
+        double sum = 0;
+        int wrong = 0;
+        for (int y = 0; y < res; ++y)
+            for (int x = 0; x < res; ++x) {
+                const float a = alphaAt(img, x, y);
+                sum += a;
+                bool allIn = true, allOut = true;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const double t = truth[size_t(std::clamp(y + dy, 0, res - 1)) * res +
+                                               std::clamp(x + dx, 0, res - 1)];
+                        allIn = allIn && t == 1.0;
+                        allOut = allOut && t == 0.0;
+                    }
+                wrong += (allIn && a < 0.999f) || (allOut && a > 0.f);
+            }
+        EXPECT_EQ(wrong, 0);
+        EXPECT_NEAR(sum, truthSum, areaTolerance * truthSum) << "area";
+    }
+}
+
+std::string loopPoints(const std::vector<P2>& poly, double z, double tilt = 0) {
+    std::string out;
+    for (const P2& p : poly)
+        for (double c : {p.x, p.y, z + tilt * p.x * p.y}) out.append(" ").append(std::to_string(c));
+    return out;
+}
+
+// A concave outer loop (a star) with two holes, one of them concave, as a GeneralPolygon: it covers
+// exactly the star minus the holes (crossing-number truth, independent of the triangulation). Holes are
+// given in either orientation; a variant lies in a slightly curved (nearly planar) surface.
+TEST(Polygons, GeneralPolygonWithHolesCoversExactlyItsArea) {
+    std::vector<P2> star;
+    for (int k = 0; k < 12; ++k) {
+        const double a = k * 3.14159265358979 / 6, r = k % 2 ? 0.75 : 1.35;
+        star.push_back({r * std::cos(a), r * std::sin(a)});
+    }
+    const std::vector<P2> square = {{-0.45, -0.2}, {-0.05, -0.2}, {-0.05, 0.2}, {-0.45, 0.2}};  // ccw
+    const std::vector<P2> ell = {{0.1, 0.3},  {0.1, -0.4}, {0.5, -0.4},
+                                 {0.5, -0.2}, {0.3, -0.2}, {0.3, 0.3}};  // cw
+    const int res = 72;
+    for (double tilt : {0.0, 0.02}) {
+        SCOPED_TRACE("tilt " + std::to_string(tilt));
+        const std::string rib = "GeneralPolygon [" + std::to_string(star.size()) + " 4 6] \"P\" [" +
+                                loopPoints(star, 0.3, tilt) + loopPoints(square, 0.3, tilt) +
+                                loopPoints(ell, 0.3, tilt) + " ]";
+        Loaded l = load(topView(rib, res));
+        EXPECT_TRUE(l.warnings.empty() || !contains(l.warnings.front(), "polygon")) << l.warnings.front();
+        // Triangles of a polygon with h holes and n vertices in all: n + 2h - 2.
+        EXPECT_EQ(l.scene.patches.size(), star.size() + 4 + 6 + 2 * 2 - 2);
+        const std::vector<double> truth = exactCoverage(l.scene, [&](double x, double y) {
+            return insidePolygon(star, x, y) && !insidePolygon(square, x, y) && !insidePolygon(ell, x, y);
+        });
+        expectCoverage(l.scene, truth, res);
+    }
+}
+
+// PointsGeneralPolygons: a picture frame (a square with a square hole) and the square that fills the hole,
+// sharing the hole's vertices, next to an L with an L-shaped hole; all of it watertight in both engines.
+TEST(Polygons, PointsGeneralPolygonsMeshHasNoPinholesAndHolesStayOpen) {
+    // Points: outer square 0-3, inner square 4-7 (the frame's hole, filled by polygon 2), then a
+    // separate polygon with a hole.
+    const std::string P =
+        "-1.3 -1.3 0.2  0.2 -1.3 0.2  0.2 0.2 0.2  -1.3 0.2 0.2 "
+        "-0.8 -0.8 0.35  -0.3 -0.8 0.35  -0.3 -0.3 0.35  -0.8 -0.3 0.35 "
+        "0.4 0.4 0  1.3 0.4 0  1.3 1.3 0  0.4 1.3 0 "
+        "0.7 0.7 0  1.0 0.7 0  1.0 1.0 0  0.7 1.0 0";
+    const std::string rib =
+        "PointsGeneralPolygons [2 1 2] [4 4 4 4 4] [0 1 2 3 4 5 6 7 7 6 5 4 8 9 10 11 12 13 14 15] "
+        "\"P\" [" +
+        P + "]";
+    const int res = 96;
+    Loaded l = load(topView(rib, res));
+    auto in = [](double x, double y, double x0, double y0, double x1, double y1) {
+        return x > x0 && x < x1 && y > y0 && y < y1;
+    };
+    const std::vector<double> truth = exactCoverage(l.scene, [&](double x, double y) {
+        return in(x, y, -1.3, -1.3, 0.2, 0.2) ||
+               (in(x, y, 0.4, 0.4, 1.3, 1.3) && !in(x, y, 0.7, 0.7, 1.0, 1.0));
+    });
+    expectCoverage(l.scene, truth, res);
+    for (const char* engine : {"reyes", "rt"}) {
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        EXPECT_EQ(countPinholes(render(l.scene, rs).image), 0) << engine;
+    }
+}
+
+// Polygons of one mesh that share an edge (walked in opposite directions) get bit-identical boundary
+// control points for it, before any weld: the ray tracer, which does not weld, sees no crack either.
+TEST(Polygons, SharedEdgesAreBitIdentical) {
+    std::string P, nverts, verts;
+    const int n = 6;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i)
+            for (double c :
+                 {0.37 * i + 0.05 * j, 0.29 * j - 0.03 * i * i, 0.11 * std::sin(1.7 * i + 2.3 * j)})
+                P.append(" ").append(std::to_string(c));
+    auto id = [&](int i, int j) { return std::to_string(j * (n + 1) + i); };
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            const std::string a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+            if ((i + j) % 2 == 0) {
+                nverts += " 3 3";
+                verts += " " + a + " " + b + " " + c + " " + a + " " + c + " " + d;
+            } else {
+                nverts += " 4";
+                verts += " " + a + " " + b + " " + c + " " + d;
+            }
+        }
+    const Scene s =
+        load("WorldBegin\nPointsPolygons [" + nverts + "] [" + verts + "] \"P\" [" + P + "]\nWorldEnd\n")
+            .scene;
+    // Every boundary curve of every patch (4 control points), and the curves with the same two ends.
+    struct Curve {
+        Vec3 p[4];
+    };
+    std::vector<Curve> curves;
+    for (const BezierPatch& b : s.patches) {
+        Curve c[4];
+        for (int k = 0; k < 4; ++k) {
+            c[0].p[k] = b.at(k, 0);
+            c[1].p[k] = b.at(3, k);
+            c[2].p[k] = b.at(3 - k, 3);
+            c[3].p[k] = b.at(0, 3 - k);
+        }
+        for (const Curve& e : c)
+            if (!(e.p[0] == e.p[3])) curves.push_back(e);
+    }
+    int shared = 0, differ = 0;
+    for (size_t i = 0; i < curves.size(); ++i)
+        for (size_t j = i + 1; j < curves.size(); ++j) {
+            const Curve &a = curves[i], &b = curves[j];
+            if (!(a.p[0] == b.p[3] && a.p[3] == b.p[0])) continue;
+            ++shared;
+            for (int k = 0; k < 4; ++k) differ += !(a.p[k] == b.p[3 - k]);
+        }
+    EXPECT_EQ(shared, 2 * n * (n - 1) + n * n / 2);  // inner grid edges + the triangles' diagonals
+    EXPECT_EQ(differ, 0);
+}
+
+// "st" on polygons: the pieces' corner s, t are the given values of their corners (vertex/varying: per
+// point, facevarying: per corner), checked against a linear function of the corner's position.
+TEST(Polygons, TexCoordsFollowTheVertices) {
+    auto f = [](Vec3 p) { return Vec2{0.5f * p.x + 0.1f, 0.25f * p.y - 0.2f}; };
+    const std::vector<Vec3> pts = {{0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {1, 0.4f, 0}, {0, 1, 0}};  // concave
+    std::string P, st, s, t, fvst;
+    for (const Vec3& p : pts) {
+        P += " " + std::to_string(p.x) + " " + std::to_string(p.y) + " 0";
+        st += " " + std::to_string(f(p).x) + " " + std::to_string(f(p).y);
+        s += " " + std::to_string(f(p).x);
+        t += " " + std::to_string(f(p).y);
+    }
+    // Facevarying on a PointsPolygons: a triangle and a quad sharing points, values listed per corner.
+    for (int i : {0, 1, 3, 3, 2, 4, 0})
+        fvst += " " + std::to_string(f(pts[size_t(i)]).x) + " " + std::to_string(f(pts[size_t(i)]).y);
+    for (const std::string& rib :
+         {"Polygon \"P\" [" + P + "] \"st\" [" + st + "]",
+          "Polygon \"P\" [" + P + "] \"varying float s\" [" + s + "] \"vertex float t\" [" + t + "]",
+          "PointsPolygons [3 4] [0 1 3 3 2 4 0] \"P\" [" + P + "] \"facevarying float[2] st\" [" + fvst +
+              "]"}) {
+        SCOPED_TRACE(rib);
+        Loaded l = load("WorldBegin\n" + rib + "\nWorldEnd\n");
+        ASSERT_EQ(l.scene.texCoords.size(), l.scene.patches.size());
+        ASSERT_GE(l.scene.patches.size(), 2u);
+        for (size_t i = 0; i < l.scene.patches.size(); ++i)
+            for (int k = 0; k < 4; ++k) {
+                const Vec3 corner = l.scene.patches[i].cp[(k & 1 ? 3 : 0) + (k & 2 ? 12 : 0)];
+                EXPECT_NEAR(l.scene.texCoords[i].st[k].x, f(corner).x, 1e-5);
+                EXPECT_NEAR(l.scene.texCoords[i].st[k].y, f(corner).y, 1e-5);
+            }
+    }
+}
+
+// "Cs" per polygon (uniform) or for all (constant) colours the pieces (the surface with that Cs, checked with
+// RI "constant" in both engines); per-vertex "Cs" is warned about and ignored (no per-vertex colours).
+TEST(Polygons, UniformAndConstantColours) {
+    const std::string quads =
+        "PointsPolygons [4 4] [0 1 4 3 1 2 5 4] \"P\" [-1.2 -1 0  0 -1 0  1.2 -1 0 "
+        " -1.2 1 0  0 1 0  1.2 1 0]";
+    const int res = 32;
+    struct Case {
+        std::string params;
+        Color left, right;
+    };
+    for (const Case& c :
+         {Case{" \"uniform color Cs\" [1 0 0  0 0.5 1]", {1, 0, 0}, {0, 0.5f, 1}},
+          Case{" \"constant color Cs\" [0.2 0.9 0.4]", {0.2f, 0.9f, 0.4f}, {0.2f, 0.9f, 0.4f}},
+          Case{" \"Cs\" [1 0 0  1 0 0  1 0 0  1 0 0  1 0 0  1 0 0]",
+               {0.6f, 0.6f, 0.6f},
+               {0.6f, 0.6f, 0.6f}}}) {
+        SCOPED_TRACE(c.params);
+        Loaded l = load(topView("Surface \"constant\"\nColor [0.6 0.6 0.6]\n" + quads + c.params, res));
+        const bool perVertex = contains(c.params, "\"Cs\" [");
+        int warned = 0;
+        for (const std::string& w : l.warnings)
+            warned += contains(w, "\"Cs\" is used as a uniform or constant");
+        EXPECT_EQ(warned, perVertex ? 1 : 0);
+        for (const char* engine : {"reyes", "rt"}) {
+            SCOPED_TRACE(engine);
+            RenderSettings rs;
+            rs.engine = engine;
+            rs.threads = 2;
+            const Image img = render(l.scene, rs).image;
+            for (int k = 0; k < 3; ++k) {
+                EXPECT_NEAR(img.pixel(8, 16)[k], (&c.left.x)[k], 1e-3);
+                EXPECT_NEAR(img.pixel(24, 16)[k], (&c.right.x)[k], 1e-3);
+            }
+        }
+    }
+    // Wrong counts name the line.
+    EXPECT_TRUE(contains(
+        expectError("WorldBegin\n" + quads + "\n\"uniform color Cs\" [1 0 0]\nWorldEnd\n", 3), "Cs"));
+}
+
+// Deformation blur of a polygon whose shape changes from concave (a dart: 2 triangles) to convex (a square,
+// which alone would be one bilinear patch): the later key is cut into the first key's pieces, so the keys
+// correspond; the pieces cover the dart at shutter open and the square at shutter close.
+TEST(Polygons, DeformingPolygonKeepsTheFirstKeysPieces) {
+    for (const std::string& prim : {std::string("Polygon \"P\" "), std::string("GeneralPolygon [4] \"P\" "),
+                                    std::string("PointsPolygons [4] [0 1 2 3] \"P\" ")}) {
+        SCOPED_TRACE(prim);
+        Loaded l = load("Shutter 0 1\nWorldBegin\nMotionBegin [0 1]\n" + prim +
+                        "[0 0 0  2 0 0  0.3 0.3 0  0 2 0]\n" + prim +
+                        "[0 0 0  2 0 0  2 2 0  0 2 0]\nMotionEnd\nWorldEnd\n");
+        ASSERT_EQ(l.scene.patches.size(), 2u);
+        for (float time : {0.f, 1.f}) {
+            double area = 0;
+            for (size_t i = 0; i < 2; ++i) {
+                const BezierPatch b = patchAtTime(l.scene, i, time);
+                area += 0.5 * length(cross(b.cp[3] - b.cp[0], b.cp[12] - b.cp[0]));
+            }
+            EXPECT_NEAR(area, time == 0.f ? 0.6 : 4.0, 1e-5) << time;
+        }
+    }
+}
+
+TEST(Polygons, GeneralPolygonBadInputFailsNamingTheLine) {
+    const std::string w = "WorldBegin\n";
+    EXPECT_TRUE(contains(expectError(w + "GeneralPolygon [3 3] \"P\" [0 0 0 1 0 0 1 1 0]\nWorldEnd\n", 2),
+                         "nvertices adds up to 6 points, but \"P\" has 3"));
+    EXPECT_TRUE(contains(expectError(w + "\nGeneralPolygon [3 2] \"P\" [0 0 0 1 0 0 1 1 0 0 0 0 1 1 1]\n", 3),
+                         "loop 1 has 2 vertices"));
+    EXPECT_TRUE(contains(expectError(w + "GeneralPolygon 3 \"P\" [0 0 0 1 0 0 1 1 0]\nWorldEnd\n", 2),
+                         "must be an array"));
+    EXPECT_TRUE(contains(
+        expectError(
+            w + "PointsGeneralPolygons [1 1] [3 3 3] [0 1 2 0 2 3 0 1 3] \"P\" [0 0 0 1 0 0 1 1 0 0 1 0]\n",
+            2),
+        "nloops adds up to 2 loops, but nvertices has 3"));
+    EXPECT_TRUE(contains(
+        expectError(w + "PointsGeneralPolygons [1] [3] [0 1 4] \"P\" [0 0 0 1 0 0 1 1 0 0 1 0]\nWorldEnd\n",
+                    2),
+        "vertex index 4 is out of range"));
+    EXPECT_TRUE(contains(expectError(w + "PointsGeneralPolygons [0] [] [] \"P\" [0 0 0]\nWorldEnd\n", 2),
+                         "needs at least 1"));
+    // Wrong primitive variable counts, also facevarying ones.
+    EXPECT_TRUE(contains(
+        expectError(w + "Polygon \"P\" [0 0 0 1 0 0 1 1 0]\n\"st\" [0 0 1 0]\nWorldEnd\n", 3), "st"));
+    EXPECT_TRUE(contains(expectError(w + "PointsPolygons [3] [0 1 2] \"P\" [0 0 0 1 0 0 1 1 0]\n"
+                                         "\"facevarying float s\" [0 1]\nWorldEnd\n",
+                                     3),
+                         "s"));
+    EXPECT_TRUE(contains(
+        expectError(
+            w + "PointsPolygons [3] [0 1 2] \"P\" [0 0 0 1 0 0 1 1 0] \"Cs\" [1 0 0 0 1 0]\nWorldEnd\n", 2),
+        "Cs"));
+}
+
+TEST(Polygons, DegenerateHolesWarnAndAreIgnored) {
+    // A hole with no area, and one outside the outer loop: the square is rendered whole (as 2 triangles).
+    Loaded l = load(
+        "WorldBegin\nGeneralPolygon [4 3 4] \"P\" [0 0 0 4 0 0 4 4 0 0 4 0  1 1 0 2 2 0 3 3 0"
+        "  6 1 0 7 1 0 7 2 0 6 2 0]\nWorldEnd\n");
+    EXPECT_EQ(l.scene.patches.size(), 2u);
+    int degenerate = 0, outside = 0;
+    for (const std::string& m : l.warnings) {
+        degenerate +=
+            contains(m, ":2:") && contains(m, "hole with fewer than 3 distinct vertices or no area");
+        outside += contains(m, ":2:") && contains(m, "not inside the outer loop");
+    }
+    EXPECT_EQ(degenerate, 1);
+    EXPECT_EQ(outside, 1);
 }
 
 TEST(Polygons, BadInputFailsNamingTheLine) {

@@ -1,7 +1,10 @@
 #include "io/rib_geometry.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -87,7 +90,7 @@ class PrimitiveReader {
                 diag_.warnOnce("Pz", p.line,
                                what + ": \"Pz\" height fields are not supported; primitive skipped");
                 return std::nullopt;
-            } else if (!isTexCoordParam(p.name)) {
+            } else if (!isTexCoordParam(p.name) && !(p.name == "Cs" && polygonColorsRead_)) {
                 warnIgnoredParam(p, r.name, diag_);
             }
         }
@@ -187,78 +190,311 @@ class PrimitiveReader {
         return 0;
     }
 
-    // One polygon (vertex indices into pts) as bilinear Bezier pieces: a convex quadrilateral is one
-    // bilinear patch (v0 v1 v3 v2: dP/du x dP/dv follows the vertex order, as RI's polygon normal); any other
-    // polygon is cut into triangles by ear clipping in its plane (Newell normal), each a bilinear patch with
-    // its last edge collapsed (a, b, c, c). Fewer than 3 distinct vertices or no area: warned and skipped.
-    void addPolygon(int line, const std::vector<Vec3>& pts, const std::vector<int>& face,
-                    const std::string& what) {
-        std::vector<Vec3> p;
-        for (int i : face)
-            if (p.empty() || !(pts[size_t(i)] == p.back())) p.push_back(pts[size_t(i)]);
-        while (p.size() > 1 && p.front() == p.back()) p.pop_back();
-        Vec3 nrm{0, 0, 0};  // Newell's normal: twice the vector area
-        for (size_t i = 0; i < p.size(); ++i) {
-            const Vec3 a = p[i], b = p[(i + 1) % p.size()];
-            nrm += Vec3{(a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y)};
+    // A polygon corner: its point (index into "P", and into vertex/varying values) and its place in the
+    // request's vertex list (the index of its facevarying values).
+    struct Corner {
+        int point = 0, fv = 0;
+    };
+    // Per-corner s, t of the polygon primitives: one value per point (vertex/varying) or per corner
+    // (facevarying); empty: the default (none stored).
+    struct PolygonTexCoords {
+        std::vector<Vec2> st;
+        bool faceVarying = false;
+        Vec2 at(const Corner& c) const { return st[size_t(faceVarying ? c.fv : c.point)]; }
+    };
+    PolygonTexCoords polygonTexCoords_;
+    // "Cs" of the polygon primitives: one colour per polygon (uniform) or one for all (constant); empty:
+    // none. polygonColorsRead_: the primitive's "Cs" was looked at (positions() does not warn about it).
+    std::vector<Color> polygonColors_;
+    bool polygonColorsRead_ = false;
+    size_t polygonIndex_ = 0;  // the polygon whose pieces are being added
+
+    void readPolygonColors(const std::vector<Param>& ps, size_t npolygons, const std::string& what) {
+        polygonColorsRead_ = true;
+        for (const Param& p : ps) {
+            if (p.name != "Cs") continue;
+            const std::string cls = p.decl ? p.decl->cls : "";
+            if (!p.decl || p.decl->type != "color" || p.decl->arraySize != 1 || !p.value->numeric() ||
+                (cls != "uniform" && cls != "constant")) {
+                diag_.warnOnce(
+                    "Cs:" + what, p.line,
+                    what +
+                        ": \"Cs\" is used as a uniform or constant color only (one colour per polygon "
+                        "or for all: the scene has no per-vertex colours); ignored");
+                continue;
+            }
+            const size_t n = cls == "uniform" ? npolygons : 1;
+            if (p.value->nums.size() != 3 * n)
+                diag_.fail(p.line, what + ": \"Cs\" needs " + std::to_string(3 * n) + " numbers (" +
+                                       std::to_string(n) + " " + cls + " colours), got " +
+                                       std::to_string(p.value->nums.size()));
+            polygonColors_.clear();
+            for (size_t i = 0; i < n; ++i) {
+                const Color c{float(p.value->nums[3 * i]), float(p.value->nums[3 * i + 1]),
+                              float(p.value->nums[3 * i + 2])};
+                if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
+                    diag_.fail(p.line, what + ": \"Cs\" must be finite numbers");
+                polygonColors_.push_back(c);
+            }
         }
-        float extent = 0.f;
-        for (const Vec3& q : p) extent = std::max(extent, length(q - p[0]));
-        if (p.size() < 3 || !(length(nrm) > 1e-10f * extent * extent)) {
+    }
+
+    // One bilinear piece of a polygon with the s, t of its corners g[0..3] (when the primitive has them).
+    void addPolygonPiece(const std::vector<Vec3>& pts, const Corner (&k)[4]) {
+        const Vec3 g[4] = {pts[size_t(k[0].point)], pts[size_t(k[1].point)], pts[size_t(k[2].point)],
+                           pts[size_t(k[3].point)]};
+        // Degree elevation as addPatch's, but every edge point is (2 near + far) / 3 of its edge's two
+        // ends, which does not depend on the direction the edge is walked: a polygon sharing the edge
+        // (reversed) gets the same four points bit for bit, in both engines (no weld needed).
+        // (A collapsed edge stays a point; 2 near is exact, so a fused multiply-add rounds the same.)
+        auto third = [](Vec3 nearEnd, Vec3 farEnd) {
+            return nearEnd == farEnd ? nearEnd : (nearEnd * 2.f + farEnd) / 3.f;
+        };
+        BezierPatch b;
+        for (int u = 0; u < 4; u += 3)
+            for (int v = 0; v < 4; v += 3) b.at(u, v) = g[(u ? 1 : 0) + (v ? 2 : 0)];
+        for (int v = 0; v < 4; v += 3) {  // the u edges (v = 0: g0 g1, v = 3: g2 g3)
+            const Vec3 a = g[v ? 2 : 0], c = g[v ? 3 : 1];
+            b.at(1, v) = third(a, c);
+            b.at(2, v) = third(c, a);
+        }
+        for (int u = 0; u < 4; u += 3) {  // the v edges (u = 0: g0 g2, u = 3: g1 g3)
+            const Vec3 a = g[u ? 1 : 0], c = g[u ? 3 : 2];
+            b.at(u, 1) = third(a, c);
+            b.at(u, 2) = third(c, a);
+        }
+        for (int u = 1; u < 3; ++u)  // inside: the bilinear map at thirds, between the u edges
+            for (int v = 1; v < 3; ++v) b.at(u, v) = lerp(b.at(u, 0), b.at(u, 3), v / 3.f);
+        shape_.patches.push_back(b);
+        PrimitiveShape::PolygonPiece piece{};
+        for (int q = 0; q < 4; ++q) piece.point[q] = k[q].point, piece.fv[q] = k[q].fv;
+        piece.polygon = polygonIndex_;
+        shape_.polygonPieces.push_back(piece);
+        if (!polygonColors_.empty())
+            shape_.colors.push_back(polygonColors_[polygonColors_.size() == 1 ? 0 : polygonIndex_]);
+        if (!polygonTexCoords_.st.empty()) {
+            PatchTexCoords tc;
+            for (int q = 0; q < 4; ++q) tc.st[q] = polygonTexCoords_.at(k[q]);
+            shape_.texCoords.push_back(tc);
+        }
+    }
+
+    // One polygon, its outer loop first and then its holes (corners index pts), as bilinear Bezier pieces:
+    // a convex quadrilateral without holes is one bilinear patch (v0 v1 v3 v2: dP/du x dP/dv follows the
+    // vertex order, as RI's polygon normal); any other polygon is projected onto the plane of its outer
+    // loop's Newell normal (so nearly planar polygons work), its holes are bridged into the outer loop
+    // (each from a vertex to the nearest outer vertex it sees), and the one loop is cut into triangles by
+    // ear clipping, each a bilinear patch with its last edge collapsed (a, b, c, c). Corners are the
+    // request's points, so polygons sharing an edge share its end points and (addPolygonPiece) its edge
+    // control points bit for bit. An outer loop with fewer than 3 distinct vertices or no area:
+    // warned and skipped; a degenerate hole or one outside the outer loop: warned and ignored.
+    void addPolygon(int line, const std::vector<Vec3>& pts, const std::vector<std::vector<Corner>>& loopsIn,
+                    const std::string& what) {
+        // Consecutive corners at the same position are one corner.
+        auto clean = [&](const std::vector<Corner>& in) {
+            std::vector<Corner> out;
+            for (const Corner& c : in)
+                if (out.empty() || !(pts[size_t(c.point)] == pts[size_t(out.back().point)])) out.push_back(c);
+            while (out.size() > 1 && pts[size_t(out.front().point)] == pts[size_t(out.back().point)])
+                out.pop_back();
+            return out;
+        };
+        auto newell = [&](const std::vector<Corner>& loop) {  // twice the vector area
+            Vec3 n{0, 0, 0};
+            for (size_t i = 0; i < loop.size(); ++i) {
+                const Vec3 a = pts[size_t(loop[i].point)], b = pts[size_t(loop[(i + 1) % loop.size()].point)];
+                n += Vec3{(a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y)};
+            }
+            return n;
+        };
+        auto extentOf = [&](const std::vector<Corner>& loop) {
+            float e = 0.f;
+            for (const Corner& c : loop)
+                e = std::max(e, length(pts[size_t(c.point)] - pts[size_t(loop[0].point)]));
+            return e;
+        };
+        std::vector<Corner> outer = clean(loopsIn[0]);
+        const Vec3 nrm = newell(outer);
+        const float extent = extentOf(outer);
+        if (outer.size() < 3 || !(length(nrm) > 1e-10f * extent * extent)) {
             diag_.warnOnce("degeneratepolygon", line,
                            what + ": a polygon with fewer than 3 distinct vertices or no area is skipped");
             return;
         }
-        auto turn = [&](Vec3 a, Vec3 b, Vec3 c) { return dot(cross(b - a, c - b), nrm); };
-        if (p.size() == 4) {
+        // The plane's 2D frame (e1, e2, n right-handed): the outer loop runs counter-clockwise in it.
+        const Vec3 n = nrm / length(nrm);
+        const Vec3 e1 = normalize(std::fabs(n.x) > 0.5f ? cross(n, Vec3{0, 1, 0}) : cross(n, Vec3{1, 0, 0}));
+        const Vec3 e2 = cross(n, e1);
+        auto flat = [&](const Corner& c) {
+            const Vec3 p = pts[size_t(c.point)];
+            return Vec2{float(double(dot(p, e1))), float(double(dot(p, e2)))};
+        };
+        auto cross2 = [](Vec2 a, Vec2 b) { return double(a.x) * b.y - double(a.y) * b.x; };
+        auto sub = [](Vec2 a, Vec2 b) { return Vec2{a.x - b.x, a.y - b.y}; };
+        auto area2 = [&](const std::vector<Corner>& loop) {
+            double a = 0;
+            for (size_t i = 0; i < loop.size(); ++i)
+                a += cross2(flat(loop[i]), flat(loop[(i + 1) % loop.size()]));
+            return a;
+        };
+
+        std::vector<std::vector<Corner>> holes;
+        for (size_t h = 1; h < loopsIn.size(); ++h) {
+            std::vector<Corner> hole = clean(loopsIn[h]);
+            const double a = hole.size() < 3 ? 0.0 : area2(hole);
+            const float he = extentOf(hole);
+            if (!(std::fabs(a) > 1e-10 * double(he) * he)) {
+                diag_.warnOnce("degeneratehole", line,
+                               what + ": a hole with fewer than 3 distinct vertices or no area is ignored");
+                continue;
+            }
+            if (a > 0) std::reverse(hole.begin(), hole.end());  // holes run clockwise
+            holes.push_back(std::move(hole));
+        }
+
+        if (holes.empty() && outer.size() == 4) {
+            auto turn = [&](const Corner& a, const Corner& b, const Corner& c) {
+                return cross2(sub(flat(b), flat(a)), sub(flat(c), flat(b)));
+            };
             bool convex = true;
             for (size_t i = 0; i < 4; ++i)
-                convex = convex && turn(p[i], p[(i + 1) % 4], p[(i + 2) % 4]) > 0.f;
+                convex = convex && turn(outer[i], outer[(i + 1) % 4], outer[(i + 2) % 4]) > 0;
             if (convex) {
-                const Vec3 g[4] = {p[0], p[1], p[3], p[2]};
-                addPatch(g, false);
+                const Corner k[4] = {outer[0], outer[1], outer[3], outer[2]};
+                addPolygonPiece(pts, k);
                 return;
             }
         }
-        // Ear clipping: an ear is a convex corner whose triangle holds no other remaining vertex.
-        std::vector<size_t> ring(p.size());
-        for (size_t i = 0; i < ring.size(); ++i) ring[i] = i;
-        auto inside = [&](Vec3 q, Vec3 a, Vec3 b, Vec3 c) {
-            return turn(a, b, q) >= 0.f && turn(b, c, q) >= 0.f && turn(c, a, q) >= 0.f;
+
+        // Proper crossing of segments pq and ab (touching at an end point does not count).
+        auto crosses = [&](Vec2 p, Vec2 q, Vec2 a, Vec2 b) {
+            const double d1 = cross2(sub(q, p), sub(a, p)), d2 = cross2(sub(q, p), sub(b, p)),
+                         d3 = cross2(sub(b, a), sub(p, a)), d4 = cross2(sub(b, a), sub(q, a));
+            return ((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0));
         };
-        bool clean = true;
+        // Bridges, holes in decreasing order of their largest x (Eberly's order).
+        std::vector<Corner> ring = outer;
+        std::vector<float> maxX(holes.size());
+        for (size_t h = 0; h < holes.size(); ++h) {
+            maxX[h] = -std::numeric_limits<float>::infinity();
+            for (const Corner& c : holes[h]) maxX[h] = std::max(maxX[h], flat(c).x);
+        }
+        std::vector<size_t> order(holes.size());
+        for (size_t h = 0; h < order.size(); ++h) order[h] = h;
+        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return maxX[a] > maxX[b]; });
+        std::vector<bool> merged(holes.size(), false);
+        bool holeOutside = false;
+        for (size_t oi = 0; oi < order.size(); ++oi) {
+            const std::vector<Corner>& hole = holes[order[oi]];
+            size_t mi = 0;  // the hole's rightmost vertex
+            for (size_t i = 1; i < hole.size(); ++i)
+                if (flat(hole[i]).x > flat(hole[mi]).x) mi = i;
+            const Vec2 m = flat(hole[mi]);
+            // The nearest ring vertex that m sees: no ring or hole edge crosses the bridge, and the bridge
+            // leaves that vertex into the polygon's inside (a vertex may appear twice after a bridge).
+            std::vector<size_t> cand(ring.size());
+            for (size_t i = 0; i < ring.size(); ++i) cand[i] = i;
+            auto dist2 = [&](size_t i) {
+                const Vec2 d = sub(flat(ring[i]), m);
+                return double(d.x) * d.x + double(d.y) * d.y;
+            };
+            std::stable_sort(cand.begin(), cand.end(),
+                             [&](size_t a, size_t b) { return dist2(a) < dist2(b); });
+            size_t pick = ring.size();
+            for (size_t i : cand) {
+                const Vec2 p = flat(ring[i]);
+                const Vec2 a = flat(ring[(i + ring.size() - 1) % ring.size()]),
+                           b = flat(ring[(i + 1) % ring.size()]);
+                const Vec2 d = sub(m, p);
+                const double c1 = cross2(sub(b, p), d), c2 = cross2(d, sub(a, p));
+                const bool convexCorner = cross2(sub(p, a), sub(b, p)) > 0;
+                if (!(convexCorner ? (c1 > 0 && c2 > 0) : (c1 > 0 || c2 > 0))) continue;
+                bool blocked = false;
+                for (size_t j = 0; j < ring.size() && !blocked; ++j)
+                    blocked = crosses(m, p, flat(ring[j]), flat(ring[(j + 1) % ring.size()]));
+                for (size_t h = 0; h < holes.size() && !blocked; ++h) {
+                    if (merged[h]) continue;
+                    for (size_t j = 0; j < holes[h].size() && !blocked; ++j)
+                        blocked = crosses(m, p, flat(holes[h][j]), flat(holes[h][(j + 1) % holes[h].size()]));
+                }
+                if (!blocked) {
+                    pick = i;
+                    break;
+                }
+            }
+            merged[order[oi]] = true;
+            // Is m inside the ring at all? (Crossing number; a hole outside the outer loop is ignored.)
+            bool inside = false;
+            for (size_t i = 0, j = outer.size() - 1; i < outer.size(); j = i++) {
+                const Vec2 a = flat(outer[i]), b = flat(outer[j]);
+                if ((a.y > m.y) != (b.y > m.y) && m.x < (b.x - a.x) * (m.y - a.y) / (b.y - a.y) + a.x)
+                    inside = !inside;
+            }
+            if (pick == ring.size() || !inside) {
+                holeOutside = true;
+                continue;
+            }
+            std::vector<Corner> next(ring.begin(), ring.begin() + long(pick) + 1);
+            for (size_t k = 0; k <= hole.size(); ++k) next.push_back(hole[(mi + k) % hole.size()]);
+            next.insert(next.end(), ring.begin() + long(pick), ring.end());
+            ring = std::move(next);
+        }
+        if (holeOutside)
+            diag_.warnOnce(
+                "holeoutside", line,
+                what + ": a hole that is not inside the outer loop (or that crosses it) is ignored");
+
+        // Ear clipping: an ear is a convex corner whose triangle holds no other remaining vertex (corners at
+        // the same position as the ear's, the two ends of a bridge, do not count).
+        auto turn = [&](const Corner& a, const Corner& b, const Corner& c) {
+            return cross2(sub(flat(b), flat(a)), sub(flat(c), flat(b)));
+        };
+        auto inTriangle = [&](Vec2 q, Vec2 a, Vec2 b, Vec2 c) {
+            return cross2(sub(b, a), sub(q, a)) >= 0 && cross2(sub(c, b), sub(q, b)) >= 0 &&
+                   cross2(sub(a, c), sub(q, c)) >= 0;
+        };
+        bool cleanCut = true;
         while (ring.size() > 3) {
             bool clipped = false;
             for (size_t k = 0; k < ring.size() && !clipped; ++k) {
-                const size_t ia = ring[(k + ring.size() - 1) % ring.size()], ib = ring[k],
-                             ic = ring[(k + 1) % ring.size()];
-                const Vec3 a = p[ia], b = p[ib], c = p[ic];
-                if (!(turn(a, b, c) > 0.f)) continue;
+                const size_t ia = (k + ring.size() - 1) % ring.size(), ic = (k + 1) % ring.size();
+                const Corner a = ring[ia], b = ring[k], c = ring[ic];
+                if (!(turn(a, b, c) > 0)) continue;
+                const Vec2 fa = flat(a), fb = flat(b), fc = flat(c);
                 bool empty = true;
-                for (size_t m : ring)
-                    if (m != ia && m != ib && m != ic && !(p[m] == a || p[m] == b || p[m] == c) &&
-                        inside(p[m], a, b, c))
-                        empty = false;
+                for (size_t m = 0; m < ring.size() && empty; ++m) {
+                    if (m == ia || m == k || m == ic) continue;
+                    const Vec2 q = flat(ring[m]);
+                    if ((q.x == fa.x && q.y == fa.y) || (q.x == fb.x && q.y == fb.y) ||
+                        (q.x == fc.x && q.y == fc.y))
+                        continue;
+                    empty = !inTriangle(q, fa, fb, fc);
+                }
                 if (!empty) continue;
-                const Vec3 g[4] = {a, b, c, c};
-                addPatch(g, false);
+                const Corner piece[4] = {a, b, c, c};
+                addPolygonPiece(pts, piece);
                 ring.erase(ring.begin() + long(k));
                 clipped = true;
             }
             if (!clipped) {  // self-intersecting or numerically flat: a fan of what is left
-                clean = false;
+                if (std::fabs(area2(ring)) <= 1e-9 * double(extent) * extent) {  // flat leftovers (bridges)
+                    ring.clear();
+                    break;
+                }
+                cleanCut = false;
                 for (size_t k = 1; k + 1 < ring.size(); ++k) {
-                    const Vec3 g[4] = {p[ring[0]], p[ring[k]], p[ring[k + 1]], p[ring[k + 1]]};
-                    addPatch(g, false);
+                    if (!(std::fabs(turn(ring[0], ring[k], ring[k + 1])) > 0)) continue;
+                    const Corner piece[4] = {ring[0], ring[k], ring[k + 1], ring[k + 1]};
+                    addPolygonPiece(pts, piece);
                 }
                 ring.clear();
             }
         }
-        if (ring.size() == 3) {
-            const Vec3 g[4] = {p[ring[0]], p[ring[1]], p[ring[2]], p[ring[2]]};
-            addPatch(g, false);
+        if (ring.size() == 3 && turn(ring[0], ring[1], ring[2]) > 0) {
+            const Corner piece[4] = {ring[0], ring[1], ring[2], ring[2]};
+            addPolygonPiece(pts, piece);
         }
-        if (!clean)
+        if (!cleanCut)
             diag_.warnOnce(
                 "selfintersectingpolygon", line,
                 what + ": a polygon that crosses itself was split as a fan (it may not render as intended)");
@@ -318,67 +554,213 @@ class PrimitiveReader {
     }
     void skip() { shape_.skipped = true; }
 
+    // A later key of a deformation block with the first key's topology: the first key's pieces, at this
+    // key's points (true), so that the keys' patches correspond.
+    const PrimitiveShape* firstKey_ = nullptr;
+    void setFirstKey(const PrimitiveShape* first) { firstKey_ = first; }
+    bool reuseFirstKeyPieces(const std::vector<Vec3>& pts) {
+        if (!firstKey_ || firstKey_->skipped || firstKey_->request != shape_.request ||
+            firstKey_->topology != shape_.topology || firstKey_->topologyHash != shape_.topologyHash)
+            return false;
+        for (const PrimitiveShape::PolygonPiece& p : firstKey_->polygonPieces) {
+            Corner k[4];
+            for (int q = 0; q < 4; ++q) {
+                if (p.point[q] < 0 || size_t(p.point[q]) >= pts.size()) return false;
+                k[q] = {p.point[q], p.fv[q]};
+            }
+            polygonIndex_ = p.polygon;
+            addPolygonPiece(pts, k);
+        }
+        return true;
+    }
+
+    // The s, t of a polygon primitive ("st" or "s" and "t"; vertex or varying: one per point, facevarying:
+    // one per corner), into polygonTexCoords_; nothing: the pieces keep the default s = u, t = v. Other
+    // storage classes are warned about and ignored.
+    void readPolygonTexCoords(const Request& r, const std::vector<Param>& ps, size_t npoints, size_t ncorners,
+                              const std::string& what) {
+        const Param *st = nullptr, *s = nullptr, *t = nullptr;
+        bool faceVarying = false;
+        for (const Param& p : ps) {
+            if (!isTexCoordParam(p.name)) continue;
+            const std::string cls = p.decl ? p.decl->cls : "";
+            const int per = p.name == "st" ? 2 : 1;
+            const bool fv = cls == "facevarying" || cls == "facevertex";
+            if ((cls != "varying" && cls != "vertex" && !fv) || !p.decl || p.decl->type != "float" ||
+                p.decl->arraySize != per || !p.value->numeric()) {
+                diag_.warnOnce("stclass:" + p.name, p.line,
+                               what + ": \"" + p.name +
+                                   "\" is used as a vertex, varying or facevarying \"float" +
+                                   (per == 2 ? "[2]" : "") + "\" only; ignored");
+                continue;
+            }
+            const size_t n = fv ? ncorners : npoints;
+            if (p.value->nums.size() != n * size_t(per))
+                diag_.fail(p.line, what + ": \"" + p.name + "\" needs " + std::to_string(n * size_t(per)) +
+                                       " numbers (" + std::to_string(n) + " " + cls + " values), got " +
+                                       std::to_string(p.value->nums.size()));
+            if ((st || s || t) && fv != faceVarying)
+                diag_.fail(p.line, what + ": \"s\" and \"t\" must have the same storage class");
+            faceVarying = fv;
+            (p.name == "st" ? st : p.name == "s" ? s : t) = &p;
+        }
+        if (!st && !s && !t) return;
+        if (st && (s || t))
+            diag_.warnOnce("stboth", r.line, what + ": both \"st\" and \"s\"/\"t\" given; \"st\" is used");
+        const size_t n = faceVarying ? ncorners : npoints;
+        PolygonTexCoords& out = polygonTexCoords_;
+        out.faceVarying = faceVarying;
+        out.st.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            if (st)
+                out.st[i] = {float(st->value->nums[2 * i]), float(st->value->nums[2 * i + 1])};
+            else
+                out.st[i] = {s ? float(s->value->nums[i]) : 0.f, t ? float(t->value->nums[i]) : 0.f};
+            if (!std::isfinite(out.st[i].x) || !std::isfinite(out.st[i].y) ||
+                std::fabs(out.st[i].x) > 1e30f || std::fabs(out.st[i].y) > 1e30f)
+                diag_.fail(r.line, what + ": texture coordinates must be finite numbers");
+        }
+    }
+
+    // The loop sizes of a general polygon (nvertices of GeneralPolygon, or one polygon's share of
+    // PointsGeneralPolygons' nvertices), checked: every loop needs 3 vertices.
+    void checkLoops(const Request& r, const std::vector<int>& sizes, size_t arg,
+                    const std::string& what) const {
+        for (size_t i = 0; i < sizes.size(); ++i)
+            if (sizes[i] < 3)
+                diag_.fail(r.args[arg].line, what + ": loop " + std::to_string(i) + " has " +
+                                                 std::to_string(sizes[i]) +
+                                                 " vertices; a loop needs at least 3");
+    }
+
     // Polygon (RI spec 3.2, sec. 5.1): one planar polygon, convex or concave, its vertices in "P".
-    void polygon(const Request& r) {
-        const size_t n = pointCount(r, 0);
-        if (n == 0) diag_.fail(r.line, "Polygon: missing the position parameter \"P\"");
-        auto ps = parseParams(r, 0, decls_, diag_, [&](const std::string& cls) -> size_t {
+    // GeneralPolygon nvertices: loops of nvertices[i] points each, the first the outer boundary and the
+    // others holes.
+    void polygon(const Request& r, bool general) {
+        const std::string what = r.name;
+        std::vector<int> loopSizes;
+        size_t start = 0;
+        if (general) {
+            Arguments args(r, diag_);
+            args.atLeast(1, "nvertices ...parameterlist...");
+            loopSizes = args.intArray(0, "nvertices");
+            if (!r.args[0].isArray()) diag_.fail(r.line, what + ": nvertices must be an array");
+            if (loopSizes.empty()) diag_.fail(r.args[0].line, what + ": no loops");
+            checkLoops(r, loopSizes, 0, what);
+            start = 1;
+        }
+        const size_t n = pointCount(r, start);
+        if (n == 0) diag_.fail(r.line, what + ": missing the position parameter \"P\"");
+        if (general) {
+            size_t total = 0;
+            for (int k : loopSizes) total += size_t(k);
+            if (total != n)
+                diag_.fail(r.line, what + ": nvertices adds up to " + std::to_string(total) +
+                                       " points, but \"P\" has " + std::to_string(n));
+        } else {
+            loopSizes = {int(n)};
+        }
+        auto ps = parseParams(r, start, decls_, diag_, [&](const std::string& cls) -> size_t {
             return cls == "uniform" || cls == "constant" ? 1 : n;
         });
         requireWorld(r);
-        setTopology("Polygon with " + std::to_string(n) + " vertices");
-        auto pts = positions(r, ps, n, "Polygon");
+        std::vector<double> topo(loopSizes.begin(), loopSizes.end());
+        setTopology(what + " with " + std::to_string(n) + " vertices", topo);
+        readPolygonColors(ps, 1, what);
+        auto pts = positions(r, ps, n, what);
         if (!pts) return skip();
-        std::vector<int> face(n);
-        for (size_t i = 0; i < n; ++i) face[i] = int(i);
-        addPolygon(r.line, *pts, face, "Polygon");
+        readPolygonTexCoords(r, ps, n, n, what);
+        if (reuseFirstKeyPieces(*pts)) return;
+        std::vector<std::vector<Corner>> loops;
+        int at = 0;
+        for (int k : loopSizes) {
+            loops.emplace_back();
+            for (int i = 0; i < k; ++i, ++at) loops.back().push_back({at, at});
+        }
+        addPolygon(r.line, *pts, loops, what);
     }
 
     // PointsPolygons nvertices vertices (RI spec 3.2, sec. 5.1): polygons sharing vertices, each convex or
-    // concave; shared edges give bit-identical patch boundaries up to the weld (no cracks).
-    void pointsPolygons(const Request& r) {
+    // concave. PointsGeneralPolygons nloops nvertices vertices: polygon i has nloops[i] loops (the first its
+    // outer boundary, the others holes), loop j has nvertices[j] vertices. Shared edges give bit-identical
+    // patch boundaries up to the weld (no cracks).
+    void pointsPolygons(const Request& r, bool general) {
+        const std::string what = r.name;
         Arguments args(r, diag_);
-        args.atLeast(2, "nvertices vertices ...parameterlist...");
-        const std::vector<int> nverts = args.intArray(0, "nvertices"), verts = args.intArray(1, "vertices");
-        if (!r.args[0].isArray() || !r.args[1].isArray())
-            diag_.fail(r.line, "PointsPolygons: nvertices and vertices must be arrays");
-        if (nverts.empty()) diag_.fail(r.args[0].line, "PointsPolygons: no polygons");
-        size_t total = 0;
-        for (size_t f = 0; f < nverts.size(); ++f) {
-            if (nverts[f] < 3)
-                diag_.fail(r.args[0].line, "PointsPolygons: polygon " + std::to_string(f) + " has " +
-                                               std::to_string(nverts[f]) +
-                                               " vertices; a polygon needs at least 3");
-            total += size_t(nverts[f]);
+        const size_t base = general ? 1 : 0;
+        args.atLeast(base + 2, general ? "nloops nvertices vertices ...parameterlist..."
+                                       : "nvertices vertices ...parameterlist...");
+        std::vector<int> nloops;
+        const std::vector<int> nverts = args.intArray(base, "nvertices"),
+                               verts = args.intArray(base + 1, "vertices");
+        for (size_t i = 0; i <= base + 1; ++i)
+            if (!r.args[i].isArray())
+                diag_.fail(r.line, what + (general ? ": nloops, nvertices and vertices must be arrays"
+                                                   : ": nvertices and vertices must be arrays"));
+        if (general) {
+            nloops = args.intArray(0, "nloops");
+            if (nloops.empty()) diag_.fail(r.args[0].line, what + ": no polygons");
+            size_t loops = 0;
+            for (size_t f = 0; f < nloops.size(); ++f) {
+                if (nloops[f] < 1)
+                    diag_.fail(r.args[0].line, what + ": polygon " + std::to_string(f) + " has " +
+                                                   std::to_string(nloops[f]) +
+                                                   " loops; a polygon needs at least 1");
+                loops += size_t(nloops[f]);
+            }
+            if (loops != nverts.size())
+                diag_.fail(r.args[1].line, what + ": nloops adds up to " + std::to_string(loops) +
+                                               " loops, but nvertices has " + std::to_string(nverts.size()));
+            checkLoops(r, nverts, 1, what);
+        } else {
+            if (nverts.empty()) diag_.fail(r.args[0].line, what + ": no polygons");
+            for (size_t f = 0; f < nverts.size(); ++f)
+                if (nverts[f] < 3)
+                    diag_.fail(r.args[0].line, what + ": polygon " + std::to_string(f) + " has " +
+                                                   std::to_string(nverts[f]) +
+                                                   " vertices; a polygon needs at least 3");
+            nloops.assign(nverts.size(), 1);
         }
+        size_t total = 0;
+        for (int k : nverts) total += size_t(k);
         if (total != verts.size())
-            diag_.fail(r.args[1].line, "PointsPolygons: nvertices adds up to " + std::to_string(total) +
-                                           " vertex indices, but vertices has " +
-                                           std::to_string(verts.size()));
-        const size_t npoints = pointCount(r, 2);
-        if (npoints == 0) diag_.fail(r.line, "PointsPolygons: missing the position parameter \"P\"");
+            diag_.fail(r.args[base + 1].line, what + ": nvertices adds up to " + std::to_string(total) +
+                                                  " vertex indices, but vertices has " +
+                                                  std::to_string(verts.size()));
+        const size_t npoints = pointCount(r, base + 2);
+        if (npoints == 0) diag_.fail(r.line, what + ": missing the position parameter \"P\"");
         for (int v : verts)
             if (v < 0 || size_t(v) >= npoints)
-                diag_.fail(r.args[1].line, "PointsPolygons: vertex index " + std::to_string(v) +
-                                               " is out of range: \"P\" has " + std::to_string(npoints) +
-                                               " points (indices 0.." + std::to_string(npoints - 1) + ")");
-        auto ps = parseParams(r, 2, decls_, diag_, [&](const std::string& cls) -> size_t {
+                diag_.fail(r.args[base + 1].line, what + ": vertex index " + std::to_string(v) +
+                                                      " is out of range: \"P\" has " +
+                                                      std::to_string(npoints) + " points (indices 0.." +
+                                                      std::to_string(npoints - 1) + ")");
+        auto ps = parseParams(r, base + 2, decls_, diag_, [&](const std::string& cls) -> size_t {
             if (cls == "vertex" || cls == "varying") return npoints;
             if (cls == "facevarying" || cls == "facevertex") return verts.size();
-            if (cls == "uniform") return nverts.size();
+            if (cls == "uniform") return nloops.size();
             return 1;
         });
         requireWorld(r);
-        std::vector<double> topo(nverts.begin(), nverts.end());
+        std::vector<double> topo(nloops.begin(), nloops.end());
+        topo.insert(topo.end(), nverts.begin(), nverts.end());
         topo.insert(topo.end(), verts.begin(), verts.end());
-        setTopology("PointsPolygons with " + std::to_string(nverts.size()) + " polygons", topo);
-        auto pts = positions(r, ps, npoints, "PointsPolygons");
+        setTopology(what + " with " + std::to_string(nloops.size()) + " polygons", topo);
+        readPolygonColors(ps, nloops.size(), what);
+        auto pts = positions(r, ps, npoints, what);
         if (!pts) return skip();
-        size_t at = 0;
-        for (int nv : nverts) {
-            std::vector<int> face(verts.begin() + long(at), verts.begin() + long(at + size_t(nv)));
-            at += size_t(nv);
-            addPolygon(r.line, *pts, face, "PointsPolygons");
+        readPolygonTexCoords(r, ps, npoints, verts.size(), what);
+        if (reuseFirstKeyPieces(*pts)) return;
+        size_t at = 0, loop = 0;
+        for (size_t f = 0; f < nloops.size(); ++f) {
+            const int nl = nloops[f];
+            polygonIndex_ = f;
+            std::vector<std::vector<Corner>> loops;
+            for (int l = 0; l < nl; ++l, ++loop) {
+                loops.emplace_back();
+                for (int i = 0; i < nverts[loop]; ++i, ++at) loops.back().push_back({verts[at], int(at)});
+            }
+            addPolygon(r.line, *pts, loops, what);
         }
     }
 
@@ -753,21 +1135,24 @@ class PrimitiveReader {
 
 bool isPrimitiveRequest(const std::string& name) {
     return name == "Patch" || name == "PatchMesh" || name == "NuPatch" || name == "SubdivisionMesh" ||
-           name == "Polygon" || name == "PointsPolygons";
+           name == "Polygon" || name == "PointsPolygons" || name == "GeneralPolygon" ||
+           name == "PointsGeneralPolygons";
 }
 
-PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c) {
+PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c,
+                                  const PrimitiveShape* firstKey) {
     PrimitiveReader reader(c, r);
+    reader.setFirstKey(firstKey);
     if (r.name == "Patch")
         reader.patch(r);
     else if (r.name == "PatchMesh")
         reader.patchMesh(r);
     else if (r.name == "NuPatch")
         reader.nuPatch(r);
-    else if (r.name == "Polygon")
-        reader.polygon(r);
-    else if (r.name == "PointsPolygons")
-        reader.pointsPolygons(r);
+    else if (r.name == "Polygon" || r.name == "GeneralPolygon")
+        reader.polygon(r, r.name == "GeneralPolygon");
+    else if (r.name == "PointsPolygons" || r.name == "PointsGeneralPolygons")
+        reader.pointsPolygons(r, r.name == "PointsGeneralPolygons");
     else
         reader.subdivisionMesh(r);
     return std::move(reader.shape());
@@ -973,6 +1358,27 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
     // Texture coordinates do not move: the first key's. Scene::texCoords stays empty while every patch
     // has the default.
     const std::vector<PatchTexCoords>& st = keys.front().texCoords;
+    // Colours per patch (a polygon's uniform or constant "Cs"): the surface with that Cs, one material per
+    // distinct colour. Colours do not move: the first key's.
+    const std::vector<Color>& colors = keys.front().colors;
+    std::vector<uint32_t> patchMaterial;
+    if (colors.size() == n) {
+        std::map<std::array<float, 3>, uint32_t> byColor;
+        for (const Color& col : colors) {
+            auto [it, added] = byColor.try_emplace({col.x, col.y, col.z}, 0);
+            if (added) {
+                Material m = c.state.attributes().surface;
+                m.Cs = col;
+                it->second = materialIndex(scene, m);
+            }
+            patchMaterial.push_back(it->second);
+        }
+    }
+    auto attributesOf = [&](size_t j) {
+        PatchAttributes pa = a;
+        if (!patchMaterial.empty()) pa.material = patchMaterial[j];
+        return pa;
+    };
     auto addTexCoords = [&](size_t j) {
         if (st.size() != n && scene.texCoords.empty()) return;
         scene.texCoords.resize(scene.patches.size() - 1);
@@ -982,7 +1388,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         const Mat4 m = ctm.at(open);
         for (size_t j = 0; j < n; ++j) {
             scene.patches.push_back(transformed(m, keys.front().patches[j]));
-            scene.attributes.push_back(a);
+            scene.attributes.push_back(attributesOf(j));
             addTexCoords(j);
         }
         return;
@@ -1008,7 +1414,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
             world[k] = transformed(worldFromObject[k], objectAt(j, T[k]));
             for (int q = 0; q < 16 && same && k > 0; ++q) same = world[k].cp[q] == world[0].cp[q];
         }
-        PatchAttributes pa = a;
+        PatchAttributes pa = attributesOf(j);
         if (!same) {
             pa.motion = {uint32_t(scene.motionPatches.size()), uint32_t(T.size())};
             scene.motionPatches.insert(scene.motionPatches.end(), world.begin(), world.end());

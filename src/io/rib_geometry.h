@@ -31,6 +31,16 @@ struct PrimitiveShape {
     // The s, t of each patch (RI "st" / "s" "t" varying primitive variables, or TextureCoordinates);
     // empty: every patch has the default s = u, t = v.
     std::vector<PatchTexCoords> texCoords;
+    // The colour (RI "Cs") of each patch where the primitive gives one per polygon (uniform) or one for all
+    // (constant); empty: the graphics state's Color.
+    std::vector<Color> colors;
+    // Polygons: each piece's four corners (points of "P", places in the vertex list) and its polygon, so
+    // that the later keys of a deformation block are cut the same way as the first.
+    struct PolygonPiece {
+        int point[4], fv[4];
+        size_t polygon;
+    };
+    std::vector<PolygonPiece> polygonPieces;
     // What the keys of a deformation block must share, in words (e.g. `PatchMesh "bicubic" 7
     // "nonperiodic" 4 "nonperiodic"`) and as a hash that also covers vertex indices, knots and tags.
     std::string topology;
@@ -45,10 +55,16 @@ bool isQuadricRequest(const std::string& name);
 // Degenerate parameters that RI defines as an empty surface (radius, height range or sweep of 0) add
 // nothing and warn; malformed ones (wrong counts, non-finite values, a paraboloid crossing z = 0) fail.
 void addQuadric(const Request& r, const PrimitiveContext& c);
-// Reads Patch, PatchMesh, NuPatch, SubdivisionMesh, Polygon or PointsPolygons (r.name) without adding
-// it to the scene. Polygons become bilinear patches (a convex quadrilateral) or degenerate bilinear
-// patches (the triangles of an ear-clipping triangulation), exact for planar polygons.
-PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c);
+// Reads Patch, PatchMesh, NuPatch, SubdivisionMesh, Polygon, GeneralPolygon, PointsPolygons or
+// PointsGeneralPolygons (r.name) without adding it to the scene. Polygons become bilinear patches (a convex
+// quadrilateral without holes) or degenerate bilinear patches (the triangles of an ear-clipping
+// triangulation, holes bridged into the outer loop), exact for planar polygons; their "st" / "s" "t"
+// (vertex, varying or facevarying) become the pieces' texture coordinates.
+// `firstKey`: the first key of the deformation block this request is a later key of (nullptr: none);
+// polygons with its topology are cut into its pieces rather than triangulated again, so that every key's
+// pieces match even where ear clipping would choose other ears for the moved points.
+PrimitiveShape readPrimitiveShape(const Request& r, const PrimitiveContext& c,
+                                  const PrimitiveShape* firstKey = nullptr);
 // Adds one primitive to the scene with the attributes and the CTM of the graphics state. `keys` holds one
 // shape (no deformation) or one per time of `times` (a deformation block; the caller has checked that
 // their topologies match). A moving CTM and/or deformation keys give every patch keys in

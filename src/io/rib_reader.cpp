@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <memory>
 #include <optional>
 #include <set>
 #include <string_view>
@@ -80,6 +81,10 @@ class RibReader {
                 if (motion_)
                     diag_.fail(lex.eofLine(), "end of file inside the motion block opened at " +
                                                   motion_->file + ":" + std::to_string(motion_->line));
+                if (defining_ && defining_->archiveDepth == archiveDepth_)
+                    diag_.fail(lex.eofLine(),
+                               "end of file inside the object definition (ObjectBegin) opened at " +
+                                   defining_->object->file + ":" + std::to_string(defining_->object->line));
                 return;
             }
             if (t.type != TokenType::Request)
@@ -91,17 +96,25 @@ class RibReader {
                 if (r.name == *skipUntil_) skipUntil_.reset();
                 continue;
             }
-            if (motion_ && r.name != "MotionEnd") {
-                motionRequest(r, h);
+            if (defining_ && r.name != "ObjectEnd" && r.name != "ReadArchive") {
+                recordObjectRequest(r, h);
                 continue;
             }
-            if (!h) {
-                diag_.warnOnce("request:" + r.name, r.line,
-                               "unknown or unsupported request '" + r.name + "' ignored");
-                continue;
-            }
-            (this->*h)(r, Arguments(r, diag_));
+            execute(r, h);
         }
+    }
+    // One request, in a motion block or not.
+    void execute(const Request& r, Handler h) {
+        if (motion_ && r.name != "MotionEnd") {
+            motionRequest(r, h);
+            return;
+        }
+        if (!h) {
+            diag_.warnOnce("request:" + r.name, r.line,
+                           "unknown or unsupported request '" + r.name + "' ignored");
+            return;
+        }
+        (this->*h)(r, Arguments(r, diag_));
     }
 
     // Arguments run up to the next request. Unknown requests are skipped tolerantly: their
@@ -460,19 +473,28 @@ class RibReader {
         const std::string& name = args.string(0);
         parseParams(r, 1, decls_, diag_);
         if (name == "searchpath") {
-            // "texture": where texture names are looked up (below); "shader" and others are meaningless
-            // here (the shaders are built in).
-            for (const Param& p : parseParams(r, 1, decls_, diag_))
-                if (p.name == "texture") setTextureSearchPath(paramString(r, p, diag_));
+            // "texture": where texture names are looked up (textureIndex); "archive": where ReadArchive looks
+            // up relative names; "shader": kept (with "&" expansion) but used for nothing, the shaders
+            // being built in; others ("procedural", "display", ...) are meaningless here.
+            for (const Param& p : parseParams(r, 1, decls_, diag_)) {
+                if (p.name == "texture")
+                    textureSearchPath_ = searchPath(paramString(r, p, diag_), textureSearchPath_);
+                if (p.name == "archive")
+                    archiveSearchPath_ = searchPath(paramString(r, p, diag_), archiveSearchPath_);
+                if (p.name == "shader")
+                    shaderSearchPath_ = searchPath(paramString(r, p, diag_), shaderSearchPath_);
+            }
             return;
         }
         diag_.warnOnce("option:" + name, r.line, "Option \"" + name + "\" is not supported; ignored");
     }
 
     // ---- textures (RI spec 3.2, sec. 8.3 and 4.1.6) -----------------------------------------------
-    // Option "searchpath" "texture" "dir:dir:...": "&" is the previous path, "@" the default (the directory
-    // of the file being read); relative directories are relative to that file's directory.
-    void setTextureSearchPath(const std::string& text) {
+    // Option "searchpath" "texture" (or "archive", "shader") "dir:dir:...", as PRMan: "&" is the previous
+    // path, "@" the default (the directory of the file being read); relative directories are relative to
+    // that file's directory.
+    std::vector<std::string> searchPath(const std::string& text,
+                                        const std::vector<std::string>& previous) const {
         std::vector<std::string> out;
         size_t start = 0;
         while (start <= text.size()) {
@@ -480,14 +502,14 @@ class RibReader {
             if (end == std::string::npos) end = text.size();
             const std::string dir = text.substr(start, end - start);
             if (dir == "&")
-                out.insert(out.end(), textureSearchPath_.begin(), textureSearchPath_.end());
+                out.insert(out.end(), previous.begin(), previous.end());
             else if (dir == "@")
                 out.push_back(fileDirectory());
             else if (!dir.empty())
                 out.push_back(relativeToFile(dir));
             start = end + 1;
         }
-        textureSearchPath_ = std::move(out);
+        return out;
     }
     std::string fileDirectory() const { return std::filesystem::path(lex_->file()).parent_path().string(); }
     // A render product a RIB reads back (MakeShadow's depth file, a light's shadow map): where Display and
@@ -1205,7 +1227,9 @@ class RibReader {
                 m.rotations.push_back({v[0], v[1], v[2], v[3]});
             }
         } else if (primitive) {
-            m.shapes.push_back(readPrimitiveShape(r, primitiveContext()));
+            PrimitiveShape key =
+                readPrimitiveShape(r, primitiveContext(), m.shapes.empty() ? nullptr : &m.shapes.front());
+            m.shapes.push_back(std::move(key));
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
             if (b.topology != a.topology || b.topologyHash != a.topologyHash ||
                 (!a.skipped && !b.skipped && a.patches.size() != b.patches.size()))
@@ -1283,20 +1307,188 @@ class RibReader {
         }
     }
 
+    // ---- retained geometry (RI spec 3.2, sec. 5, "Retained Geometry") -----------------------------
+    // ObjectBegin handle ... ObjectEnd records the requests of an object; ObjectInstance handle replays them
+    // inside an implicit attribute block, under the transformation and attributes current at the instance
+    // (RI: "the object inherits the current set of attributes"); transformations and attributes inside the
+    // definition are relative to / override those (as PRMan, which resets the graphics state at
+    // ObjectBegin). The CTM at ObjectBegin plays no part. Every instance is a copy of the object's surfaces
+    // in the scene.
+    struct RetainedObject;
+    struct RecordedRequest {
+        Request request;
+        std::string file;
+        std::shared_ptr<const RetainedObject> instance;  // ObjectInstance inside a definition, resolved
+    };
+    struct RetainedObject {
+        std::string file;
+        int line = 0;
+        std::vector<RecordedRequest> requests;
+    };
+    struct Definition {
+        std::string handle;
+        std::shared_ptr<RetainedObject> object;
+        int archiveDepth = 0;
+        std::vector<std::pair<std::string, int>> blocks;  // open AttributeBegin/TransformBegin/MotionBegin
+    };
+    // The key of an object handle: RI 3.2's sequence number or a later PRMan's string.
+    std::string objectHandle(const Request& r) const {
+        if (r.args.size() != 1 || r.args[0].isArray())
+            diag_.fail(r.line, r.name + " expects one object handle (a number or a string), got " +
+                                   std::to_string(r.args.size()) + " arguments");
+        const Value& v = r.args[0];
+        if (v.numeric()) {
+            const double n = v.nums[0];
+            if (!(n == std::floor(n)) || std::fabs(n) > 1e9)
+                diag_.fail(v.line,
+                           r.name + ": the object handle must be an integer or a string, got " + fmtNum(n));
+            return std::to_string(long(n));
+        }
+        return "\"" + v.strs[0] + "\"";
+    }
+    void objectBegin(const Request& r, const Arguments&) {
+        Definition d;
+        d.handle = objectHandle(r);
+        d.object = std::make_shared<RetainedObject>();
+        d.object->file = diag_.file();
+        d.object->line = r.line;
+        d.archiveDepth = archiveDepth_;
+        defining_ = std::move(d);
+    }
+    void objectEnd(const Request& r, const Arguments& args) {
+        args.count(0, "no arguments");
+        if (!defining_) diag_.fail(r.line, "ObjectEnd without a matching ObjectBegin");
+        if (!defining_->blocks.empty())
+            diag_.fail(r.line, "ObjectEnd while " + defining_->blocks.back().first + " (line " +
+                                   std::to_string(defining_->blocks.back().second) + ") is still open");
+        objects_[defining_->handle] = std::move(defining_->object);  // a handle defined again is replaced
+        defining_.reset();
+    }
+    // Inside a definition: geometry, transformations, attribute and transform blocks, motion blocks and
+    // attributes are recorded; Declare and ReadArchive are carried out now; anything else is an error.
+    void recordObjectRequest(const Request& r, Handler h) {
+        Definition& d = *defining_;
+        const std::string where = " (the object definition opened at " + d.object->file + ":" +
+                                  std::to_string(d.object->line) + ")";
+        if (r.name == "ObjectBegin") diag_.fail(r.line, "nested ObjectBegin" + where + " is still open");
+        if (r.name == "Declare") {
+            (this->*h)(r, Arguments(r, diag_));
+            return;
+        }
+        static const std::set<std::string> allowed = {"Translate",
+                                                      "Rotate",
+                                                      "Scale",
+                                                      "ConcatTransform",
+                                                      "Transform",
+                                                      "AttributeBegin",
+                                                      "AttributeEnd",
+                                                      "TransformBegin",
+                                                      "TransformEnd",
+                                                      "MotionBegin",
+                                                      "MotionEnd",
+                                                      "Color",
+                                                      "Opacity",
+                                                      "Surface",
+                                                      "Displacement",
+                                                      "ShadingRate",
+                                                      "Sides",
+                                                      "Orientation",
+                                                      "ReverseOrientation",
+                                                      "Attribute",
+                                                      "Basis",
+                                                      "TextureCoordinates",
+                                                      "GeometricApproximation",
+                                                      "ObjectInstance"};
+        if (!h) {
+            diag_.warnOnce("request:" + r.name, r.line,
+                           "unknown or unsupported request '" + r.name + "' ignored");
+            return;
+        }
+        if (!allowed.count(r.name) && !isPrimitiveRequest(r.name) && !isQuadricRequest(r.name))
+            diag_.fail(r.line, r.name + " is not allowed inside an object definition" + where +
+                                   ": only geometry, transformations and attributes are retained");
+        static const std::map<std::string, std::string> closes = {{"AttributeEnd", "AttributeBegin"},
+                                                                  {"TransformEnd", "TransformBegin"},
+                                                                  {"MotionEnd", "MotionBegin"}};
+        if (r.name == "AttributeBegin" || r.name == "TransformBegin" || r.name == "MotionBegin") {
+            if (r.name == "MotionBegin")
+                for (const auto& b : d.blocks)
+                    if (b.first == "MotionBegin")
+                        diag_.fail(r.line, "nested MotionBegin (line " + std::to_string(b.second) +
+                                               ") is still open");
+            d.blocks.emplace_back(r.name, r.line);
+        } else if (auto c = closes.find(r.name); c != closes.end()) {
+            if (d.blocks.empty() || d.blocks.back().first != c->second)
+                diag_.fail(r.line, r.name + " without a matching " + c->second +
+                                       " inside the object definition" + where);
+            d.blocks.pop_back();
+        }
+        RecordedRequest rec{r, diag_.file(), nullptr};
+        if (r.name == "ObjectInstance") rec.instance = findObject(r);
+        d.object->requests.push_back(std::move(rec));
+    }
+    std::shared_ptr<const RetainedObject> findObject(const Request& r) const {
+        const std::string handle = objectHandle(r);
+        auto it = objects_.find(handle);
+        if (it == objects_.end())
+            diag_.fail(r.line,
+                       "ObjectInstance: no object with handle " + handle + " was defined (ObjectBegin)");
+        return it->second;
+    }
+    void objectInstance(const Request& r, const Arguments&) {
+        if (!state_.inWorld()) diag_.fail(r.line, "ObjectInstance outside WorldBegin/WorldEnd");
+        instantiate(*findObject(r), r);
+    }
+    void instantiate(const RetainedObject& object, const Request& at) {
+        if (instanceDepth_ + 1 > kMaxArchiveDepth)
+            diag_.fail(at.line, "ObjectInstance nested more than " + std::to_string(kMaxArchiveDepth) +
+                                    " levels deep");
+        ++instanceDepth_;
+        const std::string file = diag_.file();
+        state_.begin(Block::Attribute, file, at.line);
+        for (const RecordedRequest& rec : object.requests) {
+            diag_.setFile(rec.file);
+            if (rec.instance && !motion_)
+                instantiate(*rec.instance, rec.request);
+            else
+                execute(rec.request, handler(rec.request.name));
+        }
+        diag_.setFile(file);
+        state_.end(Block::Attribute, Request{"ObjectInstance", at.line, {}}, diag_);
+        --instanceDepth_;
+    }
+
     // ---- ReadArchive (RI spec 3.2, sec. 8.1) -----------------------------------------------------
     void readArchive(const Request& r, const Arguments& args) {
         args.count(1, "filename");
         const std::string& name = args.string(0);
         namespace fs = std::filesystem;
-        fs::path p(name);
-        // Relative names are relative to the directory of the including file.
-        if (p.is_relative()) p = fs::path(lex_->file()).parent_path() / p;
-        std::string path = p.string();
         if (archiveDepth_ + 1 > kMaxArchiveDepth)
             diag_.fail(r.line, "ReadArchive nested more than " + std::to_string(kMaxArchiveDepth) +
                                    " levels deep (recursive include?)");
+        // Relative names: through Option "searchpath" "archive", by default the directory of the including
+        // file; the first directory that holds the file wins.
         std::error_code ec;
-        if (!fs::is_regular_file(p, ec)) diag_.fail(r.line, "ReadArchive: cannot open \"" + path + "\"");
+        std::string path;
+        if (fs::path(name).is_absolute()) {
+            path = name;
+            if (!fs::is_regular_file(path, ec))
+                diag_.fail(r.line, "ReadArchive: cannot open \"" + path + "\"");
+        } else if (archiveSearchPath_.empty()) {
+            path = relativeToFile(name);
+            if (!fs::is_regular_file(path, ec))
+                diag_.fail(r.line, "ReadArchive: cannot open \"" + path + "\"");
+        } else {
+            std::string where;
+            for (const std::string& d : archiveSearchPath_) {
+                const fs::path candidate = d.empty() ? fs::path(name) : fs::path(d) / name;
+                where += (where.empty() ? "" : ":") + (d.empty() ? std::string(".") : d);
+                if (path.empty() && fs::is_regular_file(candidate, ec)) path = candidate.string();
+            }
+            if (path.empty())
+                diag_.fail(r.line, "ReadArchive: cannot open \"" + printable(name, 200) +
+                                       "\": not found in the archive search path " + where);
+        }
         std::string text;
         try {
             text = readInputFile(path);
@@ -1372,6 +1564,8 @@ class RibReader {
             {"SubdivisionMesh", &RibReader::primitive},
             {"Polygon", &RibReader::primitive},
             {"PointsPolygons", &RibReader::primitive},
+            {"GeneralPolygon", &RibReader::primitive},
+            {"PointsGeneralPolygons", &RibReader::primitive},
             {"Sphere", &RibReader::quadric},
             {"Cylinder", &RibReader::quadric},
             {"Cone", &RibReader::quadric},
@@ -1380,6 +1574,9 @@ class RibReader {
             {"Hyperboloid", &RibReader::quadric},
             {"Torus", &RibReader::quadric},
             {"ReadArchive", &RibReader::readArchive},
+            {"ObjectBegin", &RibReader::objectBegin},
+            {"ObjectEnd", &RibReader::objectEnd},
+            {"ObjectInstance", &RibReader::objectInstance},
             {"MakeTexture", &RibReader::makeTextureRequest},
             {"MakeShadow", &RibReader::makeShadowRequest},
             {"TextureCoordinates", &RibReader::textureCoordinates},
@@ -1398,9 +1595,13 @@ class RibReader {
     std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;
     std::optional<int> frameOrdinal_;
-    int archiveDepth_ = 0;  // ReadArchive nesting of the file being read
-    // Option "searchpath" "texture" (empty: the directory of the file that names the texture).
-    std::vector<std::string> textureSearchPath_;
+    int archiveDepth_ = 0;                // ReadArchive nesting of the file being read
+    std::optional<Definition> defining_;  // the open ObjectBegin
+    std::map<std::string, std::shared_ptr<const RetainedObject>> objects_;  // by handle
+    int instanceDepth_ = 0;
+    // Option "searchpath" "texture" and "archive" (empty: the directory of the file that names the texture
+    // or the archive); "shader" (kept, unused).
+    std::vector<std::string> textureSearchPath_, archiveSearchPath_, shaderSearchPath_;
 };
 
 }  // namespace
