@@ -9,6 +9,7 @@
 #include "core/basis.h"
 #include "core/nurbs.h"
 #include "core/subdivision.h"
+#include "io/subdiv_osd.h"
 #include "shading/texture.h"
 
 namespace tessera::rib {
@@ -46,7 +47,7 @@ void checkFinite(const BezierPatch& b, int line, const Diagnostics& diag) {
 class PrimitiveReader {
   public:
     PrimitiveReader(const PrimitiveContext& c, const Request& r)
-        : state_(c.state), decls_(c.decls), diag_(c.diag) {
+        : state_(c.state), decls_(c.decls), diag_(c.diag), camera_(c.scene.camera) {
         shape_.request = r.name;
         shape_.line = r.line;
     }
@@ -591,7 +592,20 @@ class PrimitiveReader {
             }
     }
 
-    // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted by subdivToBezier().
+    // Extent in raster pixels of the projection of points (object space, the CTM at shutter open), 0 if
+    // some point is at or behind the eye: what subdivLevelFor() chooses a level from.
+    float rasterSize(const std::vector<Vec3>& points) const {
+        const Mat4 toCamera = camera_.cameraFromWorld * state_.transform().at(camera_.shutterOpen);
+        Bounds3 b;
+        for (const Vec3& p : points) b.extend(toCamera.point(p));
+        float x0, x1, y0, y1;
+        if (points.empty() || !Projector(camera_).rasterBounds(b, x0, x1, y0, y1)) return 0.f;
+        const float size = std::max(x1 - x0, y1 - y0);
+        return std::isfinite(size) ? size : 0.f;
+    }
+
+    // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted through OpenSubdiv by
+    // subdivideOsd() (io/subdiv_osd.h) at a level from the mesh's size on screen.
     void subdivisionMesh(const Request& r) {
         Arguments args(r, diag_);
         args.atLeast(3, "scheme nvertices vertices [tags nargs intargs floatargs] ...parameterlist...");
@@ -733,7 +747,9 @@ class PrimitiveReader {
         }
         SubdivResult res;
         try {
-            res = subdivToBezier(mesh);
+            OsdSubdivOptions options;
+            options.rasterSize = rasterSize(mesh.points);
+            res = subdivideOsd(mesh, options);
         } catch (const SubdivError& e) {
             diag_.fail(r.line, std::string("SubdivisionMesh: ") + e.what());
         }
@@ -746,6 +762,7 @@ class PrimitiveReader {
     const GraphicsState& state_;
     const Declarations& decls_;
     Diagnostics& diag_;
+    const Camera& camera_;
     PrimitiveShape shape_;
 };
 

@@ -1,0 +1,399 @@
+#include "io/subdiv_osd.h"
+
+#include <opensubdiv/bfr/refinerSurfaceFactory.h>
+#include <opensubdiv/bfr/surface.h>
+#include <opensubdiv/far/primvarRefiner.h>
+#include <opensubdiv/far/topologyDescriptor.h>
+#include <opensubdiv/far/topologyRefinerFactory.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+namespace {
+
+using namespace OpenSubdiv;
+using Far::Index;
+using Refiner = Far::TopologyRefiner;
+using Factory = Far::TopologyRefinerFactory<Far::TopologyDescriptor>;
+
+// A point for Far::PrimvarRefinerReal<double>.
+struct P3 {
+    double x = 0, y = 0, z = 0;
+    void Clear() { x = y = z = 0; }
+    void AddWithWeight(const P3& p, double w) {
+        x += w * p.x;
+        y += w * p.y;
+        z += w * p.z;
+    }
+};
+
+// RenderMan's rules in OpenSubdiv's terms. Crease method: uniform (OpenSubdiv's default, which is PRMan's
+// default "normal" creasing; Chaikin is PRMan's opt-in "creasemethod" "chaikin", which RIB tags here cannot
+// select). Triangles: Catmull-Clark's own rule (TRI_SUB_CATMARK), as PRMan does.
+Sdc::Options sdcOptions(BoundaryMode mode) {
+    Sdc::Options o;
+    o.SetVtxBoundaryInterpolation(mode == BoundaryMode::None
+                                      ? Sdc::Options::VTX_BOUNDARY_NONE
+                                      : (mode == BoundaryMode::EdgesOnly ? Sdc::Options::VTX_BOUNDARY_EDGE_ONLY
+                                                                         : Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER));
+    o.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
+    o.SetTriangleSubdivision(Sdc::Options::TRI_SUB_CATMARK);
+    return o;
+}
+
+// OpenSubdiv's infinite sharpness is 10 (Sdc::Crease::SHARPNESS_INFINITE); RIB files write larger values or
+// "infinity" for a hard crease.
+float osdSharpness(float s) {
+    return std::isfinite(s) ? std::clamp(s, 0.f, 10.f) : (s > 0 ? 10.f : 0.f);
+}
+
+// The data a TopologyDescriptor points to.
+struct Topology {
+    std::vector<int> faceSizes, faceVerts, creasePairs, cornerVerts, holes;
+    std::vector<float> creaseWeights, cornerWeights;
+};
+
+std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, BoundaryMode mode) {
+    Far::TopologyDescriptor d;
+    d.numVertices = numVertices;
+    d.numFaces = int(t.faceSizes.size());
+    d.numVertsPerFace = t.faceSizes.data();
+    d.vertIndicesPerFace = t.faceVerts.data();
+    d.numCreases = int(t.creaseWeights.size());
+    d.creaseVertexIndexPairs = t.creasePairs.data();
+    d.creaseWeights = t.creaseWeights.data();
+    d.numCorners = int(t.cornerWeights.size());
+    d.cornerVertexIndices = t.cornerVerts.data();
+    d.cornerWeights = t.cornerWeights.data();
+    d.numHoles = int(t.holes.size());
+    d.holeIndices = t.holes.data();
+    std::unique_ptr<Refiner> r(
+        Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode))));
+    if (!r) throw SubdivError("OpenSubdiv could not build the mesh's topology");
+    return r;
+}
+
+Topology topologyOf(const SubdivMesh& m) {
+    Topology t;
+    t.faceSizes = m.faceSizes;
+    t.faceVerts = m.faceVerts;
+    for (const SubdivCrease& c : m.creases) {
+        if (!(osdSharpness(c.sharpness) > 0)) continue;
+        t.creasePairs.insert(t.creasePairs.end(), {c.v0, c.v1});
+        t.creaseWeights.push_back(osdSharpness(c.sharpness));
+    }
+    for (const SubdivCorner& c : m.corners) {
+        if (!(osdSharpness(c.sharpness) > 0)) continue;
+        t.cornerVerts.push_back(c.vertex);
+        t.cornerWeights.push_back(osdSharpness(c.sharpness));
+    }
+    t.holes = m.holes;
+    std::sort(t.holes.begin(), t.holes.end());
+    t.holes.erase(std::unique(t.holes.begin(), t.holes.end()), t.holes.end());
+    return t;
+}
+
+// Faces with a surface: not holes and, without boundary interpolation (RenderMan's default), not touching
+// the boundary (those only shape their neighbours).
+std::vector<char> renderedFaces(const SubdivMesh& m, const Refiner& r) {
+    const Far::TopologyLevel& L = r.GetLevel(0);
+    std::vector<char> out(size_t(L.GetNumFaces()), 1);
+    for (int h : m.holes) out[size_t(h)] = 0;
+    if (m.boundary == BoundaryMode::None)
+        for (int f = 0; f < L.GetNumFaces(); ++f)
+            for (int v : L.GetFaceVertices(f))
+                if (L.IsVertexBoundary(v)) out[size_t(f)] = 0;
+    return out;
+}
+
+using Param = std::array<Vec2, 4>;
+Vec2 mid(Vec2 a, Vec2 b) {
+    return {(a.x + b.x) * 0.5f, (a.y + b.y) * 0.5f};
+}
+
+}  // namespace
+
+int subdivLevelFor(const SubdivMesh& mesh, float rasterSize) {
+    int level = kDefaultSubdivLevel;
+    if (rasterSize > 0 && std::isfinite(rasterSize) && !mesh.faceSizes.empty()) {
+        // A control face covers about rasterSize / sqrt(faces) pixels; each level halves it.
+        const double facePixels = rasterSize / std::sqrt(double(mesh.faceSizes.size()));
+        level = int(std::ceil(std::log2(std::max(facePixels / 4.0, 1.0))));
+        level = std::clamp(level, 1, 4);
+    }
+    float sharp = 0;
+    for (const SubdivCrease& c : mesh.creases)
+        if (osdSharpness(c.sharpness) < 10) sharp = std::max(sharp, osdSharpness(c.sharpness));
+    for (const SubdivCorner& c : mesh.corners)
+        if (osdSharpness(c.sharpness) < 10) sharp = std::max(sharp, osdSharpness(c.sharpness));
+    level = std::max(level, std::min(int(std::ceil(sharp)), kMaxSubdivLevel));
+    return level;
+}
+
+SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& options) {
+    if (options.level != -1 && (options.level < 1 || options.level > kMaxSubdivLevel))
+        throw SubdivError("the subdivision level must be -1 (automatic) or 1.." + std::to_string(kMaxSubdivLevel));
+    validateSubdivMesh(mesh);
+    const int level = options.level > 0 ? options.level : subdivLevelFor(mesh, options.rasterSize);
+
+    // 1. Uniform refinement of the control mesh.
+    const Topology topo = topologyOf(mesh);
+    std::unique_ptr<Refiner> A = makeRefiner(int(mesh.points.size()), topo, mesh.boundary);
+    const std::vector<char> rendered0 = renderedFaces(mesh, *A);
+    A->RefineUniform(Refiner::UniformOptions(level));
+    std::vector<P3> pts(mesh.points.size());
+    for (size_t i = 0; i < pts.size(); ++i) pts[i] = {mesh.points[i].x, mesh.points[i].y, mesh.points[i].z};
+    Far::PrimvarRefinerReal<double> primvar(*A);
+    // Placement of every face on the control mesh, carried down the levels with the points.
+    struct Place {
+        int base, sub;
+        Param uv;
+        bool rendered;
+    };
+    std::vector<Place> place;
+    {
+        const Far::TopologyLevel& L0 = A->GetLevel(0);
+        for (int f = 0; f < L0.GetNumFaces(); ++f)
+            place.push_back({f, L0.GetFaceVertices(f).size() == 4 ? -1 : -2,
+                             {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}}, rendered0[size_t(f)] != 0});
+    }
+    for (int l = 1; l <= level; ++l) {
+        std::vector<P3> next(size_t(A->GetLevel(l).GetNumVertices()));
+        primvar.Interpolate(l, pts, next);
+        pts.swap(next);
+        const Far::TopologyLevel& P = A->GetLevel(l - 1);
+        const Far::TopologyLevel& C = A->GetLevel(l);
+        std::vector<Place> childPlace(size_t(C.GetNumFaces()));
+        for (int f = 0; f < P.GetNumFaces(); ++f) {
+            const Place& pp = place[size_t(f)];
+            auto pv = P.GetFaceVertices(f);
+            auto pe = P.GetFaceEdges(f);
+            const int n = pv.size();
+            const Index faceChild = P.GetFaceChildVertex(f);
+            for (Index cf : P.GetFaceChildFaces(f)) {
+                auto cv = C.GetFaceVertices(cf);
+                // The parent corner this child sits at: the one whose vertex child it contains.
+                int corner = -1;
+                for (int i = 0; i < n && corner < 0; ++i)
+                    for (Index v : cv)
+                        if (v == P.GetVertexChildVertex(pv[i])) corner = i;
+                Place cp{pp.base, pp.sub, {}, pp.rendered};
+                Param local;  // parent-space (or sub-face) coordinates of the corner's vertex, edges, centre
+                Vec2 atVertex, atNext, atPrev, atCentre;
+                if (pp.sub == -2) {
+                    cp.sub = corner;
+                    atVertex = {0, 0}, atNext = {1, 0}, atCentre = {1, 1}, atPrev = {0, 1};
+                } else {
+                    const Param& u = pp.uv;
+                    atVertex = u[size_t(corner)];
+                    atNext = mid(u[size_t(corner)], u[size_t((corner + 1) % 4)]);
+                    atPrev = mid(u[size_t(corner)], u[size_t((corner + 3) % 4)]);
+                    atCentre = mid(mid(u[0], u[2]), mid(u[1], u[3]));
+                }
+                for (int k = 0; k < cv.size(); ++k) {
+                    const Index v = cv[k];
+                    if (v == faceChild)
+                        local[size_t(k)] = atCentre;
+                    else if (v == P.GetVertexChildVertex(pv[corner]))
+                        local[size_t(k)] = atVertex;
+                    else if (v == P.GetEdgeChildVertex(pe[corner]))
+                        local[size_t(k)] = atNext;
+                    else
+                        local[size_t(k)] = atPrev;  // the child of the edge before the corner
+                }
+                cp.uv = local;
+                childPlace[size_t(cf)] = cp;
+            }
+        }
+        place.swap(childPlace);
+    }
+
+    // 2. The refined level as the base of a second refiner, with the sharpness left at that level.
+    const Far::TopologyLevel& L = A->GetLevel(level);
+    Topology t2;
+    const int nf = L.GetNumFaces();
+    for (int f = 0; f < nf; ++f) {
+        auto fv = L.GetFaceVertices(f);
+        t2.faceSizes.push_back(fv.size());
+        t2.faceVerts.insert(t2.faceVerts.end(), fv.begin(), fv.end());
+        if (L.IsFaceHole(f)) t2.holes.push_back(f);
+    }
+    for (int e = 0; e < L.GetNumEdges(); ++e)
+        if (L.GetEdgeSharpness(e) > 0) {
+            auto ev = L.GetEdgeVertices(e);
+            t2.creasePairs.insert(t2.creasePairs.end(), {ev[0], ev[1]});
+            t2.creaseWeights.push_back(L.GetEdgeSharpness(e));
+        }
+    for (int v = 0; v < L.GetNumVertices(); ++v)
+        if (L.GetVertexSharpness(v) > 0) {
+            t2.cornerVerts.push_back(v);
+            t2.cornerWeights.push_back(L.GetVertexSharpness(v));
+        }
+    std::unique_ptr<Refiner> B = makeRefiner(L.GetNumVertices(), t2, mesh.boundary);
+    Bfr::RefinerSurfaceFactory<> factory(*B);
+
+    // Hermite patches, face by face.
+    SubdivResult out;
+    out.level = level;
+    std::vector<int> patchOf(size_t(nf), -1);
+    std::vector<double> meshPts(pts.size() * 3), patchPts;
+    for (size_t i = 0; i < pts.size(); ++i) {
+        meshPts[3 * i] = pts[i].x;
+        meshPts[3 * i + 1] = pts[i].y;
+        meshPts[3 * i + 2] = pts[i].z;
+    }
+    const Bfr::Surface<double>::PointDescriptor desc(3);
+    Bfr::Surface<double> surface;
+    for (int f = 0; f < nf; ++f) {
+        if (!place[size_t(f)].rendered || L.IsFaceHole(f)) continue;
+        if (!factory.InitVertexSurface(f, &surface)) continue;
+        patchPts.resize(size_t(surface.GetNumPatchPoints()) * 3);
+        surface.PreparePatchPoints(meshPts.data(), desc, patchPts.data(), desc);
+        BezierPatch bp;
+        static const int cu[4] = {0, 1, 1, 0}, cv[4] = {0, 0, 1, 1};
+        for (int c = 0; c < 4; ++c) {
+            const double uv[2] = {double(cu[c]), double(cv[c])};
+            double P[3], Du[3], Dv[3], Duu[3], Duv[3], Dvv[3];
+            surface.Evaluate(uv, patchPts.data(), desc, P, Du, Dv, Duu, Duv, Dvv);
+            const double su = cu[c] ? -1 : 1, sv = cv[c] ? -1 : 1;
+            const int i0 = cu[c] ? 3 : 0, j0 = cv[c] ? 3 : 0, i1 = cu[c] ? 2 : 1, j1 = cv[c] ? 2 : 1;
+            auto at = [&](double a, double b, double ab) {
+                return Vec3{float(P[0] + a * Du[0] + b * Dv[0] + ab * Duv[0]),
+                            float(P[1] + a * Du[1] + b * Dv[1] + ab * Duv[1]),
+                            float(P[2] + a * Du[2] + b * Dv[2] + ab * Duv[2])};
+            };
+            bp.at(i0, j0) = at(0, 0, 0);
+            bp.at(i1, j0) = at(su / 3, 0, 0);
+            bp.at(i0, j1) = at(0, sv / 3, 0);
+            bp.at(i1, j1) = at(su / 3, sv / 3, su * sv / 9);
+        }
+        const bool exact = surface.IsRegular();
+        patchOf[size_t(f)] = int(out.patches.size());
+        out.patches.push_back(bp);
+        out.patchFace.push_back(uint32_t(f));
+        out.patchExact.push_back(exact ? 1 : 0);
+        ++(exact ? out.exactCount : out.approxCount);
+        const Place& pl = place[size_t(f)];
+        out.patchBaseFace.push_back(uint32_t(pl.base));
+        out.patchSubFace.push_back(pl.sub);
+        out.patchUV.push_back(pl.uv);
+    }
+
+    // 3. Shared boundary curves: every vertex and every edge's inner points from one patch (a regular one
+    // if any), copied into all patches that use them.
+    auto cornerIndex = [](int c) { return std::array<int, 2>{c == 1 || c == 2 ? 3 : 0, c >= 2 ? 3 : 0}; };
+    // Inner control point k (0, 1) of side s of a patch, walking from corner s to corner s + 1.
+    auto sideIndex = [](int s, int k) -> std::array<int, 2> {
+        switch (s) {
+            case 0:
+                return {1 + k, 0};
+            case 1:
+                return {3, 1 + k};
+            case 2:
+                return {2 - k, 3};
+            default:
+                return {0, 2 - k};
+        }
+    };
+    std::vector<int> vOwner(size_t(L.GetNumVertices()), -1), eOwner(size_t(L.GetNumEdges()), -1);
+    for (int pass = 0; pass < 2; ++pass)  // pass 0: regular patches only
+        for (int f = 0; f < nf; ++f) {
+            const int p = patchOf[size_t(f)];
+            if (p < 0 || (pass == 0 && !out.patchExact[size_t(p)])) continue;
+            for (Index v : L.GetFaceVertices(f))
+                if (vOwner[size_t(v)] < 0) vOwner[size_t(v)] = f;
+            for (Index e : L.GetFaceEdges(f))
+                if (eOwner[size_t(e)] < 0) eOwner[size_t(e)] = f;
+        }
+    for (int f = 0; f < nf; ++f) {
+        const int p = patchOf[size_t(f)];
+        if (p < 0) continue;
+        auto fv = L.GetFaceVertices(f);
+        auto fe = L.GetFaceEdges(f);
+        BezierPatch& bp = out.patches[size_t(p)];
+        for (int c = 0; c < 4; ++c) {
+            const int of = vOwner[size_t(fv[c])];
+            if (of == f) continue;
+            const int oc = L.GetFaceVertices(of).FindIndex(fv[c]);
+            const auto a = cornerIndex(c), b = cornerIndex(oc);
+            bp.at(a[0], a[1]) = out.patches[size_t(patchOf[size_t(of)])].at(b[0], b[1]);
+        }
+        for (int s = 0; s < 4; ++s) {
+            const int of = eOwner[size_t(fe[s])];
+            if (of == f) continue;
+            const int os = L.GetFaceEdges(of).FindIndex(fe[s]);
+            // The owner walks the edge from its corner os; the same direction as ours if it starts at our
+            // corner s.
+            const bool same = L.GetFaceVertices(of)[os] == fv[s];
+            const BezierPatch& op = out.patches[size_t(patchOf[size_t(of)])];
+            for (int k = 0; k < 2; ++k) {
+                const auto a = sideIndex(s, k), b = sideIndex(os, same ? k : 1 - k);
+                bp.at(a[0], a[1]) = op.at(b[0], b[1]);
+            }
+        }
+    }
+    return out;
+}
+
+struct SubdivLimit::Impl {
+    std::unique_ptr<Refiner> refiner;
+    std::unique_ptr<Bfr::RefinerSurfaceFactory<>> factory;
+    std::vector<double> points;
+    std::vector<char> rendered;
+    // Surfaces by face, built on first use.
+    mutable std::vector<std::unique_ptr<Bfr::Surface<double>>> surfaces;
+    mutable std::vector<std::vector<double>> patchPoints;
+};
+
+SubdivLimit::SubdivLimit(const SubdivMesh& mesh, int approxLevel) : impl_(std::make_unique<Impl>()) {
+    validateSubdivMesh(mesh);
+    impl_->refiner = makeRefiner(int(mesh.points.size()), topologyOf(mesh), mesh.boundary);
+    impl_->rendered = renderedFaces(mesh, *impl_->refiner);
+    Bfr::SurfaceFactory::Options o;
+    o.SetApproxLevelSmooth(approxLevel);
+    o.SetApproxLevelSharp(std::max(approxLevel, 6));
+    impl_->factory = std::make_unique<Bfr::RefinerSurfaceFactory<>>(*impl_->refiner, o);
+    for (const Vec3& p : mesh.points) impl_->points.insert(impl_->points.end(), {p.x, p.y, p.z});
+    impl_->surfaces.resize(mesh.faceSizes.size());
+    impl_->patchPoints.resize(mesh.faceSizes.size());
+}
+
+SubdivLimit::~SubdivLimit() = default;
+
+bool SubdivLimit::hasLimit(int face) const {
+    return face >= 0 && size_t(face) < impl_->rendered.size() && impl_->rendered[size_t(face)] &&
+           impl_->factory->FaceHasLimitSurface(face);
+}
+
+bool SubdivLimit::evaluate(int face, int subFace, double s, double t, std::array<double, 3>& position,
+                           std::array<double, 3>& normal) const {
+    if (!hasLimit(face)) return false;
+    auto& surf = impl_->surfaces[size_t(face)];
+    const Bfr::Surface<double>::PointDescriptor desc(3);
+    if (!surf) {
+        surf = std::make_unique<Bfr::Surface<double>>();
+        if (!impl_->factory->InitVertexSurface(face, surf.get())) return false;
+        auto& pp = impl_->patchPoints[size_t(face)];
+        pp.resize(size_t(surf->GetNumPatchPoints()) * 3);
+        surf->PreparePatchPoints(impl_->points.data(), desc, pp.data(), desc);
+    }
+    double uv[2] = {s, t};
+    const Bfr::Parameterization param = surf->GetParameterization();
+    if (param.HasSubFaces()) {
+        const double st[2] = {s, t};
+        param.ConvertNormalizedSubFaceToCoord(std::max(subFace, 0), st, uv);
+    }
+    double Du[3], Dv[3];
+    surf->Evaluate(uv, impl_->patchPoints[size_t(face)].data(), desc, position.data(), Du, Dv);
+    const double n[3] = {Du[1] * Dv[2] - Du[2] * Dv[1], Du[2] * Dv[0] - Du[0] * Dv[2],
+                         Du[0] * Dv[1] - Du[1] * Dv[0]};
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (int i = 0; i < 3; ++i) normal[size_t(i)] = len > 0 ? n[i] / len : 0;
+    return true;
+}
+
+}  // namespace tessera
