@@ -30,12 +30,14 @@ nlohmann::json report(const SubdivResult& r, const SubdivDeviation& d, double se
             {"max_position_error_rel_diagonal", d.relativePosition()},
             {"max_normal_error_deg", d.maxNormalDeg},
             {"normal_error_deg_99_9_percentile", d.normalDeg999},
-            {"max_position_error_rel_diagonal_exact_patches", d.diagonal > 0 ? d.maxPositionExact / d.diagonal : 0},
+            {"max_position_error_rel_diagonal_exact_patches",
+             d.diagonal > 0 ? d.maxPositionExact / d.diagonal : 0},
             {"max_normal_error_deg_exact_patches", d.maxNormalDegExact},
-            {"worst_normal_at", {{"patch", d.worstNormalPatch},
-                                 {"exact", r.patchExact.empty() ? 0 : int(r.patchExact[d.worstNormalPatch])},
-                                 {"s", d.worstNormalST[0]},
-                                 {"t", d.worstNormalST[1]}}},
+            {"worst_normal_at",
+             {{"patch", d.worstNormalPatch},
+              {"exact", r.patchExact.empty() ? 0 : int(r.patchExact[d.worstNormalPatch])},
+              {"s", d.worstNormalST[0]},
+              {"t", d.worstNormalST[1]}}},
             {"convert_seconds", seconds}};
 }
 

@@ -535,11 +535,12 @@ TEST(BadInput, ObjFiles) {
 // SubdivisionMesh (issue 16): wrong parameter counts and out-of-range indices name the line of the
 // offending array or tag.
 TEST(BadInput, SubdivisionMesh) {
-    const std::string mesh = "SubdivisionMesh \"catmull-clark\" [4 4 4 4 4 4]\n";  // line 6
+    const std::string mesh = "SubdivisionMesh \"catmull-clark\" [4 4 4 4 4 4]\n";     // line 6
     const std::string verts = "[0 3 2 1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n";  // line 7
     const std::string P = "\"P\" [-1 -1 -1 1 -1 -1 1 1 -1 -1 1 -1 -1 -1 1 1 -1 1 1 1 1 -1 1 1]\n";
     // Parameter counts.
-    expectRejected("subdiv_nverts.rib", valid(mesh + "[0 3 2 1 4 5 6 7]\n" + P), 7, "nvertices adds up to 24");
+    expectRejected("subdiv_nverts.rib", valid(mesh + "[0 3 2 1 4 5 6 7]\n" + P), 7,
+                   "nvertices adds up to 24");
     expectRejected("subdiv_p.rib", valid(mesh + verts + "\"P\" [-1 -1 -1 1 -1 -1]\n"), 0, "\"P\"");
     expectRejected("subdiv_nargs.rib", valid(mesh + verts + "[\"crease\"] [2]\n[0 1] [2]\n" + P), 8,
                    "nargs needs 2 numbers per tag");
@@ -548,8 +549,9 @@ TEST(BadInput, SubdivisionMesh) {
     expectRejected("subdiv_crease_one.rib", valid(mesh + verts + "[\"crease\"] [1 1]\n[0] [2]\n" + P), 8,
                    "needs at least 2 vertices and 1 sharpness");
     // Out-of-range indices.
-    expectRejected("subdiv_negative.rib", valid(mesh + "[0 3 2 -1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n" + P),
-                   7, "negative vertex index -1");
+    expectRejected("subdiv_negative.rib",
+                   valid(mesh + "[0 3 2 -1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n" + P), 7,
+                   "negative vertex index -1");
     expectRejected("subdiv_crease_range.rib", valid(mesh + verts + "[\"crease\"] [2 1]\n[0 99] [2]\n" + P), 8,
                    "names vertex 99, outside 0..7");
     expectRejected("subdiv_corner_range.rib", valid(mesh + verts + "[\"corner\"] [1 1]\n[8] [2]\n" + P), 8,

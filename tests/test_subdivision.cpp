@@ -534,8 +534,18 @@ namespace {
 SubdivMesh creasedCube(float sharpness) {
     SubdivMesh m = cube();
     if (sharpness > 0)
-        for (auto [a, b] : std::vector<std::pair<int, int>>{
-                 {0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}})
+        for (auto [a, b] : std::vector<std::pair<int, int>>{{0, 1},
+                                                            {1, 2},
+                                                            {2, 3},
+                                                            {3, 0},
+                                                            {4, 5},
+                                                            {5, 6},
+                                                            {6, 7},
+                                                            {7, 4},
+                                                            {0, 4},
+                                                            {1, 5},
+                                                            {2, 6},
+                                                            {3, 7}})
             m.creases.push_back({a, b, sharpness});
     return m;
 }
@@ -580,9 +590,10 @@ TEST(SubdivisionOsd, CreasedCubeFollowsTheBfrLimitSurface) {
         EXPECT_LT(d.maxNormalDegExact, 0.01);
         EXPECT_LT(d.relativePosition(), 2e-4);
         EXPECT_LT(d.maxNormalDeg, 2.0);
-        std::printf("[ bfr      ] cube sharpness %g level %d: %zu exact, %zu approximated; max position %.2e "
-                    "of the diagonal, normal %.3f deg\n",
-                    sharp, r.level, r.exactCount, r.approxCount, d.relativePosition(), d.maxNormalDeg);
+        std::printf(
+            "[ bfr      ] cube sharpness %g level %d: %zu exact, %zu approximated; max position %.2e "
+            "of the diagonal, normal %.3f deg\n",
+            sharp, r.level, r.exactCount, r.approxCount, d.relativePosition(), d.maxNormalDeg);
         expectClosedAndWatertight(r, "sharpness " + std::to_string(sharp));
         const Vec3 c = cornerPoint(r);
         if (sharp == 0) {
@@ -682,8 +693,8 @@ TEST(SubdivisionOsd, CornersHolesBoundariesAndTriangles) {
 TEST(SubdivisionOsd, LevelFromScreenSize) {
     const SubdivMesh c = cube();
     EXPECT_EQ(subdivLevelFor(c, 0.f), kDefaultSubdivLevel);
-    EXPECT_EQ(subdivLevelFor(c, 10.f), 1);             // ~4 pixels a control face
-    EXPECT_EQ(subdivLevelFor(c, 68.6f), 3);            // 28 pixels a control face: 3.5 at level 3
+    EXPECT_EQ(subdivLevelFor(c, 10.f), 1);   // ~4 pixels a control face
+    EXPECT_EQ(subdivLevelFor(c, 68.6f), 3);  // 28 pixels a control face: 3.5 at level 3
     EXPECT_EQ(subdivLevelFor(c, 1e6f), 4);
     EXPECT_EQ(subdivLevelFor(creasedCube(4.5f), 10.f), 5);  // semi-sharp features resolved
     EXPECT_EQ(subdivLevelFor(creasedCube(10.f), 10.f), 1);  // infinitely sharp: nothing to resolve
@@ -707,7 +718,8 @@ TEST(SubdivisionOsd, BigGuyIsWatertightAndCloseToTheLimit) {
     EXPECT_LT(d.relativePosition(), 5e-4);
     EXPECT_LT(d.maxNormalDeg, 10.0);
     // Better than the hand-written converter in position.
-    EXPECT_LT(d.relativePosition(), subdivDeviation(obj.mesh, subdivToBezier(obj.mesh), limit, 5).relativePosition());
+    EXPECT_LT(d.relativePosition(),
+              subdivDeviation(obj.mesh, subdivToBezier(obj.mesh), limit, 5).relativePosition());
 }
 
 // Rendered in both engines, Big Guy and a creased cube have no pinholes (box filter: every pixel whose
@@ -719,7 +731,8 @@ TEST(SubdivisionOsd, BigGuyAndCreasedCubeHaveNoPinholesInBothEngines) {
         "Translate 0 0 6\nRotate -30 1 0 0\nRotate 35 0 1 0\nWorldBegin\nLightSource \"ambientlight\" 1\n"
         "Surface \"matte\"\nSubdivisionMesh \"catmull-clark\" " +
         std::string(kCubeMesh) +
-        " [\"crease\" \"crease\" \"corner\"] [5 1 2 1 1 1] [0 1 2 3 0 4 5 6] [2 10 3] " + kCubeP + "\nWorldEnd\n");
+        " [\"crease\" \"crease\" \"corner\"] [5 1 2 1 1 1] [0 1 2 3 0 4 5 6] [2 10 3] " + kCubeP +
+        "\nWorldEnd\n");
     for (const std::string& file : {bigguy, cubeRib}) {
         Scene s = loadScene(file, {});
         s.camera.width = s.camera.height = 160;
@@ -755,18 +768,19 @@ TEST(SubdivisionRib, FaceVaryingAndVaryingStFollowEachFace) {
     for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i) {
             nverts += " 4";
-            for (auto [a, b] : std::vector<std::pair<int, int>>{{i, j}, {i + 1, j}, {i + 1, j + 1}, {i, j + 1}}) {
+            for (auto [a, b] :
+                 std::vector<std::pair<int, int>>{{i, j}, {i + 1, j}, {i + 1, j + 1}, {i, j + 1}}) {
                 verts += " " + std::to_string(b * (n + 1) + a);
                 stCorner += " " + std::to_string(a / 4.0) + " " + std::to_string(b / 4.0);
             }
         }
-    for (const std::string& st : {"\"facevarying float[2] st\" [" + stCorner + "]",
-                                  "\"varying float[2] st\" [" + stVertex + "]"}) {
+    for (const std::string& st :
+         {"\"facevarying float[2] st\" [" + stCorner + "]", "\"varying float[2] st\" [" + stVertex + "]"}) {
         SCOPED_TRACE(st.substr(0, 22));
-        Scene s = loadScene(writeRibFile("WorldBegin\nSubdivisionMesh \"catmull-clark\" [" + nverts + "] [" + verts +
-                                         "] [\"interpolateboundary\"] [0 0] [] [] \"P\" [" + P + "] " + st +
-                                         "\nWorldEnd\n"),
-                            {});
+        Scene s = loadScene(
+            writeRibFile("WorldBegin\nSubdivisionMesh \"catmull-clark\" [" + nverts + "] [" + verts +
+                         "] [\"interpolateboundary\"] [0 0] [] [] \"P\" [" + P + "] " + st + "\nWorldEnd\n"),
+            {});
         ASSERT_EQ(s.patches.size(), 16u * 16);
         ASSERT_EQ(s.texCoords.size(), s.patches.size());
         float worst = 0;

@@ -259,7 +259,8 @@ Level refine(const Level& L, const Topo& T) {
                 cp.sub = c;
             } else {
                 auto mid = [](Vec2 a, Vec2 b) { return Vec2{(a.x + b.x) * 0.5f, (a.y + b.y) * 0.5f}; };
-                const Vec2 a = pp.uv[size_t(c)], n = pp.uv[size_t((c + 1) % 4)], p = pp.uv[size_t((c + 3) % 4)];
+                const Vec2 a = pp.uv[size_t(c)], n = pp.uv[size_t((c + 1) % 4)],
+                           p = pp.uv[size_t((c + 3) % 4)];
                 const Vec2 centre = mid(mid(pp.uv[0], pp.uv[2]), mid(pp.uv[1], pp.uv[3]));
                 cp.uv = {a, mid(a, n), centre, mid(p, a)};
             }
@@ -376,7 +377,8 @@ Level fromMesh(const SubdivMesh& m, std::vector<std::string>* warnings) {
                           std::to_string(m.faceVerts.size()) + " are given");
     L.hole.assign(m.faceSizes.size(), 0);
     for (size_t f = 0; f < m.faceSizes.size(); ++f)
-        L.param.push_back({int(f), m.faceSizes[f] == 4 ? -1 : -2, {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}}});
+        L.param.push_back(
+            {int(f), m.faceSizes[f] == 4 ? -1 : -2, {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}}});
     for (int h : m.holes) {
         if (h < 0 || size_t(h) >= m.faceSizes.size())
             throw SubdivError("hole face " + std::to_string(h) + " does not exist");

@@ -99,7 +99,7 @@ struct SubdivResult {
     std::vector<uint32_t> patchBaseFace;
     std::vector<int> patchSubFace;
     std::vector<std::array<Vec2, 4>> patchUV;
-    int level = 0;                    // refinement steps applied
+    int level = 0;  // refinement steps applied
     size_t exactCount = 0, approxCount = 0;
     std::vector<std::string> warnings;  // e.g. semi-sharp creases treated as sharp
 };

@@ -598,7 +598,8 @@ class PrimitiveReader {
     void subdivTexCoords(const SubdivMesh& mesh, const std::vector<Vec2>& st, bool perCorner,
                          const SubdivResult& res) {
         std::vector<size_t> offset(mesh.faceSizes.size() + 1, 0);
-        for (size_t f = 0; f < mesh.faceSizes.size(); ++f) offset[f + 1] = offset[f] + size_t(mesh.faceSizes[f]);
+        for (size_t f = 0; f < mesh.faceSizes.size(); ++f)
+            offset[f + 1] = offset[f] + size_t(mesh.faceSizes[f]);
         auto corner = [&](size_t k) { return perCorner ? st[k] : st[size_t(mesh.faceVerts[k])]; };
         auto mix = [](Vec2 a, Vec2 b, float w) { return Vec2{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w}; };
         for (size_t i = 0; i < res.patches.size(); ++i) {
@@ -610,7 +611,9 @@ class PrimitiveReader {
             } else {
                 const int c = res.patchSubFace[i];
                 Vec2 centre{0, 0};
-                for (int k = 0; k < n; ++k) centre = {centre.x + corner(o + size_t(k)).x / float(n), centre.y + corner(o + size_t(k)).y / float(n)};
+                for (int k = 0; k < n; ++k)
+                    centre = {centre.x + corner(o + size_t(k)).x / float(n),
+                              centre.y + corner(o + size_t(k)).y / float(n)};
                 const Vec2 a = corner(o + size_t(c)), next = corner(o + size_t((c + 1) % n)),
                            prev = corner(o + size_t((c + n - 1) % n));
                 q[0] = a, q[1] = mix(a, next, 0.5f), q[2] = centre, q[3] = mix(a, prev, 0.5f);

@@ -38,8 +38,9 @@ Sdc::Options sdcOptions(BoundaryMode mode) {
     Sdc::Options o;
     o.SetVtxBoundaryInterpolation(mode == BoundaryMode::None
                                       ? Sdc::Options::VTX_BOUNDARY_NONE
-                                      : (mode == BoundaryMode::EdgesOnly ? Sdc::Options::VTX_BOUNDARY_EDGE_ONLY
-                                                                         : Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER));
+                                      : (mode == BoundaryMode::EdgesOnly
+                                             ? Sdc::Options::VTX_BOUNDARY_EDGE_ONLY
+                                             : Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER));
     o.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
     o.SetTriangleSubdivision(Sdc::Options::TRI_SUB_CATMARK);
     return o;
@@ -71,8 +72,7 @@ std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, Boundar
     d.cornerWeights = t.cornerWeights.data();
     d.numHoles = int(t.holes.size());
     d.holeIndices = t.holes.data();
-    std::unique_ptr<Refiner> r(
-        Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode))));
+    std::unique_ptr<Refiner> r(Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode))));
     if (!r) throw SubdivError("OpenSubdiv could not build the mesh's topology");
     return r;
 }
@@ -153,9 +153,8 @@ struct InnerFit {
             conditions.push_back({0, q, true, false, 1});
         }
         for (int c = 0; c < 4; ++c)
-            conditions.push_back(
-                {double(c == 1 || c == 2), double(c >= 2), true, true,
-                 irregular & (1 << c) ? kTwistWeightExtraordinary : kTwistWeightRegular});
+            conditions.push_back({double(c == 1 || c == 2), double(c >= 2), true, true,
+                                  irregular & (1 << c) ? kTwistWeightExtraordinary : kTwistWeightRegular});
         double M[4][8] = {};
         for (const Condition& c : conditions) {
             double w[4][4];
@@ -250,7 +249,8 @@ int subdivLevelFor(const SubdivMesh& mesh, float rasterSize) {
 
 SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& options) {
     if (options.level != -1 && (options.level < 1 || options.level > kMaxSubdivLevel))
-        throw SubdivError("the subdivision level must be -1 (automatic) or 1.." + std::to_string(kMaxSubdivLevel));
+        throw SubdivError("the subdivision level must be -1 (automatic) or 1.." +
+                          std::to_string(kMaxSubdivLevel));
     validateSubdivMesh(mesh);
     const int level = options.level > 0 ? options.level : subdivLevelFor(mesh, options.rasterSize);
 
@@ -274,8 +274,10 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
     {
         const Far::TopologyLevel& L0 = A->GetLevel(0);
         for (int f = 0; f < L0.GetNumFaces(); ++f)
-            place.push_back({f, L0.GetFaceVertices(f).size() == 4 ? -1 : -2,
-                             {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}}, rendered0[size_t(f)] != 0});
+            place.push_back({f,
+                             L0.GetFaceVertices(f).size() == 4 ? -1 : -2,
+                             {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}},
+                             rendered0[size_t(f)] != 0});
     }
     for (int l = 1; l <= level; ++l) {
         std::vector<P3> next(size_t(A->GetLevel(l).GetNumVertices()));
@@ -365,8 +367,9 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
     const Bfr::Surface<double>::PointDescriptor desc(3);
     Bfr::Surface<double> surface;
     static const std::array<InnerFit, 16> fits = [] {
-        std::array<InnerFit, 16> f{InnerFit(0), InnerFit(1), InnerFit(2),  InnerFit(3),  InnerFit(4),  InnerFit(5),
-                                   InnerFit(6), InnerFit(7), InnerFit(8),  InnerFit(9),  InnerFit(10), InnerFit(11),
+        std::array<InnerFit, 16> f{InnerFit(0),  InnerFit(1),  InnerFit(2),  InnerFit(3),
+                                   InnerFit(4),  InnerFit(5),  InnerFit(6),  InnerFit(7),
+                                   InnerFit(8),  InnerFit(9),  InnerFit(10), InnerFit(11),
                                    InnerFit(12), InnerFit(13), InnerFit(14), InnerFit(15)};
         return f;
     }();
@@ -415,15 +418,22 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
                 const int c0 = side, c1 = (side + 1) % 4;
                 auto tangent = [&](int c, std::array<double, 3>& T) {
                     const double sign = side >= 2 ? -1 : 1;
-                    for (int x = 0; x < 3; ++x) T[x] = sign * (side % 2 == 0 ? cornerDu[c][x] : cornerDv[c][x]);
+                    for (int x = 0; x < 3; ++x)
+                        T[x] = sign * (side % 2 == 0 ? cornerDu[c][x] : cornerDv[c][x]);
                 };
                 std::array<double, 3> Ta, Tb;
                 tangent(c0, Ta);
                 tangent(c1, Tb);
                 double m00 = 0, m01 = 0, m11 = 0, r0 = 0, r1 = 0;
                 for (double q : {0.25, 0.5, 0.75}) {
-                    const double uv[2] = {side == 0 ? q : side == 1 ? 1 : side == 2 ? 1 - q : 0,
-                                          side == 0 ? 0 : side == 1 ? q : side == 2 ? 1 : 1 - q};
+                    const double uv[2] = {side == 0   ? q
+                                          : side == 1 ? 1
+                                          : side == 2 ? 1 - q
+                                                      : 0,
+                                          side == 0   ? 0
+                                          : side == 1 ? q
+                                          : side == 2 ? 1
+                                                      : 1 - q};
                     double L[3], b[4], d[4];
                     surface.Evaluate(uv, patchPts.data(), desc, L);
                     bernstein(q, b, d);
@@ -453,9 +463,11 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
                     beta = std::clamp((r1 - m01 * alpha) / m11, 0.0, 1.0);
                 }
                 const auto i1 = sideIndex(side, 0), i2 = sideIndex(side, 1);
-                bp.at(i1[0], i1[1]) = {float(cornerP[c0][0] + alpha * Ta[0]), float(cornerP[c0][1] + alpha * Ta[1]),
+                bp.at(i1[0], i1[1]) = {float(cornerP[c0][0] + alpha * Ta[0]),
+                                       float(cornerP[c0][1] + alpha * Ta[1]),
                                        float(cornerP[c0][2] + alpha * Ta[2])};
-                bp.at(i2[0], i2[1]) = {float(cornerP[c1][0] - beta * Tb[0]), float(cornerP[c1][1] - beta * Tb[1]),
+                bp.at(i2[0], i2[1]) = {float(cornerP[c1][0] - beta * Tb[0]),
+                                       float(cornerP[c1][1] - beta * Tb[1]),
                                        float(cornerP[c1][2] - beta * Tb[2])};
             }
             values.resize(fit.conditions.size());
@@ -623,7 +635,8 @@ SubdivDeviation subdivDeviation(const SubdivMesh& mesh, const SubdivResult& resu
                 const double ft = (1 - s) * (1 - t) * uv[0].y + s * (1 - t) * uv[1].y + s * t * uv[2].y +
                                   (1 - s) * t * uv[3].y;
                 std::array<double, 3> P, N;
-                if (!limit.evaluate(int(result.patchBaseFace[i]), result.patchSubFace[i], fs, ft, P, N)) continue;
+                if (!limit.evaluate(int(result.patchBaseFace[i]), result.patchSubFace[i], fs, ft, P, N))
+                    continue;
                 // The patch in double: the error of the conversion, not of float evaluation.
                 double q[3], du[3], dv[3];
                 bezierPoint(result.patches[i], s, t, q, du, dv);

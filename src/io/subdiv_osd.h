@@ -74,13 +74,13 @@ class SubdivLimit {
 // How far converted patches are from the limit surface: each patch sampled on an n x n grid (corners and
 // edges included), its position and geometric normal compared with SubdivLimit at the same parameters.
 struct SubdivDeviation {
-    double maxPosition = 0;     // largest distance, in object-space units
-    double diagonal = 0;        // the control mesh's bounding-box diagonal
-    double maxNormalDeg = 0;    // largest angle between the normals, in degrees
-    double normalDeg999 = 0;    // the 99.9th percentile of that angle over all samples
+    double maxPosition = 0;   // largest distance, in object-space units
+    double diagonal = 0;      // the control mesh's bounding-box diagonal
+    double maxNormalDeg = 0;  // largest angle between the normals, in degrees
+    double normalDeg999 = 0;  // the 99.9th percentile of that angle over all samples
     double maxPositionExact = 0, maxNormalDegExact = 0;  // over the patches marked exact only
     size_t samples = 0;
-    size_t worstNormalPatch = 0;               // where the largest normal error is
+    size_t worstNormalPatch = 0;  // where the largest normal error is
     std::array<double, 2> worstNormalST{};
     double relativePosition() const { return diagonal > 0 ? maxPosition / diagonal : 0; }
 };
