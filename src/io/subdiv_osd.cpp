@@ -131,7 +131,7 @@ struct InnerFit {
     std::vector<Condition> conditions;
     double inverse[4][4];  // of the normal equations
     static constexpr int kInner[4][2] = {{1, 1}, {2, 1}, {2, 2}, {1, 2}};
-    static constexpr double kTwistWeightRegular = 0.1, kTwistWeightExtraordinary = 0.1;
+    static constexpr double kTwistWeightRegular = 0.1, kTwistWeightExtraordinary = 1e-3;
 
     static void weights(const Condition& c, double w[4][4]) {
         double bu[4], du[4], bv[4], dv[4];
@@ -424,6 +424,17 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
                 std::array<double, 3> Ta, Tb;
                 tangent(c0, Ta);
                 tangent(c1, Tb);
+                // At an extraordinary end only the direction counts: scaled to the chord, so the fitted
+                // length is a fraction of it (1/3 for evenly spaced control points).
+                double chord = 0;
+                for (int x = 0; x < 3; ++x)
+                    chord += (cornerP[c1][x] - cornerP[c0][x]) * (cornerP[c1][x] - cornerP[c0][x]);
+                chord = std::sqrt(chord);
+                for (auto [T, bit] : {std::pair{&Ta, 1 << c0}, std::pair{&Tb, 1 << c1}}) {
+                    const double len = std::sqrt((*T)[0] * (*T)[0] + (*T)[1] * (*T)[1] + (*T)[2] * (*T)[2]);
+                    if ((irregular & bit) && len > 0)
+                        for (double& x : *T) x *= chord / len;
+                }
                 double m00 = 0, m01 = 0, m11 = 0, r0 = 0, r1 = 0;
                 for (double q : {0.25, 0.5, 0.75}) {
                     const double uv[2] = {side == 0   ? q
@@ -476,7 +487,7 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
                 const double uv[2] = {c.s, c.t};
                 double P[3], Du[3], Dv[3], Duu[3], Duv[3], Dvv[3];
                 surface.Evaluate(uv, patchPts.data(), desc, P, Du, Dv, Duu, Duv, Dvv);
-                const double* d = c.du && c.dv ? Duv : (c.du ? Du : Dv);
+                const double* d = c.du && c.dv ? Duv : c.du ? Du : c.dv ? Dv : P;
                 values[k] = {d[0], d[1], d[2]};
             }
             fit.apply(bp, values);
@@ -586,8 +597,13 @@ bool SubdivLimit::evaluate(int face, int subFace, double s, double t, std::array
     surf->Evaluate(uv, impl_->patchPoints[size_t(face)].data(), desc, position.data(), Du, Dv);
     const double n[3] = {Du[1] * Dv[2] - Du[2] * Dv[1], Du[2] * Dv[0] - Du[0] * Dv[2],
                          Du[0] * Dv[1] - Du[1] * Dv[0]};
+    // Zero where the derivatives are (nearly) parallel: no tangent plane from them (e.g. the corner of a
+    // boundary with "edges only" interpolation, where both edges follow one smooth boundary curve).
     const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    for (int i = 0; i < 3; ++i) normal[size_t(i)] = len > 0 ? n[i] / len : 0;
+    const double scale = std::sqrt((Du[0] * Du[0] + Du[1] * Du[1] + Du[2] * Du[2]) *
+                                   (Dv[0] * Dv[0] + Dv[1] * Dv[1] + Dv[2] * Dv[2]));
+    const bool degenerate = !(len > 1e-6 * scale);
+    for (int i = 0; i < 3; ++i) normal[size_t(i)] = degenerate ? 0 : n[i] / len;
     return true;
 }
 
@@ -646,7 +662,9 @@ SubdivDeviation subdivDeviation(const SubdivMesh& mesh, const SubdivResult& resu
                 const double dist = std::sqrt(dx * dx + dy * dy + dz * dz);
                 const double ml = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
                 double angle = 0;
-                if (ml > 0 && (N[0] != 0 || N[1] != 0 || N[2] != 0)) {
+                const double dl = std::sqrt((du[0] * du[0] + du[1] * du[1] + du[2] * du[2]) *
+                                            (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]));
+                if (ml > 1e-6 * dl && (N[0] != 0 || N[1] != 0 || N[2] != 0)) {
                     const double cosA = (m[0] * N[0] + m[1] * N[1] + m[2] * N[2]) / ml;
                     angle = std::acos(std::clamp(cosA, -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
                 }

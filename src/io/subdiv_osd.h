@@ -59,10 +59,10 @@ class SubdivLimit {
     SubdivLimit& operator=(const SubdivLimit&) = delete;
 
     bool hasLimit(int face) const;
-    // Position and unit normal (du x dv, zero where degenerate) at (s, t) of control face `face`: for a
-    // quad its (u, v); for other faces the normalized coordinates of sub-face `subFace` (the quad at
-    // corner subFace: (0,0) at that vertex, (1,0) at the middle of the edge to the next vertex, (1,1) at
-    // the centre), as SubdivResult::patchUV gives them. False for a hole or a face without limit surface.
+    // Position and unit normal (du x dv; zero where du and dv are nearly parallel) at (s, t) of control face
+    // `face`: for a quad its (u, v); for other faces the normalized coordinates of sub-face `subFace` (the
+    // quad at corner subFace: (0,0) at that vertex, (1,0) at the middle of the edge to the next vertex, (1,1)
+    // at the centre), as SubdivResult::patchUV gives them. False for a hole or a face without limit surface.
     bool evaluate(int face, int subFace, double s, double t, std::array<double, 3>& position,
                   std::array<double, 3>& normal) const;
 
@@ -72,7 +72,8 @@ class SubdivLimit {
 };
 
 // How far converted patches are from the limit surface: each patch sampled on an n x n grid (corners and
-// edges included), its position and geometric normal compared with SubdivLimit at the same parameters.
+// edges included), its position and geometric normal compared with SubdivLimit at the same parameters
+// (normals only where both are defined: not at points where du and dv are nearly parallel).
 struct SubdivDeviation {
     double maxPosition = 0;   // largest distance, in object-space units
     double diagonal = 0;      // the control mesh's bounding-box diagonal
