@@ -830,3 +830,20 @@ TEST(SubdivisionRib, FaceVaryingAndVaryingStFollowEachFace) {
         EXPECT_LT(worst, 1e-5f);
     }
 }
+
+// Deformation keys of a SubdivisionMesh share the first key's level even when their sizes on screen would
+// choose others (the second key here is 8 times larger): every key has the same patches.
+TEST(SubdivisionRib, DeformationKeysShareTheFirstKeysLevel) {
+    std::string big = "\"P\" [";
+    for (int v = 0; v < 8; ++v)
+        for (int k = 0; k < 3; ++k) big += (v >> (k == 0 ? 0 : k == 1 ? 1 : 2)) & 1 ? " 8" : " -8";
+    big += "]";
+    const std::string mesh = std::string("SubdivisionMesh \"catmull-clark\" ") + kCubeMesh + " ";
+    Scene s =
+        loadScene(writeRibFile("Format 200 200 1\nProjection \"perspective\" \"fov\" 40\nTranslate 0 0 30\n"
+                               "Shutter 0 1\nWorldBegin\nMotionBegin [0 1]\n" +
+                               mesh + kCubeP + "\n" + mesh + big + "\nMotionEnd\nWorldEnd\n"),
+                  {});
+    EXPECT_EQ(s.patches.size(), 6u * 4);  // level 1 from the first key (8 pixels a control face); the
+                                          // second alone would be level 4
+}

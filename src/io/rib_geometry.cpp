@@ -47,7 +47,11 @@ void checkFinite(const BezierPatch& b, int line, const Diagnostics& diag) {
 class PrimitiveReader {
   public:
     PrimitiveReader(const PrimitiveContext& c, const Request& r)
-        : state_(c.state), decls_(c.decls), diag_(c.diag), camera_(c.scene.camera) {
+        : state_(c.state),
+          decls_(c.decls),
+          diag_(c.diag),
+          camera_(c.scene.camera),
+          subdivLevel_(c.subdivLevel) {
         shape_.request = r.name;
         shape_.line = r.line;
     }
@@ -788,7 +792,8 @@ class PrimitiveReader {
         SubdivResult res;
         try {
             OsdSubdivOptions options;
-            options.rasterSize = rasterSize(mesh.points);
+            options.level = subdivLevel_;
+            if (options.level < 0) options.rasterSize = rasterSize(mesh.points);
             res = subdivideOsd(mesh, options);
         } catch (const SubdivError& e) {
             diag_.fail(r.line, std::string("SubdivisionMesh: ") + e.what());
@@ -796,6 +801,7 @@ class PrimitiveReader {
         for (const std::string& w : res.warnings)
             diag_.warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
         if (st) subdivTexCoords(mesh, *st, stPerCorner, res);
+        shape_.subdivLevel = res.level;
         shape_.patches = std::move(res.patches);
     }
 
@@ -804,6 +810,7 @@ class PrimitiveReader {
     const Declarations& decls_;
     Diagnostics& diag_;
     const Camera& camera_;
+    int subdivLevel_;
     PrimitiveShape shape_;
 };
 

@@ -1205,7 +1205,10 @@ class RibReader {
                 m.rotations.push_back({v[0], v[1], v[2], v[3]});
             }
         } else if (primitive) {
-            m.shapes.push_back(readPrimitiveShape(r, primitiveContext()));
+            PrimitiveContext context = primitiveContext();
+            if (!m.shapes.empty() && m.shapes.front().subdivLevel > 0)
+                context.subdivLevel = m.shapes.front().subdivLevel;  // the same patches in every key
+            m.shapes.push_back(readPrimitiveShape(r, context));
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
             if (b.topology != a.topology || b.topologyHash != a.topologyHash ||
                 (!a.skipped && !b.skipped && a.patches.size() != b.patches.size()))
