@@ -847,3 +847,15 @@ TEST(SubdivisionRib, DeformationKeysShareTheFirstKeysLevel) {
     EXPECT_EQ(s.patches.size(), 6u * 4);  // level 1 from the first key (8 pixels a control face); the
                                           // second alone would be level 4
 }
+
+// A crease between vertices no edge joins is ignored with a warning (not OpenSubdiv's own printout).
+TEST(SubdivisionOsd, CreaseOffTheMeshIsWarnedAndIgnored) {
+    SubdivMesh m = cube();
+    m.creases.push_back({0, 6, 10.f});  // a diagonal of the cube
+    const SubdivResult r = subdivideOsd(m), smooth = subdivideOsd(cube());
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("crease (0, 6) is not an edge"), std::string::npos);
+    ASSERT_EQ(r.patches.size(), smooth.patches.size());
+    for (size_t i = 0; i < r.patches.size(); ++i)
+        EXPECT_EQ(std::memcmp(r.patches[i].cp, smooth.patches[i].cp, sizeof r.patches[i].cp), 0);
+}

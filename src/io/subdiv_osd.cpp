@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 namespace tessera {
@@ -77,12 +78,28 @@ std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, Boundar
     return r;
 }
 
-Topology topologyOf(const SubdivMesh& m) {
+// The descriptor's data. A crease between vertices that no face edge joins is left out (OpenSubdiv would
+// print a warning of its own) and, with `warnings`, reported.
+Topology topologyOf(const SubdivMesh& m, std::vector<std::string>* warnings = nullptr) {
     Topology t;
     t.faceSizes = m.faceSizes;
     t.faceVerts = m.faceVerts;
+    std::unordered_set<uint64_t> edges;
+    auto key = [](int a, int b) {
+        return (uint64_t(uint32_t(std::min(a, b))) << 32) | uint32_t(std::max(a, b));
+    };
+    for (size_t f = 0, o = 0; f < m.faceSizes.size(); o += size_t(m.faceSizes[f++]))
+        for (int i = 0; i < m.faceSizes[f]; ++i)
+            edges.insert(key(m.faceVerts[o + size_t(i)], m.faceVerts[o + size_t((i + 1) % m.faceSizes[f])]));
+    size_t notEdges = 0;
     for (const SubdivCrease& c : m.creases) {
         if (!(osdSharpness(c.sharpness) > 0)) continue;
+        if (!edges.count(key(c.v0, c.v1))) {
+            if (notEdges++ == 0 && warnings)
+                warnings->push_back("crease (" + std::to_string(c.v0) + ", " + std::to_string(c.v1) +
+                                    ") is not an edge of the mesh; such creases are ignored");
+            continue;
+        }
         t.creasePairs.insert(t.creasePairs.end(), {c.v0, c.v1});
         t.creaseWeights.push_back(osdSharpness(c.sharpness));
     }
@@ -255,7 +272,9 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
     const int level = options.level > 0 ? options.level : subdivLevelFor(mesh, options.rasterSize);
 
     // 1. Uniform refinement of the control mesh.
-    const Topology topo = topologyOf(mesh);
+    SubdivResult out;
+    out.level = level;
+    const Topology topo = topologyOf(mesh, &out.warnings);
     std::unique_ptr<Refiner> A = makeRefiner(int(mesh.points.size()), topo, mesh.boundary);
     const std::vector<char> rendered0 = renderedFaces(mesh, *A);
     Refiner::UniformOptions uniform(level);
@@ -355,8 +374,6 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
     Bfr::RefinerSurfaceFactory<> factory(*B);
 
     // Hermite patches, face by face.
-    SubdivResult out;
-    out.level = level;
     std::vector<int> patchOf(size_t(nf), -1);
     std::vector<double> meshPts(pts.size() * 3), patchPts;
     for (size_t i = 0; i < pts.size(); ++i) {
