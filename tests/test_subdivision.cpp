@@ -718,11 +718,12 @@ TEST(SubdivisionOsd, CornersHolesBoundariesAndTriangles) {
 TEST(SubdivisionOsd, LevelFromScreenSize) {
     const SubdivMesh c = cube();
     EXPECT_EQ(subdivLevelFor(c, 0.f), kDefaultSubdivLevel);
-    EXPECT_EQ(subdivLevelFor(c, 10.f), 1);   // ~4 pixels a control face
-    EXPECT_EQ(subdivLevelFor(c, 68.6f), 3);  // 28 pixels a control face: 3.5 at level 3
+    EXPECT_EQ(subdivLevelFor(c, 10.f), 2);     // ~4 pixels a control face: at least level 2
+    EXPECT_EQ(subdivLevelFor(c, 122.5f), 3);   // 50 pixels a control face: 6.25 at level 3
+    EXPECT_EQ(subdivLevelFor(c, 2449.f), 4);   // 1000 pixels: 62.5 at level 4, the most from the screen
     EXPECT_EQ(subdivLevelFor(c, 1e6f), 4);
     EXPECT_EQ(subdivLevelFor(creasedCube(4.5f), 10.f), 5);  // semi-sharp features resolved
-    EXPECT_EQ(subdivLevelFor(creasedCube(10.f), 10.f), 1);  // infinitely sharp: nothing to resolve
+    EXPECT_EQ(subdivLevelFor(creasedCube(10.f), 10.f), 2);  // infinitely sharp: nothing to resolve
     OsdSubdivOptions o;
     o.level = kMaxSubdivLevel + 1;
     EXPECT_THROW(subdivideOsd(c, o), SubdivError);
@@ -844,8 +845,8 @@ TEST(SubdivisionRib, DeformationKeysShareTheFirstKeysLevel) {
                                "Shutter 0 1\nWorldBegin\nMotionBegin [0 1]\n" +
                                mesh + kCubeP + "\n" + mesh + big + "\nMotionEnd\nWorldEnd\n"),
                   {});
-    EXPECT_EQ(s.patches.size(), 6u * 4);  // level 1 from the first key (8 pixels a control face); the
-                                          // second alone would be level 4
+    EXPECT_EQ(s.patches.size(), 6u * 16);  // level 2 from the first key (8 pixels a control face); the
+                                           // second alone would be level 4
 }
 
 // A crease between vertices no edge joins is ignored with a warning (not OpenSubdiv's own printout).

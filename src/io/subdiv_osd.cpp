@@ -252,8 +252,8 @@ int subdivLevelFor(const SubdivMesh& mesh, float rasterSize) {
     if (rasterSize > 0 && std::isfinite(rasterSize) && !mesh.faceSizes.empty()) {
         // A control face covers about rasterSize / sqrt(faces) pixels; each level halves it.
         const double facePixels = rasterSize / std::sqrt(double(mesh.faceSizes.size()));
-        level = int(std::ceil(std::log2(std::max(facePixels / 4.0, 1.0))));
-        level = std::clamp(level, 1, 4);
+        level = int(std::ceil(std::log2(std::max(facePixels / 8.0, 1.0))));
+        level = std::clamp(level, 2, 4);
     }
     float sharp = 0;
     for (const SubdivCrease& c : mesh.creases)

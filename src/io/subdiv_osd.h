@@ -38,7 +38,8 @@ struct OsdSubdivOptions {
     float rasterSize = 0.f;
 };
 
-// The automatic level: from the screen size, about 4 pixels per refined face edge (level 1..4; without a
+// The automatic level: from the screen size, about 8 pixels or less per refined face edge, level 2..4
+// (level 1's normals at extraordinary vertices are worse than the hand-written converter's; without a
 // screen size kDefaultSubdivLevel), raised to the largest finite crease/corner sharpness (rounded up,
 // at most kMaxSubdivLevel) so semi-sharp features are fully resolved into exact patches.
 int subdivLevelFor(const SubdivMesh& mesh, float rasterSize);
