@@ -531,3 +531,35 @@ TEST(BadInput, ObjFiles) {
     expectRejected("obj_short_face.obj", quad + "f 1 2\n", 5, "a face needs at least 3 vertices");
     expectRejected("obj_bad_ref.obj", quad + "f 1 2 x\n", 5, "bad vertex reference 'x'");
 }
+
+// SubdivisionMesh (issue 16): wrong parameter counts and out-of-range indices name the line of the
+// offending array or tag.
+TEST(BadInput, SubdivisionMesh) {
+    const std::string mesh = "SubdivisionMesh \"catmull-clark\" [4 4 4 4 4 4]\n";     // line 6
+    const std::string verts = "[0 3 2 1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n";  // line 7
+    const std::string P = "\"P\" [-1 -1 -1 1 -1 -1 1 1 -1 -1 1 -1 -1 -1 1 1 -1 1 1 1 1 -1 1 1]\n";
+    // Parameter counts.
+    expectRejected("subdiv_nverts.rib", valid(mesh + "[0 3 2 1 4 5 6 7]\n" + P), 7,
+                   "nvertices adds up to 24");
+    expectRejected("subdiv_p.rib", valid(mesh + verts + "\"P\" [-1 -1 -1 1 -1 -1]\n"), 0, "\"P\"");
+    expectRejected("subdiv_nargs.rib", valid(mesh + verts + "[\"crease\"] [2]\n[0 1] [2]\n" + P), 8,
+                   "nargs needs 2 numbers per tag");
+    expectRejected("subdiv_nargs_more.rib", valid(mesh + verts + "[\"crease\"] [3 1]\n[0 1] [2]\n" + P), 8,
+                   "asks for more intargs/floatargs than given");
+    expectRejected("subdiv_crease_one.rib", valid(mesh + verts + "[\"crease\"] [1 1]\n[0] [2]\n" + P), 8,
+                   "needs at least 2 vertices and 1 sharpness");
+    // Out-of-range indices.
+    expectRejected("subdiv_negative.rib",
+                   valid(mesh + "[0 3 2 -1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n" + P), 7,
+                   "negative vertex index -1");
+    expectRejected("subdiv_crease_range.rib", valid(mesh + verts + "[\"crease\"] [2 1]\n[0 99] [2]\n" + P), 8,
+                   "names vertex 99, outside 0..7");
+    expectRejected("subdiv_corner_range.rib", valid(mesh + verts + "[\"corner\"] [1 1]\n[8] [2]\n" + P), 8,
+                   "names vertex 8, outside 0..7");
+    expectRejected("subdiv_hole_range.rib", valid(mesh + verts + "[\"hole\"] [1 0]\n[6] []\n" + P), 8,
+                   "\"hole\" names face 6, outside 0..5");
+    // Topology: an edge used twice in the same direction (a flipped face) names the request's line.
+    expectRejected("subdiv_flipped.rib",
+                   valid(mesh + "[0 1 2 3 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n" + P), 6,
+                   "used twice in the same direction");
+}

@@ -59,7 +59,7 @@ TEST(Obj, StatementsAndIndexForms) {
     EXPECT_EQ(m.faceLine[5], 25);  // where the continued line starts
     std::vector<std::string> warnings;
     Scene s = loadScene(writeObj(text), [&](const std::string& w) { warnings.push_back(w); });
-    EXPECT_EQ(s.patches.size(), 24u);  // a cube: every face refined once
+    EXPECT_EQ(s.patches.size(), 6u * 16);  // a cube at the default level 2 (no camera at conversion)
     EXPECT_TRUE(warnings.empty()) << warnings[0];
     EXPECT_EQ(s.objectCount, 1u);
     EXPECT_FALSE(s.lights.empty());
@@ -96,10 +96,10 @@ TEST(Obj, BigGuy) {
     if (!fs::exists(path)) GTEST_SKIP() << "shared data not found";
     std::vector<std::string> warnings;
     Scene s = loadScene(path, [&](const std::string& w) { warnings.push_back(w); });
-    EXPECT_EQ(s.patches.size(), 5800u);
+    EXPECT_EQ(s.patches.size(), 1450u * 16);  // level 2 (kDefaultSubdivLevel)
     EXPECT_TRUE(warnings.empty());
     // Format override gives the same result; a wrong override fails cleanly.
-    EXPECT_EQ(loadScene(path, {}, SceneFormat::Obj).patches.size(), 5800u);
+    EXPECT_EQ(loadScene(path, {}, SceneFormat::Obj).patches.size(), 1450u * 16);
     EXPECT_THROW(loadScene(path, {}, SceneFormat::Micropolis), InputError);
 }
 
@@ -108,5 +108,5 @@ TEST(Obj, DetectedByContentWithoutExtension) {
         std::string(kCubeVerts) + "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
     std::string path = writeObj(text, "cube");
     EXPECT_EQ(detectSceneFormat(path), SceneFormat::Obj);
-    EXPECT_EQ(loadScene(path, {}).patches.size(), 24u);
+    EXPECT_EQ(loadScene(path, {}).patches.size(), 6u * 16);
 }

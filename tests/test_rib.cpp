@@ -788,7 +788,7 @@ TEST(RibFiles, ShippedScenesKeepTheirContent) {
     };
     const Expect cases[] = {
         {"teapot", 32, 32, 4, 1},  {"killeroo", 11532, 89, 3, 1},    {"killeroo2", 23064, 178, 3, 2},
-        {"bigguy", 5800, 1, 3, 1}, {"bigguy_box", 3575, 3575, 2, 4},
+        {"bigguy", 23200, 1, 3, 1}, {"bigguy_box", 3575, 3575, 2, 4},  // bigguy: OpenSubdiv, level 2
     };
     for (const Expect& c : cases) {
         SCOPED_TRACE(c.name);

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <random>
 #include <string>
@@ -17,7 +18,10 @@
 #include "io/obj_reader.h"
 #include "io/rib_lexer.h"
 #include "io/scene_loader.h"
+#include "io/subdiv_osd.h"
+#include "render/render.h"
 #include "test_support.h"
+#include "test_util.h"
 
 using namespace tessera;
 namespace fs = std::filesystem;
@@ -455,7 +459,8 @@ TEST(SubdivisionRib, CubeTagsAndErrors) {
     Scene s = loadScene(
         writeRibFile(head + "SubdivisionMesh \"catmull-clark\" " + kCubeMesh + " " + kCubeP + "\nWorldEnd\n"),
         {});
-    EXPECT_EQ(s.patches.size(), 24u);
+    // No camera view of the mesh (the eye is inside the cube): the default level, 2.
+    EXPECT_EQ(s.patches.size(), 6u * 16);
     EXPECT_EQ(s.objectCount, 1u);
     // Tags: a hole and a crease; an unknown tag warns.
     std::vector<std::string> warnings;
@@ -463,7 +468,7 @@ TEST(SubdivisionRib, CubeTagsAndErrors) {
                                " [\"hole\" \"crease\" \"stitch\"] [1 0 2 1 0 0] [1 4 5] [10] " + kCubeP +
                                "\nWorldEnd\n"),
                   [&](const std::string& w) { warnings.push_back(w); });
-    EXPECT_EQ(s.patches.size(), 20u);
+    EXPECT_EQ(s.patches.size(), 5u * 16);
     bool stitch = false;
     for (const std::string& w : warnings)
         stitch |= w.find("\"stitch\" is not supported") != std::string::npos;
@@ -505,10 +510,11 @@ TEST(SubdivisionRib, AqsisRegressionScenesLoad) {
         const char* file;
         size_t patches;
     };
-    // subdiv1: 4 triangles -> 12 quads -> 48 (two steps for non-quad meshes); subdiv2: 96 triangles;
-    // subdiv3: 9 quads with interpolateboundary -> 36.
-    for (Expect e :
-         {Expect{"subdiv1.rib", 48}, Expect{"subdiv2.rib", 96 * 3 * 4}, Expect{"subdiv3.rib", 36}}) {
+    // The level comes from each mesh's size on screen (docs/subdivision.md). subdiv1: 4 triangles, 12 quads
+    // after one step, level 4; subdiv2: 96 triangles, level 2; subdiv3: 9 quads with interpolateboundary,
+    // level 4.
+    for (Expect e : {Expect{"subdiv1.rib", 12 * 64}, Expect{"subdiv2.rib", 96 * 3 * 4},
+                     Expect{"subdiv3.rib", 9 * 256}}) {
         Scene s = loadScene(dir + e.file, {});
         EXPECT_EQ(s.patches.size(), e.patches) << e.file;
         size_t bad, open;
@@ -519,4 +525,338 @@ TEST(SubdivisionRib, AqsisRegressionScenesLoad) {
             EXPECT_EQ(shared, 2 * s.patches.size()) << e.file;
         }
     }
+}
+
+// ---- OpenSubdiv converter (io/subdiv_osd.h) against OpenSubdiv's limit surface (Bfr) ---------------
+
+namespace {
+
+// The cube with all 12 edges creased at `sharpness` (0: no crease tags).
+SubdivMesh creasedCube(float sharpness) {
+    SubdivMesh m = cube();
+    if (sharpness > 0)
+        for (auto [a, b] : std::vector<std::pair<int, int>>{{0, 1},
+                                                            {1, 2},
+                                                            {2, 3},
+                                                            {3, 0},
+                                                            {4, 5},
+                                                            {5, 6},
+                                                            {6, 7},
+                                                            {7, 4},
+                                                            {0, 4},
+                                                            {1, 5},
+                                                            {2, 6},
+                                                            {3, 7}})
+            m.creases.push_back({a, b, sharpness});
+    return m;
+}
+
+// The limit point at cube corner (1, 1, 1): the patch corner closest to it.
+Vec3 cornerPoint(const SubdivResult& r) {
+    Vec3 best{0, 0, 0};
+    for (const BezierPatch& p : r.patches)
+        for (int k : {0, 3, 12, 15})
+            if (length(p.cp[k] - Vec3{1, 1, 1}) < length(best - Vec3{1, 1, 1})) best = p.cp[k];
+    return best;
+}
+
+void expectClosedAndWatertight(const SubdivResult& r, const std::string& what) {
+    size_t bad, open;
+    EXPECT_EQ(checkWatertight(r.patches, bad, open), 2 * r.patches.size()) << what;
+    EXPECT_EQ(bad, 0u) << what;
+    EXPECT_EQ(open, 0u) << what;
+}
+
+}  // namespace
+
+// Sharpness 0, 1.5, 2 and infinity: the patches follow Bfr's limit surface of the control cube, position
+// and normal, with the tolerances measured (docs/subdivision.md) and some margin; exact (regular) patches
+// to float precision. Independent checks: the smooth corner is the Catmull-Clark limit mask's point, the
+// infinitely sharp corner is the control point, and the corner moves out with the sharpness: sharpness 2
+// rounds the box (the bug the hand-written converter had: it rendered a hard box).
+TEST(SubdivisionOsd, CreasedCubeFollowsTheBfrLimitSurface) {
+    const float inf = std::numeric_limits<float>::infinity();
+    double lastCorner = 0;
+    for (float sharp : {0.f, 1.5f, 2.f, inf}) {
+        SCOPED_TRACE("sharpness " + std::to_string(sharp));
+        const SubdivMesh m = creasedCube(sharp);
+        const SubdivLimit limit(m);
+        // The automatic level (2 here: no camera, sharpness at most 2) and level 4. Tolerances: the
+        // measured errors (printed) with some margin; the approximated patches are the 3 faces at each of
+        // the 8 valence-3 corners.
+        struct Tolerance {
+            int level;
+            double position, normalDeg;
+        };
+        for (Tolerance tol : {Tolerance{-1, 4e-3, 8.0}, Tolerance{4, 1e-3, 3.0}}) {
+            OsdSubdivOptions o;
+            o.level = tol.level;
+            const SubdivResult r = subdivideOsd(m, o);
+            if (tol.level < 0) {
+                EXPECT_EQ(r.level, kDefaultSubdivLevel);
+            }
+            EXPECT_EQ(r.patches.size(), 6u << (2 * r.level));
+            const SubdivDeviation d = subdivDeviation(m, r, limit, 9);
+            EXPECT_EQ(d.samples, r.patches.size() * 81);
+            EXPECT_LT(d.maxPositionExact / d.diagonal, 1e-6);
+            EXPECT_LT(d.maxNormalDegExact, 0.01);
+            EXPECT_LT(d.relativePosition(), tol.position);
+            EXPECT_LT(d.maxNormalDeg, tol.normalDeg);
+            std::printf(
+                "[ bfr      ] cube sharpness %g level %d: %zu exact, %zu approximated; max position %.2e "
+                "of the diagonal, normal %.3f deg\n",
+                sharp, r.level, r.exactCount, r.approxCount, d.relativePosition(), d.maxNormalDeg);
+            expectClosedAndWatertight(r, "sharpness " + std::to_string(sharp));
+        }
+        const SubdivResult r = subdivideOsd(m);
+        const Vec3 c = cornerPoint(r);
+        if (sharp == 0) {
+            // The hand-written limit mask (after one step: all quads).
+            EXPECT_LT(length(c - limitPositions(refineMesh(m))[6]), 1e-5f);
+        }
+        if (!std::isfinite(sharp)) {
+            EXPECT_LT(length(c - Vec3{1, 1, 1}), 1e-6f);
+        }
+        if (sharp == 2) {
+            EXPECT_GT(length(c - Vec3{1, 1, 1}), 0.05f);  // rounded, not a hard box
+        }
+        EXPECT_GT(length(c), lastCorner);
+        lastCorner = length(c);
+        if (sharp == 2) {
+            // The test can fail: the hand-written converter (semi-sharp treated as infinitely sharp) is far
+            // from the limit surface.
+            const SubdivResult old = subdivToBezier(m);
+            EXPECT_GT(subdivDeviation(m, old, limit, 9).relativePosition(), 0.01);
+        }
+    }
+}
+
+// A level below the sharpness (only when asked for: the automatic level resolves them) leaves semi-sharp
+// features unresolved: Bfr evaluates them with its own refinement and the fitted patches follow it
+// roughly (measured 2.0e-2 of the diagonal at level 1 for sharpness 2.5), still watertight.
+TEST(SubdivisionOsd, UnresolvedSemiSharpCreasesStayClose) {
+    const SubdivMesh m = creasedCube(2.5f);
+    OsdSubdivOptions o;
+    o.level = 1;
+    const SubdivResult r = subdivideOsd(m, o);
+    EXPECT_EQ(r.level, 1);
+    const SubdivDeviation d = subdivDeviation(m, r, SubdivLimit(m), 9);
+    EXPECT_LT(d.relativePosition(), 3e-2);
+    expectClosedAndWatertight(r, "level 1");
+}
+
+// Corners of any sharpness, holes, the three boundary modes and non-quad faces, each against Bfr.
+TEST(SubdivisionOsd, CornersHolesBoundariesAndTriangles) {
+    struct Case {
+        std::string name;
+        SubdivMesh mesh;
+        size_t patches;
+        double position, normalDeg;  // tolerances
+    };
+    std::vector<Case> cases;
+    for (float s : {1.5f, 10.f}) {
+        SubdivMesh m = cube();
+        m.corners.push_back({6, s});
+        // An infinitely sharp corner in a smooth surface is a cone point: the patches at it are the
+        // furthest off (measured 9.8e-3, 19.7 deg at level 2; sharpness 1.5: 1.9e-3, 7.3 deg).
+        cases.push_back(
+            {"corner " + std::to_string(s), m, 6 * 16, s < 10 ? 4e-3 : 2e-2, s < 10 ? 12.0 : 30.0});
+    }
+    {
+        SubdivMesh m = cube();
+        m.holes.push_back(1);
+        cases.push_back({"hole", m, 5 * 16, 1e-3, 2.0});
+    }
+    for (BoundaryMode mode : {BoundaryMode::EdgesAndCorners, BoundaryMode::EdgesOnly, BoundaryMode::None}) {
+        SubdivMesh g = openGrid(4);
+        g.boundary = mode;
+        // Edges and corners, none: all patches regular, exact. Edges only: the valence-2 corners are
+        // irregular (measured 5.5e-5, 0.32 deg).
+        const bool exact = mode != BoundaryMode::EdgesOnly;
+        cases.push_back({"grid boundary " + std::to_string(int(mode)), g,
+                         (mode == BoundaryMode::None ? 4u : 16u) * 16, exact ? 1e-6 : 2e-4,
+                         exact ? 0.01 : 1.0});
+    }
+    cases.push_back({"tetrahedron", tetrahedron(), 12 * 4, 1e-3, 3.0});  // measured 3.7e-4, 1.4 deg
+    cases.push_back({"mixed", mixedMesh(), 40 * 4, 2e-3, 3.0});          // measured 1.1e-3, 1.2 deg
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        const SubdivResult r = subdivideOsd(c.mesh);
+        EXPECT_EQ(r.patches.size(), c.patches);
+        const SubdivDeviation d = subdivDeviation(c.mesh, r, SubdivLimit(c.mesh), 9);
+        EXPECT_EQ(d.samples, r.patches.size() * 81);
+        EXPECT_LT(d.relativePosition(), c.position);
+        EXPECT_LT(d.maxNormalDeg, c.normalDeg);
+        std::printf("[ bfr      ] %-22s level %d: max position %.2e of the diagonal, normal %.3f deg\n",
+                    c.name.c_str(), r.level, d.relativePosition(), d.maxNormalDeg);
+        size_t bad, open;
+        checkWatertight(r.patches, bad, open);
+        EXPECT_EQ(bad, 0u);
+    }
+    // The hole's face has no patches; the infinitely sharp corner is interpolated, the 1.5 one is not.
+    SubdivMesh holed = cube();
+    holed.holes.push_back(1);
+    for (uint32_t f : subdivideOsd(holed).patchBaseFace) EXPECT_NE(f, 1u);
+    SubdivMesh cornered = cube();
+    cornered.corners.push_back({6, 10.f});
+    EXPECT_LT(length(cornerPoint(subdivideOsd(cornered)) - Vec3{1, 1, 1}), 1e-6f);
+    cornered.corners.back().sharpness = 1.5f;
+    EXPECT_GT(length(cornerPoint(subdivideOsd(cornered)) - Vec3{1, 1, 1}), 0.05f);
+    // Boundary: edges and corners interpolates the valence-2 corner vertex, edges only does not.
+    SubdivMesh g = openGrid(4);
+    auto hasCorner = [&](const SubdivResult& r) {
+        for (const BezierPatch& p : r.patches)
+            for (int k : {0, 3, 12, 15})
+                if (length(p.cp[k] - g.points[0]) < 1e-6f) return true;
+        return false;
+    };
+    EXPECT_TRUE(hasCorner(subdivideOsd(g)));
+    g.boundary = BoundaryMode::EdgesOnly;
+    EXPECT_FALSE(hasCorner(subdivideOsd(g)));
+}
+
+TEST(SubdivisionOsd, LevelFromScreenSize) {
+    const SubdivMesh c = cube();
+    EXPECT_EQ(subdivLevelFor(c, 0.f), kDefaultSubdivLevel);
+    EXPECT_EQ(subdivLevelFor(c, 10.f), 2);     // ~4 pixels a control face: at least level 2
+    EXPECT_EQ(subdivLevelFor(c, 122.5f), 3);   // 50 pixels a control face: 6.25 at level 3
+    EXPECT_EQ(subdivLevelFor(c, 2449.f), 4);   // 1000 pixels: 62.5 at level 4, the most from the screen
+    EXPECT_EQ(subdivLevelFor(c, 1e6f), 4);
+    EXPECT_EQ(subdivLevelFor(creasedCube(4.5f), 10.f), 5);  // semi-sharp features resolved
+    EXPECT_EQ(subdivLevelFor(creasedCube(10.f), 10.f), 2);  // infinitely sharp: nothing to resolve
+    OsdSubdivOptions o;
+    o.level = kMaxSubdivLevel + 1;
+    EXPECT_THROW(subdivideOsd(c, o), SubdivError);
+}
+
+TEST(SubdivisionOsd, BigGuyIsWatertightAndCloseToTheLimit) {
+    std::string path = std::string(TESSERA_SHARED_DATA) + "/bigguy/obj/bigguy.obj";
+    if (!fs::exists(path)) GTEST_SKIP() << "shared data not found";
+    ObjMesh obj = parseObj(readInputFile(path), path, {});
+    const SubdivResult r = subdivideOsd(obj.mesh);
+    EXPECT_EQ(r.level, kDefaultSubdivLevel);
+    EXPECT_EQ(r.patches.size(), 1450u * 16);
+    EXPECT_EQ(r.approxCount, size_t(108 * 3 + 76 * 5 + 12 * 6));  // the faces at extraordinary vertices
+    expectClosedAndWatertight(r, "bigguy");
+    const SubdivLimit limit(obj.mesh);
+    const SubdivDeviation d = subdivDeviation(obj.mesh, r, limit, 5);
+    EXPECT_LT(d.maxPositionExact / d.diagonal, 1e-6);
+    EXPECT_LT(d.relativePosition(), 5e-4);
+    EXPECT_LT(d.maxNormalDeg, 10.0);
+    // Better than the hand-written converter in position.
+    EXPECT_LT(d.relativePosition(),
+              subdivDeviation(obj.mesh, subdivToBezier(obj.mesh), limit, 5).relativePosition());
+}
+
+// Rendered in both engines, Big Guy and a creased cube have no pinholes (box filter: every pixel whose
+// samples are all inside the silhouette is fully covered).
+TEST(SubdivisionOsd, BigGuyAndCreasedCubeHaveNoPinholesInBothEngines) {
+    const std::string bigguy = std::string(TESSERA_SOURCE_DIR) + "/scenes/bigguy.rib";
+    const std::string cubeRib = writeRibFile(
+        "Format 160 160 1\nPixelSamples 3 3\nPixelFilter \"box\" 1 1\nProjection \"perspective\" \"fov\" 40\n"
+        "Translate 0 0 6\nRotate -30 1 0 0\nRotate 35 0 1 0\nWorldBegin\nLightSource \"ambientlight\" 1\n"
+        "Surface \"matte\"\nSubdivisionMesh \"catmull-clark\" " +
+        std::string(kCubeMesh) +
+        " [\"crease\" \"crease\" \"corner\"] [5 1 2 1 1 1] [0 1 2 3 0 4 5 6] [2 10 3] " + kCubeP +
+        "\nWorldEnd\n");
+    for (const std::string& file : {bigguy, cubeRib}) {
+        Scene s = loadScene(file, {});
+        s.camera.width = s.camera.height = 160;
+        s.image.filter = FilterType::Box;
+        s.image.filterWidthX = s.image.filterWidthY = 1;
+        s.image.pixelSamplesX = s.image.pixelSamplesY = 3;
+        for (const char* engine : {"reyes", "rt"}) {
+            SCOPED_TRACE(file + " " + engine);
+            RenderSettings rs;
+            rs.engine = engine;
+            rs.threads = 2;
+            const Image img = render(s, rs).image;
+            EXPECT_EQ(tessera::test::countPinholes(img, 1.f), 0);
+            double covered = 0;
+            for (int y = 0; y < img.height; ++y)
+                for (int x = 0; x < img.width; ++x) covered += img.pixel(x, y)[3];
+            EXPECT_GT(covered, 2000.0);
+        }
+    }
+}
+
+// "st" on a SubdivisionMesh: "facevarying" (per face corner) and "varying" (per vertex) are interpolated
+// linearly over each face, as RenderMan does. On a flat, evenly spaced grid the limit surface is the
+// bilinear map of each face, so s, t at every patch corner must be the corner's own x / 4, y / 4.
+TEST(SubdivisionRib, FaceVaryingAndVaryingStFollowEachFace) {
+    auto append = [](std::string& to, auto x) {  // (not " " + to_string(): a g++ 12 -Wrestrict false alarm)
+        to += ' ';
+        to += std::to_string(x);
+    };
+    std::string P, nverts, verts, stVertex, stCorner;
+    const int n = 4;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i) {
+            append(P, i);
+            append(P, j);
+            append(P, 0);
+            append(stVertex, i / 4.0);
+            append(stVertex, j / 4.0);
+        }
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            nverts += " 4";
+            for (auto [a, b] :
+                 std::vector<std::pair<int, int>>{{i, j}, {i + 1, j}, {i + 1, j + 1}, {i, j + 1}}) {
+                append(verts, b * (n + 1) + a);
+                append(stCorner, a / 4.0);
+                append(stCorner, b / 4.0);
+            }
+        }
+    std::string facevarying = "\"facevarying float[2] st\" [", varying = "\"varying float[2] st\" [";
+    facevarying += stCorner + "]";
+    varying += stVertex + "]";
+    for (const std::string& st : {facevarying, varying}) {
+        SCOPED_TRACE(st.substr(0, 22));
+        Scene s = loadScene(
+            writeRibFile("WorldBegin\nSubdivisionMesh \"catmull-clark\" [" + nverts + "] [" + verts +
+                         "] [\"interpolateboundary\"] [0 0] [] [] \"P\" [" + P + "] " + st + "\nWorldEnd\n"),
+            {});
+        ASSERT_EQ(s.patches.size(), 16u * 16);
+        ASSERT_EQ(s.texCoords.size(), s.patches.size());
+        float worst = 0;
+        for (size_t i = 0; i < s.patches.size(); ++i) {
+            const int cpIndex[4] = {0, 3, 12, 15};  // PatchTexCoords order: (0,0) (1,0) (0,1) (1,1)
+            for (int k = 0; k < 4; ++k) {
+                const Vec3 c = s.patches[i].cp[cpIndex[k]];
+                const Vec2 t = s.texCoords[i].st[k];
+                worst = std::max({worst, std::fabs(t.x - c.x / 4), std::fabs(t.y - c.y / 4)});
+            }
+        }
+        EXPECT_LT(worst, 1e-5f);
+    }
+}
+
+// Deformation keys of a SubdivisionMesh share the first key's level even when their sizes on screen would
+// choose others (the second key here is 8 times larger): every key has the same patches.
+TEST(SubdivisionRib, DeformationKeysShareTheFirstKeysLevel) {
+    std::string big = "\"P\" [";
+    for (int v = 0; v < 8; ++v)
+        for (int k = 0; k < 3; ++k) big += (v >> (k == 0 ? 0 : k == 1 ? 1 : 2)) & 1 ? " 8" : " -8";
+    big += "]";
+    const std::string mesh = std::string("SubdivisionMesh \"catmull-clark\" ") + kCubeMesh + " ";
+    Scene s =
+        loadScene(writeRibFile("Format 200 200 1\nProjection \"perspective\" \"fov\" 40\nTranslate 0 0 30\n"
+                               "Shutter 0 1\nWorldBegin\nMotionBegin [0 1]\n" +
+                               mesh + kCubeP + "\n" + mesh + big + "\nMotionEnd\nWorldEnd\n"),
+                  {});
+    EXPECT_EQ(s.patches.size(), 6u * 16);  // level 2 from the first key (8 pixels a control face); the
+                                           // second alone would be level 4
+}
+
+// A crease between vertices no edge joins is ignored with a warning (not OpenSubdiv's own printout).
+TEST(SubdivisionOsd, CreaseOffTheMeshIsWarnedAndIgnored) {
+    SubdivMesh m = cube();
+    m.creases.push_back({0, 6, 10.f});  // a diagonal of the cube
+    const SubdivResult r = subdivideOsd(m), smooth = subdivideOsd(cube());
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("crease (0, 6) is not an edge"), std::string::npos);
+    ASSERT_EQ(r.patches.size(), smooth.patches.size());
+    for (size_t i = 0; i < r.patches.size(); ++i)
+        EXPECT_EQ(std::memcmp(r.patches[i].cp, smooth.patches[i].cp, sizeof r.patches[i].cp), 0);
 }

@@ -49,6 +49,13 @@ struct Level {
     std::vector<char> cornerTag;          // per vertex
     std::unordered_set<uint64_t> crease;  // tagged sharp edges (boundary edges are sharp implicitly)
     BoundaryMode mode = BoundaryMode::EdgesAndCorners;
+    // Where each face lies on the input mesh (SubdivResult::patchBaseFace/patchSubFace/patchUV); sub = -2:
+    // an input face other than a quad, not yet split into sub-faces.
+    struct Param {
+        int base = 0, sub = -1;
+        std::array<Vec2, 4> uv{};
+    };
+    std::vector<Param> param;
 
     int faces() const { return int(fOff.size()) - 1; }
     int size(int f) const { return fOff[f + 1] - fOff[f]; }
@@ -246,6 +253,18 @@ Level refine(const Level& L, const Topo& T) {
                         {L.fv[size_t(h)], nv + T.heEdge[size_t(h)], nv + ne + f, nv + T.heEdge[size_t(hp)]});
             N.fOff.push_back(int(N.fv.size()));
             N.hole.push_back(L.hole[size_t(f)]);
+            const Level::Param& pp = L.param[size_t(f)];
+            Level::Param cp{pp.base, pp.sub, {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}}};
+            if (pp.sub == -2) {
+                cp.sub = c;
+            } else {
+                auto mid = [](Vec2 a, Vec2 b) { return Vec2{(a.x + b.x) * 0.5f, (a.y + b.y) * 0.5f}; };
+                const Vec2 a = pp.uv[size_t(c)], n = pp.uv[size_t((c + 1) % 4)],
+                           p = pp.uv[size_t((c + 3) % 4)];
+                const Vec2 centre = mid(mid(pp.uv[0], pp.uv[2]), mid(pp.uv[1], pp.uv[3]));
+                cp.uv = {a, mid(a, n), centre, mid(p, a)};
+            }
+            N.param.push_back(cp);
         }
     }
     N.cornerTag.assign(N.p.size(), 0);
@@ -357,6 +376,9 @@ Level fromMesh(const SubdivMesh& m, std::vector<std::string>* warnings) {
         throw SubdivError("the face sizes add up to " + std::to_string(total) + " vertex indices, but " +
                           std::to_string(m.faceVerts.size()) + " are given");
     L.hole.assign(m.faceSizes.size(), 0);
+    for (size_t f = 0; f < m.faceSizes.size(); ++f)
+        L.param.push_back(
+            {int(f), m.faceSizes[f] == 4 ? -1 : -2, {Vec2{0, 0}, Vec2{1, 0}, Vec2{1, 1}, Vec2{0, 1}}});
     for (int h : m.holes) {
         if (h < 0 || size_t(h) >= m.faceSizes.size())
             throw SubdivError("hole face " + std::to_string(h) + " does not exist");
@@ -441,6 +463,10 @@ class PatchBuilder {
             out.patches.push_back(p);
             out.patchFace.push_back(uint32_t(f));
             out.patchExact.push_back(exact ? 1 : 0);
+            const Level::Param& pp = L_.param[size_t(f)];
+            out.patchBaseFace.push_back(uint32_t(pp.base));
+            out.patchSubFace.push_back(pp.sub);
+            out.patchUV.push_back(pp.uv);
             ++(exact ? out.exactCount : out.approxCount);
         }
     }
@@ -572,6 +598,11 @@ SubdivResult subdivToBezier(const SubdivMesh& mesh, const SubdivOptions& options
     out.level = steps;
     PatchBuilder(L, T).build(out);
     return out;
+}
+
+void validateSubdivMesh(const SubdivMesh& mesh) {
+    Level L = fromMesh(mesh, nullptr);
+    buildTopo(L);
 }
 
 SubdivMesh refineMesh(const SubdivMesh& mesh) {

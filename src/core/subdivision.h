@@ -1,5 +1,11 @@
 // Catmull-Clark subdivision surfaces (E. Catmull, J. Clark, "Recursively generated B-spline surfaces on
-// arbitrary topological meshes", CAD 10(6), 1978) converted to bicubic Bezier patches.
+// arbitrary topological meshes", CAD 10(6), 1978): the control mesh, its validation, and the hand-written
+// converter to bicubic Bezier patches.
+//
+// The readers convert through OpenSubdiv (io/subdiv_osd.h: exact semi-sharp creases, uniform refinement
+// to a level from the screen size). The hand-written converter below stays as the baseline that
+// bench/subdiv_error measures against OpenSubdiv's limit surface (docs/subdivision.md), and refineMesh()
+// and limitPositions() serve the tests as an independent reference for infinitely sharp features.
 //
 // Method (docs/inputs.md has the user-facing summary):
 //  1. Unless every face is already regular, the whole mesh is refined by `refineSteps` Catmull-Clark steps
@@ -26,6 +32,7 @@
 // limit curves are uniform cubic B-splines with interpolated corners, which the patches reproduce exactly.
 // Semi-sharp (finite) sharpness is treated as infinitely sharp and reported in the warnings.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -85,12 +92,22 @@ struct SubdivResult {
     std::vector<BezierPatch> patches;
     std::vector<uint32_t> patchFace;  // face of the refined mesh (refineMesh() numbering) of each patch
     std::vector<uint8_t> patchExact;  // 1: exact B-spline patch, 0: approximation
-    int level = 0;                    // refinement steps applied
+    // Where each patch lies on the control mesh: its input face, for a face other than a quad the
+    // sub-face (the quad at that corner; -1 for quads), and the (s, t) of the patch's four corners in
+    // (0,0) (1,0) (1,1) (0,1) order, in the face's (u, v) or the sub-face's normalized coordinates
+    // (io/subdiv_osd.h SubdivLimit::evaluate). Bilinear in between.
+    std::vector<uint32_t> patchBaseFace;
+    std::vector<int> patchSubFace;
+    std::vector<std::array<Vec2, 4>> patchUV;
+    int level = 0;  // refinement steps applied
     size_t exactCount = 0, approxCount = 0;
     std::vector<std::string> warnings;  // e.g. semi-sharp creases treated as sharp
 };
 
-// Converts the mesh; throws SubdivError for malformed topology.
+// Throws SubdivError for malformed topology or out-of-range indices (what both converters check first).
+void validateSubdivMesh(const SubdivMesh& mesh);
+
+// The hand-written converter (steps 1-4 above); throws SubdivError for malformed topology.
 SubdivResult subdivToBezier(const SubdivMesh& mesh, const SubdivOptions& options = {});
 
 // One Catmull-Clark step with the sharp rules above. Numbering of the result: the old vertices keep their

@@ -6,6 +6,8 @@
 #include <set>
 #include <string_view>
 
+#include "io/subdiv_osd.h"
+
 namespace tessera {
 
 namespace {
@@ -157,7 +159,7 @@ std::vector<BezierPatch> objToPatches(const std::string& text, const std::string
     ObjMesh obj = parseObj(text, file, warn);
     SubdivResult r;
     try {
-        r = subdivToBezier(obj.mesh);
+        r = subdivideOsd(obj.mesh);  // no camera yet: kDefaultSubdivLevel
     } catch (const SubdivError& e) {
         int ln = e.face() >= 0 && size_t(e.face()) < obj.faceLine.size() ? obj.faceLine[size_t(e.face())] : 0;
         throw InputError(file, ln, e.what());

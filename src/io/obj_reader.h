@@ -21,8 +21,8 @@ struct ObjMesh {
 // number, an index of 0 or out of range, a face with fewer than 3 vertices, or a file without faces.
 ObjMesh parseObj(const std::string& text, const std::string& file, const WarningSink& warn);
 
-// parseObj + subdivToBezier; topology errors (non-manifold edges, repeated vertices) are reported at the
-// line of the offending face.
+// parseObj + subdivideOsd (io/subdiv_osd.h, at kDefaultSubdivLevel); topology errors (non-manifold edges,
+// repeated vertices) are reported at the line of the offending face.
 std::vector<BezierPatch> objToPatches(const std::string& text, const std::string& file,
                                       const WarningSink& warn, SubdivResult* stats = nullptr);
 

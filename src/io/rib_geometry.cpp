@@ -12,6 +12,7 @@
 #include "core/basis.h"
 #include "core/nurbs.h"
 #include "core/subdivision.h"
+#include "io/subdiv_osd.h"
 #include "shading/texture.h"
 
 namespace tessera::rib {
@@ -49,7 +50,11 @@ void checkFinite(const BezierPatch& b, int line, const Diagnostics& diag) {
 class PrimitiveReader {
   public:
     PrimitiveReader(const PrimitiveContext& c, const Request& r)
-        : state_(c.state), decls_(c.decls), diag_(c.diag) {
+        : state_(c.state),
+          decls_(c.decls),
+          diag_(c.diag),
+          camera_(c.scene.camera),
+          subdivLevel_(c.subdivLevel) {
         shape_.request = r.name;
         shape_.line = r.line;
     }
@@ -973,7 +978,54 @@ class PrimitiveReader {
             }
     }
 
-    // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted by subdivToBezier().
+    // Per-patch s, t of a converted SubdivisionMesh: the face's corner values interpolated bilinearly over
+    // the face (a face other than a quad: over each sub-face quad, with edge midpoints and the centroid),
+    // at the patch's place on the control face (SubdivResult::patchUV).
+    void subdivTexCoords(const SubdivMesh& mesh, const std::vector<Vec2>& st, bool perCorner,
+                         const SubdivResult& res) {
+        std::vector<size_t> offset(mesh.faceSizes.size() + 1, 0);
+        for (size_t f = 0; f < mesh.faceSizes.size(); ++f)
+            offset[f + 1] = offset[f] + size_t(mesh.faceSizes[f]);
+        auto corner = [&](size_t k) { return perCorner ? st[k] : st[size_t(mesh.faceVerts[k])]; };
+        auto mix = [](Vec2 a, Vec2 b, float w) { return Vec2{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w}; };
+        for (size_t i = 0; i < res.patches.size(); ++i) {
+            const size_t f = res.patchBaseFace[i], o = offset[f];
+            const int n = mesh.faceSizes[f];
+            Vec2 q[4];
+            if (res.patchSubFace[i] < 0) {
+                for (int k = 0; k < 4; ++k) q[k] = corner(o + size_t(k));
+            } else {
+                const int c = res.patchSubFace[i];
+                Vec2 centre{0, 0};
+                for (int k = 0; k < n; ++k)
+                    centre = {centre.x + corner(o + size_t(k)).x / float(n),
+                              centre.y + corner(o + size_t(k)).y / float(n)};
+                const Vec2 a = corner(o + size_t(c)), next = corner(o + size_t((c + 1) % n)),
+                           prev = corner(o + size_t((c + n - 1) % n));
+                q[0] = a, q[1] = mix(a, next, 0.5f), q[2] = centre, q[3] = mix(a, prev, 0.5f);
+            }
+            auto at = [&](Vec2 uv) { return mix(mix(q[0], q[1], uv.x), mix(q[3], q[2], uv.x), uv.y); };
+            const auto& uv = res.patchUV[i];
+            PatchTexCoords tc;
+            tc.st[0] = at(uv[0]), tc.st[1] = at(uv[1]), tc.st[2] = at(uv[3]), tc.st[3] = at(uv[2]);
+            shape_.texCoords.push_back(tc);
+        }
+    }
+
+    // Extent in raster pixels of the projection of points (object space, the CTM at shutter open), 0 if
+    // some point is at or behind the eye: what subdivLevelFor() chooses a level from.
+    float rasterSize(const std::vector<Vec3>& points) const {
+        const Mat4 toCamera = camera_.cameraFromWorld * state_.transform().at(camera_.shutterOpen);
+        Bounds3 b;
+        for (const Vec3& p : points) b.extend(toCamera.point(p));
+        float x0, x1, y0, y1;
+        if (points.empty() || !Projector(camera_).rasterBounds(b, x0, x1, y0, y1)) return 0.f;
+        const float size = std::max(x1 - x0, y1 - y0);
+        return std::isfinite(size) ? size : 0.f;
+    }
+
+    // RiSubdivisionMesh (RI spec 3.2, sec. 5.6): Catmull-Clark surfaces, converted through OpenSubdiv by
+    // subdivideOsd() (io/subdiv_osd.h) at a level from the mesh's size on screen.
     void subdivisionMesh(const Request& r) {
         Arguments args(r, diag_);
         args.atLeast(3, "scheme nvertices vertices [tags nargs intargs floatargs] ...parameterlist...");
@@ -1070,6 +1122,12 @@ class PrimitiveReader {
         }
         auto pts = positions(r, ps, npoints, "SubdivisionMesh");
         if (!pts) return skip();
+        // s, t: "varying" (one per vertex) or "facevarying" (one per face corner); RenderMan interpolates
+        // both linearly over each face ("facevertex" and "vertex" would be smooth: not supported, warned).
+        bool stPerCorner = false;
+        for (const Param& p : ps)
+            if (isTexCoordParam(p.name) && p.decl) stPerCorner |= p.decl->cls == "facevarying";
+        const auto st = varyingTexCoords(r, ps, stPerCorner ? verts.size() : npoints, "SubdivisionMesh");
         mesh.points = std::move(*pts);
         mesh.faceSizes = std::move(nverts);
         mesh.faceVerts = std::move(verts);
@@ -1115,12 +1173,17 @@ class PrimitiveReader {
         }
         SubdivResult res;
         try {
-            res = subdivToBezier(mesh);
+            OsdSubdivOptions options;
+            options.level = subdivLevel_;
+            if (options.level < 0) options.rasterSize = rasterSize(mesh.points);
+            res = subdivideOsd(mesh, options);
         } catch (const SubdivError& e) {
             diag_.fail(r.line, std::string("SubdivisionMesh: ") + e.what());
         }
         for (const std::string& w : res.warnings)
             diag_.warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
+        if (st) subdivTexCoords(mesh, *st, stPerCorner, res);
+        shape_.subdivLevel = res.level;
         shape_.patches = std::move(res.patches);
     }
 
@@ -1128,6 +1191,8 @@ class PrimitiveReader {
     const GraphicsState& state_;
     const Declarations& decls_;
     Diagnostics& diag_;
+    const Camera& camera_;
+    int subdivLevel_;
     PrimitiveShape shape_;
 };
 

@@ -19,6 +19,9 @@ struct PrimitiveContext {
     const GraphicsState& state;
     const Declarations& decls;
     Diagnostics& diag;
+    // SubdivisionMesh: the refinement level to use (deformation keys after the first take the first's, so
+    // all keys have the same patches); -1: from the mesh's size on screen.
+    int subdivLevel = -1;
 };
 
 // The object-space Bezier patches of one primitive request, before the CTM is applied: what a motion
@@ -45,6 +48,7 @@ struct PrimitiveShape {
     // "nonperiodic" 4 "nonperiodic"`) and as a hash that also covers vertex indices, knots and tags.
     std::string topology;
     uint64_t topologyHash = 0;
+    int subdivLevel = 0;  // SubdivisionMesh: the refinement level it was converted at
 };
 
 bool isPrimitiveRequest(const std::string& name);

@@ -1227,8 +1227,10 @@ class RibReader {
                 m.rotations.push_back({v[0], v[1], v[2], v[3]});
             }
         } else if (primitive) {
-            PrimitiveShape key =
-                readPrimitiveShape(r, primitiveContext(), m.shapes.empty() ? nullptr : &m.shapes.front());
+            PrimitiveContext context = primitiveContext();
+            if (!m.shapes.empty() && m.shapes.front().subdivLevel > 0)
+                context.subdivLevel = m.shapes.front().subdivLevel;  // the same patches in every key
+            PrimitiveShape key = readPrimitiveShape(r, context, m.shapes.empty() ? nullptr : &m.shapes.front());
             m.shapes.push_back(std::move(key));
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
             if (b.topology != a.topology || b.topologyHash != a.topologyHash ||
