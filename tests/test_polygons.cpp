@@ -38,6 +38,38 @@ std::string polygonRib(const std::vector<P2>& poly, double z) {
     return rib.str();
 }
 
+// Renders `s` in both engines and checks every pixel whose 3x3 neighbourhood the exact coverage `truth`
+// says is fully inside (outside) is covered (empty), and the covered area against the exact one.
+void expectCoverage(const Scene& s, const std::vector<double>& truth, int res, double areaTolerance = 0.01) {
+    double truthSum = 0;
+    for (double t : truth) truthSum += t;
+    for (const char* engine : {"reyes", "rt"}) {
+        SCOPED_TRACE(engine);
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        const Image img = render(s, rs).image;
+        double sum = 0;
+        int wrong = 0;
+        for (int y = 0; y < res; ++y)
+            for (int x = 0; x < res; ++x) {
+                const float a = alphaAt(img, x, y);
+                sum += a;
+                bool allIn = true, allOut = true;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const double t = truth[size_t(std::clamp(y + dy, 0, res - 1)) * res +
+                                               std::clamp(x + dx, 0, res - 1)];
+                        allIn = allIn && t == 1.0;
+                        allOut = allOut && t == 0.0;
+                    }
+                wrong += (allIn && a < 0.999f) || (allOut && a > 0.f);
+            }
+        EXPECT_EQ(wrong, 0);
+        EXPECT_NEAR(sum, truthSum, areaTolerance * truthSum) << "area";
+    }
+}
+
 TEST(Polygons, ConcavePolygonsCoverExactlyTheirArea) {
     std::vector<std::vector<P2>> shapes;
     shapes.push_back({{-1, -1}, {1, -1}, {1, -0.3}, {-0.2, -0.3}, {-0.2, 1}, {-1, 1}});  // an L
@@ -53,35 +85,9 @@ TEST(Polygons, ConcavePolygonsCoverExactlyTheirArea) {
         const std::vector<P2>& poly = shapes[si];
         Scene s = load(topView(polygonRib(poly, 0.3), res)).scene;
         EXPECT_EQ(s.patches.size(), si == 2 ? 1u : poly.size() - 2);  // n - 2 triangles
-        const std::vector<double> truth =
-            exactCoverage(s, [&](double x, double y) { return insidePolygon(poly, x, y); });
-        double truthSum = 0;
-        for (double t : truth) truthSum += t;
-        for (const char* engine : {"reyes", "rt"}) {
-            SCOPED_TRACE("shape " + std::to_string(si) + " " + engine);
-            RenderSettings rs;
-            rs.engine = engine;
-            rs.threads = 2;
-            const Image img = render(s, rs).image;
-            double sum = 0;
-            int wrong = 0;
-            for (int y = 0; y < res; ++y)
-                for (int x = 0; x < res; ++x) {
-                    const float a = alphaAt(img, x, y);
-                    sum += a;
-                    bool allIn = true, allOut = true;
-                    for (int dy = -1; dy <= 1; ++dy)
-                        for (int dx = -1; dx <= 1; ++dx) {
-                            const double t = truth[size_t(std::clamp(y + dy, 0, res - 1)) * res +
-                                                   std::clamp(x + dx, 0, res - 1)];
-                            allIn = allIn && t == 1.0;
-                            allOut = allOut && t == 0.0;
-                        }
-                    wrong += (allIn && a < 0.999f) || (allOut && a > 0.f);
-                }
-            EXPECT_EQ(wrong, 0);
-            EXPECT_NEAR(sum, truthSum, 0.01 * truthSum) << "area";
-        }
+        SCOPED_TRACE("shape " + std::to_string(si));
+        expectCoverage(s, exactCoverage(s, [&](double x, double y) { return insidePolygon(poly, x, y); }),
+                       res);
     }
 }
 
@@ -124,38 +130,6 @@ TEST(Polygons, PointsPolygonsMeshHasNoPinholes) {
                 for (int x = 8; x < 88; ++x) uncovered += alphaAt(img, x, y) < 0.999f;
             EXPECT_EQ(uncovered, 0);
         }
-    }
-}
-
-// Renders `s` in both engines and checks every pixel whose 3x3 neighbourhood the exact coverage `truth`
-// says is fully inside (outside) is covered (empty), and the covered area against the exact one.
-void expectCoverage(const Scene& s, const std::vector<double>& truth, int res, double areaTolerance = 0.01) {
-    double truthSum = 0;
-    for (double t : truth) truthSum += t;
-    for (const char* engine : {"reyes", "rt"}) {
-        SCOPED_TRACE(engine);
-        RenderSettings rs;
-        rs.engine = engine;
-        rs.threads = 2;
-        const Image img = render(s, rs).image;
-        double sum = 0;
-        int wrong = 0;
-        for (int y = 0; y < res; ++y)
-            for (int x = 0; x < res; ++x) {
-                const float a = alphaAt(img, x, y);
-                sum += a;
-                bool allIn = true, allOut = true;
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const double t = truth[size_t(std::clamp(y + dy, 0, res - 1)) * res +
-                                               std::clamp(x + dx, 0, res - 1)];
-                        allIn = allIn && t == 1.0;
-                        allOut = allOut && t == 0.0;
-                    }
-                wrong += (allIn && a < 0.999f) || (allOut && a > 0.f);
-            }
-        EXPECT_EQ(wrong, 0);
-        EXPECT_NEAR(sum, truthSum, areaTolerance * truthSum) << "area";
     }
 }
 
