@@ -335,6 +335,11 @@ nlohmann::json shadowStats(const std::string& statsPath) {
     return nlohmann::json::parse(f).at("shadows");
 }
 
+std::string fileBytes(const fs::path& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
 std::vector<fs::path> cachedMaps(const fs::path& dir) {
     std::vector<fs::path> maps;
     for (const auto& e : fs::directory_iterator(dir))
@@ -389,16 +394,9 @@ TEST(Tiles, ShadowMapCacheRendersTheMapsOnceForEveryTile) {
     // The tiles read the maps from the files: replaced by maps that see nothing (infinite depth), the
     // shadow is gone and the image brightens where it was.
     const std::vector<fs::path> maps = cachedMaps(cache);
-    const std::vector<char> original = [&] {
-        std::ifstream f(maps[0], std::ios::binary);
-        return std::vector<char>(std::istreambuf_iterator<char>(f), {});
-    }();
+    const uintmax_t wholeSize = fs::file_size(maps[0]);
     for (const fs::path& m : maps) {
-        std::vector<char> bytes;
-        {
-            std::ifstream f(m, std::ios::binary);
-            bytes.assign(std::istreambuf_iterator<char>(f), {});
-        }
+        std::string bytes = fileBytes(m);
         ASSERT_GT(bytes.size(), 16u);
         const float inf = std::numeric_limits<float>::infinity();
         for (size_t o = 16; o + 4 <= bytes.size(); o += 4) std::memcpy(&bytes[o], &inf, 4);
@@ -424,13 +422,9 @@ TEST(Tiles, ShadowMapCacheRendersTheMapsOnceForEveryTile) {
         << out;
     EXPECT_EQ(shadowStats(again)["cache"]["misses"], 1);
     EXPECT_EQ(shadowStats(again)["cache"]["hits"], 5);
-    EXPECT_EQ(fs::file_size(maps[0]), original.size());
+    EXPECT_EQ(fs::file_size(maps[0]), wholeSize);
     // Another scene (the small plane moved) shares no map with this one.
-    std::string text;
-    {
-        std::ifstream f(rib);
-        text.assign(std::istreambuf_iterator<char>(f), {});
-    }
+    std::string text = fileBytes(rib);
     const size_t at = text.find("-1.3 -0.9 5");
     ASSERT_NE(at, std::string::npos);
     const std::string other = test::writeTestFile("moved.rib", text.replace(at, 4, "-1.2"));

@@ -128,24 +128,10 @@ T cast(const char* name, py::handle value) {
 
 // `n` numbers from a sequence (a tuple, a list) or a comma-separated string.
 std::vector<double> numbers(const char* name, py::handle value, size_t n) {
-    std::vector<double> v;
-    if (py::isinstance<py::str>(value)) {
-        for (const std::string& part : splitCommas(value.cast<std::string>())) {
-            size_t used = 0;
-            double x = 0;
-            try {
-                x = std::stod(part, &used);
-            } catch (const std::exception&) {
-                used = 0;
-            }
-            if (used == 0 || used != part.size())
-                v.clear(), v.resize(n + 1);  // reported below
-            else
-                v.push_back(x);
-        }
-    } else {
-        v = cast<std::vector<double>>(name, value);
-    }
+    const std::vector<double> v =
+        py::isinstance<py::str>(value)
+            ? parseNumberList(value.cast<std::string>(), n).value_or(std::vector<double>{})
+            : cast<std::vector<double>>(name, value);
     if (v.size() != n)
         throw std::invalid_argument(std::string(name) + " needs " + std::to_string(n) + " numbers");
     for (double x : v)
@@ -176,10 +162,9 @@ Request parseOptions(const py::kwargs& kw) {
         else if (key == "res") {
             if (py::isinstance<py::str>(v)) {
                 const std::string s = v.cast<std::string>();
-                char x = 0, extra = 0;
-                if (std::sscanf(s.c_str(), "%d%c%d%c", &o.width, &x, &o.height, &extra) != 3 ||
-                    (x != 'x' && x != 'X'))
-                    throw std::invalid_argument("res '" + s + "' is not WIDTHxHEIGHT");
+                const std::optional<std::pair<int, int>> wh = parseResolution(s);
+                if (!wh) throw std::invalid_argument("res '" + s + "' is not WIDTHxHEIGHT");
+                std::tie(o.width, o.height) = *wh;
             } else {
                 const auto wh = cast<std::vector<int>>(k, v);
                 if (wh.size() != 2) throw std::invalid_argument("res needs (width, height)");
@@ -276,7 +261,7 @@ PyResult renderPy(const PyScene& loaded, const py::kwargs& kw) {
     const double* cw = req.crop ? req.crop->data() : scene.image.cropWindow;
     if (req.crop) {
         const auto& c = *req.crop;
-        if (!(c[0] >= 0 && c[1] <= 1 && c[2] >= 0 && c[3] <= 1 && c[0] < c[1] && c[2] < c[3]))
+        if (!validCropWindow(c.data()))
             throw std::invalid_argument("crop needs 0 <= xmin < xmax <= 1 and 0 <= ymin < ymax <= 1 (NDC)");
     }
     settings.view.region =

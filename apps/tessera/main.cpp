@@ -18,6 +18,7 @@
 #include <optional>
 #include <vector>
 
+#include "core/hash.h"
 #include "film/crop.h"
 #include "io/diagnostics.h"
 #include "io/image_io.h"
@@ -87,20 +88,6 @@ ExrMetadata exrMetadata(const Camera& cam, double renderMs) {
     m.software = "tessera " TESSERA_VERSION;
     m.renderMs = renderMs;
     return m;
-}
-
-// `n` comma-separated finite numbers ("0,1"); nullopt if the text is not that.
-std::optional<std::vector<double>> parseNumberList(const std::string& text, size_t n) {
-    std::vector<double> out;
-    for (const std::string& part : splitCommas(text)) {
-        char* stop = nullptr;
-        errno = 0;
-        const double v = std::strtod(part.c_str(), &stop);
-        if (part.empty() || *stop != '\0' || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
-        out.push_back(v);
-    }
-    if (out.size() != n) return std::nullopt;
-    return out;
 }
 
 std::optional<UpAxis> parseUp(const std::string& up) {
@@ -289,10 +276,10 @@ std::optional<std::pair<int, int>> parseTile(const std::string& text) {
 // that changes pixels (not --crop/--tile, -o, --threads, --bucket-size, --stats or the progress flags).
 // Files the scene reads (ReadArchive, textures) are not hashed: keep them unchanged while a farm renders.
 std::string sceneHash(const RenderArgs& a, const Scene& scene) {
-    uint64_t h = 1469598103934665603ull;
+    Fnv1a64 h;
     auto mix = [&h](const std::string& bytes) {
-        for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
-        h = (h ^ 0xff) * 1099511628211ull;  // separator
+        h.bytes(bytes.data(), bytes.size());
+        h.value(uint8_t(0xff));  // separator
     };
     std::ifstream f(a.scene, std::ios::binary);
     mix(std::string(std::istreambuf_iterator<char>(f), {}));
@@ -306,7 +293,7 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
     mix(std::to_string(a.lightSamples));
     mix(a.gloss);
     mix(std::to_string(a.passes));
-    return fmt::format("{:016x}", h);
+    return fmt::format("{:016x}", h.h);
 }
 
 int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
@@ -356,7 +343,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         crop = parseNumberList(a.crop, 4);
         if (!crop) fail(fmt::format("error: --crop '{}' is not XMIN,XMAX,YMIN,YMAX (four numbers)", a.crop));
         const std::vector<double>& c = *crop;
-        if (!(c[0] >= 0 && c[1] <= 1 && c[2] >= 0 && c[3] <= 1 && c[0] < c[1] && c[2] < c[3]))
+        if (!validCropWindow(c.data()))
             fail(fmt::format(
                 "error: --crop '{}': needs 0 <= xmin < xmax <= 1 and 0 <= ymin < ymax <= 1 (NDC)", a.crop));
     }
@@ -396,9 +383,9 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     }
     int resW = 0, resH = 0;
     if (!a.res.empty()) {
-        char x = 0, extra = 0;
-        if (std::sscanf(a.res.c_str(), "%d%c%d%c", &resW, &x, &resH, &extra) != 3 || (x != 'x' && x != 'X'))
-            fail(fmt::format("error: --res '{}' is not WIDTHxHEIGHT", a.res));
+        const std::optional<std::pair<int, int>> wh = parseResolution(a.res);
+        if (!wh) fail(fmt::format("error: --res '{}' is not WIDTHxHEIGHT", a.res));
+        std::tie(resW, resH) = *wh;
         if (resW < 1 || resH < 1 || resW > kMaxResolution || resH > kMaxResolution)
             fail(fmt::format("{}: error: resolution {}x{} outside 1..{} per axis", a.scene, resW, resH,
                              kMaxResolution));

@@ -9,6 +9,12 @@
 
 namespace tessera {
 
+// A crop window xmin, xmax, ymin, ymax in NDC that --crop and the Python module's crop= accept:
+// 0 <= xmin < xmax <= 1 and 0 <= ymin < ymax <= 1.
+inline bool validCropWindow(const double* c) {
+    return c[0] >= 0 && c[1] <= 1 && c[2] >= 0 && c[3] <= 1 && c[0] < c[1] && c[2] < c[3];
+}
+
 // RI spec 3.2, sec. 4.1.1 (CropWindow): the pixels rendered are
 //   ceil(xres * xmin) .. ceil(xres * xmax) - 1  (and the same in y), clamped to the image;
 // adjacent crop windows that share an edge therefore share no pixel and leave none out.

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/basis.h"
+#include "core/hash.h"
 #include "core/nurbs.h"
 #include "core/subdivision.h"
 #include "io/subdiv_osd.h"
@@ -508,14 +509,10 @@ class PrimitiveReader {
     // The topology a deformation key must share with the others: words and a hash of `extra` numbers.
     void setTopology(std::string words, const std::vector<double>& extra = {}) {
         shape_.topology = std::move(words);
-        uint64_t h = 1469598103934665603ull;  // FNV-1a over the words and the numbers' bytes
-        auto add = [&](const void* p, size_t n) {
-            for (size_t i = 0; i < n; ++i)
-                h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
-        };
-        add(shape_.topology.data(), shape_.topology.size());
-        add(extra.data(), extra.size() * sizeof(double));
-        shape_.topologyHash = h;
+        Fnv1a64 h;  // over the words and the numbers' bytes
+        h.bytes(shape_.topology.data(), shape_.topology.size());
+        h.bytes(extra.data(), extra.size() * sizeof(double));
+        shape_.topologyHash = h.h;
     }
 
     bool patchType(const Request& r, const std::string& type) const {

@@ -1,10 +1,14 @@
 #include "render/render_options.h"
 
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <initializer_list>
 #include <stdexcept>
 
 #include "film/blur_pattern.h"
+#include "render/aovs.h"
 
 namespace tessera {
 namespace {
@@ -90,6 +94,27 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
             "interleaved blur sampling needs samples per pixel x tile size^2 <= 65536, got " +
             std::to_string(spp) + " x " + std::to_string(s.blur.tileSize) +
             "^2 (lower the samples per pixel or the blur tile size)");
+}
+
+std::optional<std::vector<double>> parseNumberList(const std::string& text, size_t n) {
+    std::vector<double> out;
+    for (const std::string& part : splitCommas(text)) {
+        char* stop = nullptr;
+        errno = 0;
+        const double v = std::strtod(part.c_str(), &stop);
+        if (part.empty() || *stop != '\0' || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
+        out.push_back(v);
+    }
+    if (out.size() != n) return std::nullopt;
+    return out;
+}
+
+std::optional<std::pair<int, int>> parseResolution(const std::string& text) {
+    int w = 0, h = 0;
+    char x = 0, extra = 0;
+    if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
+        return std::nullopt;
+    return std::pair{w, h};
 }
 
 void applySceneOverrides(Scene& scene, const RenderOptions& o) {

@@ -5,6 +5,7 @@
 #pragma once
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "engine/settings.h"
@@ -44,6 +45,11 @@ struct RenderOptions {
     double adaptiveThreshold = 0;
     bool adaptiveThresholdGiven = false;
 };
+
+// The text forms of option values, for the CLI and the Python module's strings: `n` comma-separated finite
+// numbers ("0,1"), and WIDTHxHEIGHT ("640x480"); nullopt when the text is not that.
+std::optional<std::vector<double>> parseNumberList(const std::string& text, size_t n);
+std::optional<std::pair<int, int>> parseResolution(const std::string& text);
 
 // Applies the options that edit the scene (resolution, samples per pixel, shading rate, shutter, depth of
 // field). Throws std::invalid_argument naming the option for a value out of range, and for a scene whose

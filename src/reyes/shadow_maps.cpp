@@ -13,8 +13,8 @@
 #include <numbers>
 #include <optional>
 #include <thread>
-#include <type_traits>
 
+#include "core/hash.h"
 #include "engine/clock.h"
 #include "reyes/displace.h"
 #include "reyes/pipeline.h"
@@ -149,20 +149,6 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
 
 namespace {
 
-// FNV-1a, 64 bits, over raw bytes: the shadow-map cache's keys.
-struct Fnv64 {
-    uint64_t h = 1469598103934665603ull;
-    void bytes(const void* data, size_t n) {
-        const auto* p = static_cast<const unsigned char*>(data);
-        for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
-    }
-    template <typename T>
-    void value(const T& v) {
-        static_assert(std::is_trivially_copyable_v<T>);
-        bytes(&v, sizeof v);
-    }
-};
-
 // A cached depth map: "TSHM", version, width, height, then width * height floats (host byte order: the
 // cache is for the machines of one farm).
 constexpr char kCacheMagic[4] = {'T', 'S', 'H', 'M'};
@@ -225,7 +211,7 @@ bool writeCachedMap(const std::filesystem::path& file, const std::vector<float>&
 // What a depth pass depends on besides the light's view: the app's key (scene file and options) and the
 // surfaces themselves (archives and procedural input included), at shutter open.
 uint64_t sceneCacheKey(const Scene& scene, const RenderSettings& settings) {
-    Fnv64 h;
+    Fnv1a64 h;
     h.bytes(settings.shadowMapCacheKey.data(), settings.shadowMapCacheKey.size());
     static_assert(sizeof(BezierPatch) == 16 * 3 * sizeof(float));  // no padding to hash
     h.bytes(scene.patches.data(), scene.patches.size() * sizeof(BezierPatch));
@@ -244,7 +230,7 @@ uint64_t sceneCacheKey(const Scene& scene, const RenderSettings& settings) {
 }
 
 uint64_t faceCacheKey(uint64_t sceneKey, const Camera& c, float shadingRate) {
-    Fnv64 h;
+    Fnv1a64 h;
     h.value(sceneKey);
     const Projector pr(c);
     h.value(c.cameraFromWorld);
