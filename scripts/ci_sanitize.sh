@@ -11,9 +11,10 @@ PACKAGES=("${TESSERA_PACKAGES[@]}" libgtest-dev libgmock-dev)
 bash scripts/install_packages.sh "${PACKAGES[@]}"
 
 B=build-asan
-# -O1: fast enough to run the renders, still readable stacks. float-cast-overflow is not part of
+# -O1: fast enough to run the renders; -g1: line tables and function names, all a sanitizer's stack needs
+# (less debug information to compile and link than -g). float-cast-overflow is not part of
 # g++'s "undefined": out-of-range float -> int conversions are exactly what huge inputs cause.
-cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
+cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" \
   -DTESSERA_SANITIZE=address,undefined,float-cast-overflow -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF >/dev/null
 cmake --build $B -j"$(nproc)"
 
@@ -29,7 +30,15 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 heavy='^(MotionBlurCrossEngine\.MovingSphereWithLensAgrees|DefaultFraming\.(YUpCupShowsItsOpeningFromAbove|ShippedModelsKeepSensibleViews)'
 heavy+='|Files/ShippedSceneFile\.RendersWithBothEngines/(bigguy24|bigguy9|killeroo_spin)_rib'
 heavy+='|BothEngines/ShippedScenes\.RendersWithoutPinholes/bigguy(24|9)_(reyes|rt)'
-heavy+='|ReyesSampling\.TeapotCoverageConvergesWithSpp|ReyesDeterminism\.SameImageForAnyThreadCount)( |$)'
+heavy+='|ReyesSampling\.TeapotCoverageConvergesWithSpp|ReyesDeterminism\.SameImageForAnyThreadCount'
+# Shadow maps: ReyesShadowMaps.EveryKindOfMapAgreesWithRayTracedShadows and the shadow-count and one-map
+# tests run the map passes here; the larger scenes and the bias studies (15-25 s each) only in Release.
+heavy+='|ReyesShadowMaps\.AgreeWithTheRayTracersHardShadowsOnShippedScenes'
+heavy+='|ShadowMaps\.(ALitConvexSphereDoesNotShadowItself|APlateLeaningOnTheFloorLeaksNoMoreLightThanItsBiasLifts)'
+heavy+='|Tiles\.ShadowMapCacheRendersTheMapsOnceForEveryTile'
+# The same dicing and binning at more rates / more scenes than the tests that stay here.
+heavy+='|ReyesWatertight\.TeapotBodyHasNoPinholesAtManyRates|RtRayBinning\.SameCandidatesAndImageAsPerRayTraversal'
+heavy+=')( |$)'
 exclude=(-E "$heavy")
 [ "${TESSERA_ASAN_ALL:-0}" = 1 ] && exclude=()
 ctest --test-dir $B --output-on-failure -j"$(nproc)" --timeout 900 "${exclude[@]}" "$@"
