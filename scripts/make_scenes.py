@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Writes the multi-object benchmark scenes of scenes/ (run from the repository root):
 killeroo2.rib (2 killeroos), bigguy9.rib / bigguy24.rib (3x3 and 6x4 grids of the 3570-patch Big Guy) and
-bigguy_box.rib (Big Guy in a five-walled box, for the lighting work to come)."""
+bigguy_box.rib (Big Guy in a five-walled box, for the lighting work to come) and smooth_polygons.rib
+(polygons with per-vertex normals and colours)."""
 import math
 
 def normalize(v):
@@ -121,9 +122,56 @@ Surface "matte" "Ka" [ 1 ] "Kd" [ 0.9 ]
         write("bigguy_box", "Big Guy (3570 patches) in a five-walled box (a Cornell-box-like set for lighting work)",
               800, 800, 48, [0, 2.5, 17.5], [0, 2, 0], [0, 1, 0], 0.5, 1000, body)
 
+def polygon_sphere(nu, nv, normals):
+    """A UV sphere of radius 1 as RIB PointsPolygons (triangles at the poles), with its exact normals as
+    vertex "N" when `normals`."""
+    pts, nverts, verts = [], [], []
+    for j in range(nv + 1):
+        th = math.pi * j / nv
+        for i in range(nu):
+            ph = 2 * math.pi * i / nu
+            pts.append((math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)))
+    for j in range(nv):
+        for i in range(nu):
+            a, b = j * nu + i, j * nu + (i + 1) % nu
+            c, d = (j + 1) * nu + (i + 1) % nu, (j + 1) * nu + i
+            if j == 0:
+                nverts.append(3); verts += [a, d, c]
+            elif j == nv - 1:
+                nverts.append(3); verts += [a, d, b]
+            else:
+                nverts.append(4); verts += [a, d, c, b]
+    xyz = " ".join(f"{x:.6f} {y:.6f} {z:.6f}" for x, y, z in pts)
+    s = f"PointsPolygons [ {' '.join(map(str, nverts))} ]\n  [ {' '.join(map(str, verts))} ]\n  \"P\" [ {xyz} ]\n"
+    if normals:
+        s += f"  \"N\" [ {xyz} ]\n"
+    return s
+
+def smooth_polygons():
+    body = """LightSource "ambientlight" 1 "intensity" [ 0.15 ]
+Attribute "light" "shadows" [ "on" ]  # the key light casts shadows
+LightSource "distantlight" 2 "intensity" [ 0.9 ] "from" [ -1 3 -1 ] "to" [ 0 0 0 ]
+Surface "plastic" "Ks" [ 0.4 ] "roughness" [ 0.1 ]
+Color [ 0.8 0.75 0.6 ]
+"""
+    for x, normals in ((2.4, False), (0, True)):  # look_at mirrors x: +x is on the left
+        body += f"AttributeBegin\nTranslate {x} 0 0\n" + polygon_sphere(16, 8, normals) + "AttributeEnd\n"
+    body += """AttributeBegin
+Translate -2.4 0 0
+Sphere 1 -1 1 360
+AttributeEnd
+Surface "matte"
+Polygon "P" [ -4 -1 -1.5  4 -1 -1.5  4 -1 3  -4 -1 3 ]
+  "Cs" [ 0.9 0.2 0.2  0.2 0.9 0.2  0.2 0.3 0.9  0.9 0.9 0.9 ]
+"""
+    write("smooth_polygons", "polygons with per-vertex normals and colours: a 16 x 8 polygon sphere without "
+          "\"N\" (faceted, left), the same with vertex \"N\" (smooth, middle), an RI Sphere (right), on a floor "
+          "with vertex \"Cs\"", 480, 240, 30, [0, 3.3, -8.4], [0, 0, 0], [0, 1, 0], 0.1, 100, body)
+
 if __name__ == "__main__":
     bigguy_grid("bigguy9", 3, 3)
     bigguy_grid("bigguy24", 6, 4)
     killeroo2()
     bigguy_box()
     bigguy_box(glossy=True)
+    smooth_polygons()

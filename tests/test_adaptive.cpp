@@ -6,6 +6,7 @@
 
 #include "film/adaptive.h"
 #include "render/render.h"
+#include "render/render_options.h"
 #include "test_util.h"
 
 using namespace tessera;
@@ -16,15 +17,19 @@ namespace {
 AdaptiveThresholds allThresholds(float t) {
     AdaptiveThresholds a;
     a.color = a.objectId = a.normal = a.shadow = a.texture = t;
+    a.secondaryObjectId = a.secondaryNormal = a.secondaryShadow = a.secondaryTexture = t;
     return a;
 }
 
-RenderResult renderAdaptive(const Scene& s, const AdaptiveThresholds& t, int threads = 2) {
+RenderResult renderAdaptive(const Scene& s, const AdaptiveThresholds& t, int threads = 2,
+                            std::vector<uint32_t> focus = {}, bool interpolate = false) {
     RenderSettings rs;
     rs.engine = "rt";
     rs.threads = threads;
     rs.adaptive.enabled = true;
     rs.adaptive.thresholds = t;
+    rs.adaptive.focusObjects = std::move(focus);
+    rs.adaptive.interpolate = interpolate;
     return render(s, rs);
 }
 
@@ -210,4 +215,111 @@ TEST(Adaptive, SameImageForAnyThreadCount) {
     EXPECT_EQ(one.image.rgba, four.image.rgba);
     EXPECT_EQ(one.refinedSubpixels, two.refinedSubpixels);
     EXPECT_EQ(one.refinedSubpixels, four.refinedSubpixels);
+}
+
+// Secondary-hit attributes (paper 004, L141): a mirror fills the view and reflects two squares of the same
+// constant colour but different objects, meeting at x = 0 behind the camera. Every primary hit is the same
+// (mirror, normal, no shadow), the colours match, so only the secondary object id can see the reflected
+// edge, which lies on the boundary between pixel columns 11 and 12.
+TEST(Adaptive, SecondaryHitAttributesRefineAnEdgeSeenOnlyInAMirror) {
+    Scene s = cameraSpaceScene(24, 16, 40.f);
+    Material mirror = defaultMaterial(MaterialType::Mirror);
+    mirror.Ka = mirror.Kd = mirror.Ks = 0.f;  // reflection only
+    Material constant = defaultMaterial(MaterialType::Constant);
+    constant.Cs = {0.5f, 0.5f, 0.5f};
+    s.materials = {mirror, constant};
+    addPatch(s, planarPatch({-50, -50, 10}, {100, 0, 0}, {0, 100, 0}), 0);
+    addPatch(s, planarPatch({-200, -200, -5}, {200, 0, 0}, {0, 400, 0}), 1);
+    addPatch(s, planarPatch({0, -200, -5}, {200, 0, 0}, {0, 400, 0}), 2);
+    s.attributes[1].material = s.attributes[2].material = 1;
+    AdaptiveThresholds t = allThresholds(1.f);
+    t.secondaryObjectId = 0.f;
+    const RenderResult r = renderAdaptive(s, t);
+    for (int x : {5, 18}) EXPECT_NEAR(r.image.pixel(x, 8)[0], 0.5f, 1e-5f);  // the squares' reflections
+    for (int y = 0; y < 16; ++y)
+        for (int x = 0; x < 24; ++x)
+            for (int q = 0; q < 4; ++q) {
+                const bool expect = (x == 11 && (q & 1)) || (x == 12 && !(q & 1));
+                EXPECT_EQ(refined(r, x, y, q), expect) << x << "," << y << " q" << q;
+            }
+    // The primary object id sees one object: nothing refines.
+    t = allThresholds(1.f);
+    t.objectId = 0.f;
+    EXPECT_EQ(refinedCount(renderAdaptive(s, t)), 0u);
+}
+
+// The "fairy focused" mode (paper 004, L209): three strips of objects 0, 1, 2 with the same colour meet at
+// the column boundaries 11|12 and 17|18; with the object id as the only refining attribute, a focus on
+// object 2 refines the second edge only, on object 0 the first only, and no focus both.
+TEST(Adaptive, TheFocusListLimitsTheAttributesToItsObjects) {
+    Scene s = cameraSpaceScene(24, 16, 40.f);
+    const Projector pr(s.camera);
+    const float x18 = (18.f - pr.ox) / pr.sx * 10.f;  // camera x of raster column boundary 18 at z = 10
+    addPatch(s, planarPatch({-50, -50, 10}, {50, 0, 0}, {0, 100, 0}), 0);
+    addPatch(s, planarPatch({0, -50, 10}, {x18, 0, 0}, {0, 100, 0}), 1);
+    addPatch(s, planarPatch({x18, -50, 10}, {50, 0, 0}, {0, 100, 0}), 2);
+    AdaptiveThresholds t = allThresholds(1.f);
+    t.objectId = 0.f;
+    auto edgeColumns = [&](const RenderResult& r) {
+        std::vector<int> cols;
+        for (int x = 0; x < 24; ++x) {
+            int n = 0;
+            for (int y = 0; y < 16; ++y)
+                for (int q = 0; q < 4; ++q) n += refined(r, x, y, q);
+            if (n) {
+                EXPECT_EQ(n, 32) << "column " << x << ": half of its subpixels";
+                cols.push_back(x);
+            }
+        }
+        return cols;
+    };
+    EXPECT_EQ(edgeColumns(renderAdaptive(s, t)), (std::vector<int>{11, 12, 17, 18}));
+    EXPECT_EQ(edgeColumns(renderAdaptive(s, t, 2, {2})), (std::vector<int>{17, 18}));
+    EXPECT_EQ(edgeColumns(renderAdaptive(s, t, 2, {0})), (std::vector<int>{11, 12}));
+    EXPECT_EQ(edgeColumns(renderAdaptive(s, t, 2, {7})), (std::vector<int>{}));
+}
+
+// The paper's bilinear option (L215): with nothing refined, each subpixel is the presample interpolated at
+// its centre, so the pixel is the presample filtered by (1, 6, 1) / 8 in x and in y (edges clamped); with
+// everything refined it changes nothing.
+TEST(Adaptive, InterpolatedInactiveSubpixelsFilterThePresample) {
+    const Scene s = twoSpheres(32, 24);
+    const RenderResult pre = renderAdaptive(s, allThresholds(10.f));
+    const RenderResult interp = renderAdaptive(s, allThresholds(10.f), 2, {}, true);
+    EXPECT_EQ(refinedCount(interp), 0u);
+    const int w = 32, h = 24;
+    const float k[3] = {1.f / 8, 6.f / 8, 1.f / 8};
+    double maxDiff = 0, changed = 0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 4; ++c) {
+                double want = 0;
+                for (int j = -1; j <= 1; ++j)
+                    for (int i = -1; i <= 1; ++i)
+                        want += k[i + 1] * k[j + 1] *
+                                pre.image.pixel(std::clamp(x + i, 0, w - 1), std::clamp(y + j, 0, h - 1))[c];
+                maxDiff = std::max(maxDiff, std::fabs(interp.image.pixel(x, y)[c] - want));
+                changed = std::max(changed,
+                                   double(std::fabs(interp.image.pixel(x, y)[c] - pre.image.pixel(x, y)[c])));
+            }
+    EXPECT_LT(maxDiff, 1e-5);
+    EXPECT_GT(changed, 0.05);  // the spheres' silhouettes are softened
+    const RenderResult all = renderAdaptive(s, allThresholds(0.f), 2, {}, true);
+    const RenderResult allPlain = renderAdaptive(s, allThresholds(0.f));
+    EXPECT_EQ(all.image.rgba, allPlain.image.rgba);
+}
+
+TEST(Adaptive, ThresholdAndFocusOptionsParseOrFailNamingTheProblem) {
+    AdaptiveThresholds t;
+    parseAdaptiveThresholds("poid=0,ssn=0.25,col=0.6,ste=1", t);
+    EXPECT_EQ(t.objectId, 0.f);
+    EXPECT_EQ(t.secondaryNormal, 0.25f);
+    EXPECT_EQ(t.color, 0.6f);
+    EXPECT_EQ(t.secondaryTexture, 1.f);
+    EXPECT_EQ(t.shadow, 0.06f);  // untouched
+    for (const char* bad : {"", "poid", "poid=", "xyz=0.1", "psn=-1", "psn=nan", "psn=0.1,", "psn=1x"})
+        EXPECT_THROW(parseAdaptiveThresholds(bad, t), std::invalid_argument) << bad;
+    EXPECT_EQ(parseObjectIds("3,0,12"), (std::vector<uint32_t>{3, 0, 12}));
+    for (const char* bad : {"", "3,", "-1", "a", "1.5", "99999999999"})
+        EXPECT_THROW(parseObjectIds(bad), std::invalid_argument) << bad;
 }

@@ -447,7 +447,9 @@ TEST(Subdivision, BigGuyObjIsWatertightAndClose) {
 
 namespace {
 
-std::string writeRibFile(const std::string& text) { return tessera::test::writeTestFile("scene.rib", text); }
+std::string writeRibFile(const std::string& text) {
+    return tessera::test::writeTestFile("scene.rib", text);
+}
 
 const char* kCubeMesh = "[4 4 4 4 4 4] [0 3 2 1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]";
 const char* kCubeP = "\"P\" [-1 -1 -1 1 -1 -1 1 1 -1 -1 1 -1 -1 -1 1 1 -1 1 1 1 1 -1 1 1]";
@@ -631,6 +633,51 @@ TEST(SubdivisionOsd, CreasedCubeFollowsTheBfrLimitSurface) {
     }
 }
 
+// PRMan's "creasemethod" "chaikin": a crease chain whose sharpness varies along it (the cube's top ring at
+// 1, 3, 1, 3) is subdivided by Chaikin's rule, which averages the sharpness along the chain; the patches
+// follow Bfr's limit surface under that rule (as tight as the uniform rule's), the surface differs from the
+// uniform rule's, and the RIB tag with PRMan's string arguments selects it.
+TEST(SubdivisionOsd, ChaikinCreaseMethodFollowsItsLimitSurface) {
+    SubdivMesh m = cube();
+    const int ring[4][2] = {{4, 5}, {5, 6}, {6, 7}, {7, 4}};
+    for (int e = 0; e < 4; ++e) m.creases.push_back({ring[e][0], ring[e][1], e % 2 ? 3.f : 1.f});
+    SubdivMesh chaikin = m;
+    chaikin.chaikinCreases = true;
+    const SubdivResult uniform = subdivideOsd(m), blended = subdivideOsd(chaikin);
+    ASSERT_EQ(uniform.patches.size(), blended.patches.size());
+    const SubdivDeviation d = subdivDeviation(chaikin, blended, SubdivLimit(chaikin), 9);
+    EXPECT_LT(d.relativePosition(), 4e-3);
+    EXPECT_LT(d.maxNormalDeg, 8.0);
+    std::printf("[ bfr      ] chaikin cube level %d: max position %.2e of the diagonal, normal %.3f deg\n",
+                blended.level, d.relativePosition(), d.maxNormalDeg);
+    float apart = 0;
+    for (size_t i = 0; i < uniform.patches.size(); ++i)
+        for (int k = 0; k < 16; ++k)
+            apart = std::max(apart, length(uniform.patches[i].cp[k] - blended.patches[i].cp[k]));
+    EXPECT_GT(apart, 1e-3f) << "Chaikin's rule changes the surface where the sharpness varies";
+    expectClosedAndWatertight(blended, "chaikin");
+    // The RIB tag (PRMan's form: 3 counts per tag and a stringargs array) selects the rule.
+    const std::string rib =
+        std::string("WorldBegin\nSubdivisionMesh \"catmull-clark\" ") + kCubeMesh +
+        " [\"crease\" \"crease\" \"crease\" \"crease\" \"creasemethod\"]"
+        " [2 1 0  2 1 0  2 1 0  2 1 0  0 0 1] [4 5 5 6 6 7 7 4] [1 3 1 3] [\"chaikin\"] " +
+        kCubeP + "\nWorldEnd\n";
+    const Scene s = loadScene(writeRibFile(rib), {});
+    ASSERT_EQ(s.patches.size(), blended.patches.size());
+    float fromRib = 0;
+    for (size_t i = 0; i < s.patches.size(); ++i)
+        for (int k = 0; k < 16; ++k)
+            fromRib = std::max(fromRib, length(s.patches[i].cp[k] - blended.patches[i].cp[k]));
+    EXPECT_LT(fromRib, 1e-5f);
+    // An unknown method warns and keeps the uniform rule.
+    std::vector<std::string> warnings;
+    std::string bad = rib;
+    bad.replace(bad.find("[\"chaikin\"]"), 11, "[\"smooth\"]");
+    loadScene(writeRibFile(bad), [&](const std::string& w) { warnings.push_back(w); });
+    ASSERT_FALSE(warnings.empty());
+    EXPECT_NE(warnings[0].find("creasemethod"), std::string::npos) << warnings[0];
+}
+
 // A level below the sharpness (only when asked for: the automatic level resolves them) leaves semi-sharp
 // features unresolved: Bfr evaluates them with its own refinement and the fitted patches follow it
 // roughly (measured 2.0e-2 of the diagonal at level 1 for sharpness 2.5), still watertight.
@@ -718,9 +765,9 @@ TEST(SubdivisionOsd, CornersHolesBoundariesAndTriangles) {
 TEST(SubdivisionOsd, LevelFromScreenSize) {
     const SubdivMesh c = cube();
     EXPECT_EQ(subdivLevelFor(c, 0.f), kDefaultSubdivLevel);
-    EXPECT_EQ(subdivLevelFor(c, 10.f), 2);     // ~4 pixels a control face: at least level 2
-    EXPECT_EQ(subdivLevelFor(c, 122.5f), 3);   // 50 pixels a control face: 6.25 at level 3
-    EXPECT_EQ(subdivLevelFor(c, 2449.f), 4);   // 1000 pixels: 62.5 at level 4, the most from the screen
+    EXPECT_EQ(subdivLevelFor(c, 10.f), 2);    // ~4 pixels a control face: at least level 2
+    EXPECT_EQ(subdivLevelFor(c, 122.5f), 3);  // 50 pixels a control face: 6.25 at level 3
+    EXPECT_EQ(subdivLevelFor(c, 2449.f), 4);  // 1000 pixels: 62.5 at level 4, the most from the screen
     EXPECT_EQ(subdivLevelFor(c, 1e6f), 4);
     EXPECT_EQ(subdivLevelFor(creasedCube(4.5f), 10.f), 5);  // semi-sharp features resolved
     EXPECT_EQ(subdivLevelFor(creasedCube(10.f), 10.f), 2);  // infinitely sharp: nothing to resolve

@@ -221,7 +221,20 @@ Request parseOptions(const py::kwargs& kw) {
         else if (key == "adaptive_threshold") {
             o.adaptiveThreshold = cast<double>(k, v);
             o.adaptiveThresholdGiven = true;
-        } else if (key == "shutter")
+        } else if (key == "adaptive_thresholds")
+            o.adaptiveThresholds = cast<std::string>(k, v);
+        else if (key == "adaptive_focus") {  // "3,7" or [3, 7]
+            if (py::isinstance<py::str>(v)) {
+                o.adaptiveFocus = cast<std::string>(k, v);
+            } else {
+                o.adaptiveFocus.clear();
+                for (const py::handle item : cast<py::sequence>(k, v))
+                    o.adaptiveFocus +=
+                        (o.adaptiveFocus.empty() ? "" : ",") + std::to_string(cast<long long>(k, item));
+            }
+        } else if (key == "adaptive_interpolate")
+            o.adaptiveInterpolate = cast<bool>(k, v);
+        else if (key == "shutter")
             o.shutter = numbers(k, v, 2);
         else if (key == "dof")
             o.dof = numbers(k, v, 3);
@@ -412,7 +425,8 @@ Options (None or absent: the scene's own value), the CLI's long names with '_' f
   blur (False: --no-blur), blur_sampling='simple'|'interleaved'|'bbox', blur_tile, blur_permutations,
   shutter=(open, close), dof=(fstop, focallength, focaldistance),
   integrator='direct'|'path'|'ao', ao_samples, ao_distance, ao_weighting='cosine'|'paper',
-  gloss='paper'|'microfacet', adaptive, adaptive_threshold,
+  gloss='paper'|'microfacet', adaptive, adaptive_threshold, adaptive_thresholds='poid=0.05,...',
+  adaptive_focus=[ids], adaptive_interpolate,
   aovs=['z', 'N', 'id', 'shadows', 'textured', 'occlusion', 'albedo', 'P', 'Cs', 'Ci', 'a'],
   crop=(xmin, xmax, ymin, ymax) in NDC, progress=callable(fraction done, 0..1; raising in it stops the render).
 Raises tessera.InputError for a malformed scene file, ValueError for a bad option value, TypeError for an

@@ -293,6 +293,7 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
     mix(std::to_string(a.lightSamples));
     mix(a.gloss);
     mix(std::to_string(a.passes));
+    mix(a.adaptiveThresholds + "|" + a.adaptiveFocus + "|" + std::to_string(a.adaptiveInterpolate));
     return fmt::format("{:016x}", h.h);
 }
 
@@ -317,8 +318,12 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         fail(fmt::format("error: --shadows must be on, off or scene, got '{}'", a.shadows));
     if (a.reyesShadows != "map" && a.reyesShadows != "raytrace")
         fail(fmt::format("error: --reyes-shadows must be map or raytrace, got '{}'", a.reyesShadows));
-    if (!a.adaptive && (a.adaptiveThresholdGiven || !a.adaptiveMap.empty()))
-        fail("error: --adaptive-threshold and --adaptive-map need --adaptive");
+    if (!a.adaptive && (a.adaptiveThresholdGiven || !a.adaptiveMap.empty() || !a.adaptiveThresholds.empty() ||
+                        !a.adaptiveFocus.empty() || a.adaptiveInterpolate))
+        fail(
+            "error: --adaptive-threshold, --adaptive-thresholds, --adaptive-focus, --adaptive-interpolate "
+            "and "
+            "--adaptive-map need --adaptive");
     if (a.adaptive) {
         if (a.engine != "rt") fail("error: --adaptive is ray traced: use it with --engine rt");
         if (a.spp > 0) fail("error: --adaptive chooses the samples per pixel itself: drop --spp");
@@ -1025,6 +1030,14 @@ int main(int argc, char** argv) {
                            "--adaptive: colour threshold tau_col (default 0.3; 0 refines everything)");
     render->add_option("--adaptive-map", ra.adaptiveMap,
                        "--adaptive: write the refined subpixels as a PNG of twice the resolution");
+    render->add_option("--adaptive-thresholds", ra.adaptiveThresholds,
+                       "--adaptive: paper 004's thresholds by name, e.g. poid=0.05,ssn=0.1 (col, poid, psn, "
+                       "psc, pte, soid, ssn, ssc, ste; docs/adaptive.md)");
+    render->add_option("--adaptive-focus", ra.adaptiveFocus,
+                       "--adaptive: object ids (the id AOV) whose edges the attributes refine; elsewhere "
+                       "the colour alone decides");
+    render->add_flag("--adaptive-interpolate", ra.adaptiveInterpolate,
+                     "--adaptive: inactive subpixels interpolate the presample bilinearly");
     render->add_option("--frames", ra.frames,
                        "Multi-frame RIB: render frame N or frames A-B (FrameBegin numbers); default: all");
     render->add_option("--up", ra.up, upHelp)->check(CLI::IsMember({"x", "y", "z"}));

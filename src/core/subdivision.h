@@ -68,6 +68,10 @@ struct SubdivMesh {
     std::vector<SubdivCrease> creases;
     std::vector<SubdivCorner> corners;
     std::vector<int> holes;  // faces that are not rendered (they still shape their neighbours)
+    // Semi-sharp creases by Chaikin's rule (PRMan's tag "creasemethod" "chaikin": a crease's sharpness is
+    // averaged along it at each level, so varying sharpness blends) instead of the uniform rule (the
+    // default, PRMan's "normal"). OpenSubdiv only; the hand-written converter treats creases as sharp.
+    bool chaikinCreases = false;
 };
 
 // Malformed topology: index out of range, face with fewer than 3 or repeated vertices, an edge shared by

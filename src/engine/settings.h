@@ -70,6 +70,13 @@ struct AmbientOcclusionSettings {
 struct AdaptiveSettings {
     bool enabled = false;  // --adaptive
     AdaptiveThresholds thresholds;
+    // --adaptive-focus: the paper's "fairy focused" mode (L209): the attributes count only where one of
+    // these objects (PatchAttributes::object, the id AOV) is the pixel's or a neighbour's, primary or
+    // secondary hit; elsewhere the colour alone decides. Empty: everywhere.
+    std::vector<uint32_t> focusObjects;
+    // --adaptive-interpolate: inactive subpixels take the bilinear interpolation of the presample colours
+    // at their centres instead of the pixel's centre colour (the paper's option, L215).
+    bool interpolate = false;
 };
 
 // Which lights cast shadows (--shadows): each light's own choice (Light::castsShadows, from the RIB's

@@ -96,7 +96,8 @@ class PrimitiveReader {
                 diag_.warnOnce("Pz", p.line,
                                what + ": \"Pz\" height fields are not supported; primitive skipped");
                 return std::nullopt;
-            } else if (!isTexCoordParam(p.name) && !(p.name == "Cs" && polygonColorsRead_)) {
+            } else if (!isTexCoordParam(p.name) &&
+                       !((p.name == "Cs" || p.name == "N") && polygonValuesRead_)) {
                 warnIgnoredParam(p, r.name, diag_);
             }
         }
@@ -209,40 +210,78 @@ class PrimitiveReader {
         Vec2 at(const Corner& c) const { return st[size_t(faceVarying ? c.fv : c.point)]; }
     };
     PolygonTexCoords polygonTexCoords_;
-    // "Cs" of the polygon primitives: one colour per polygon (uniform) or one for all (constant); empty:
-    // none. polygonColorsRead_: the primitive's "Cs" was looked at (positions() does not warn about it).
-    std::vector<Color> polygonColors_;
-    bool polygonColorsRead_ = false;
-    size_t polygonIndex_ = 0;  // the polygon whose pieces are being added
-
-    void readPolygonColors(const std::vector<Param>& ps, size_t npolygons, const std::string& what) {
-        polygonColorsRead_ = true;
-        for (const Param& p : ps) {
-            if (p.name != "Cs") continue;
-            const std::string cls = p.decl ? p.decl->cls : "";
-            if (!p.decl || p.decl->type != "color" || p.decl->arraySize != 1 || !p.value->numeric() ||
-                (cls != "uniform" && cls != "constant")) {
-                diag_.warnOnce(
-                    "Cs:" + what, p.line,
-                    what +
-                        ": \"Cs\" is used as a uniform or constant color only (one colour per polygon "
-                        "or for all: the scene has no per-vertex colours); ignored");
-                continue;
-            }
-            const size_t n = cls == "uniform" ? npolygons : 1;
-            if (p.value->nums.size() != 3 * n)
-                diag_.fail(p.line, what + ": \"Cs\" needs " + std::to_string(3 * n) + " numbers (" +
-                                       std::to_string(n) + " " + cls + " colours), got " +
-                                       std::to_string(p.value->nums.size()));
-            polygonColors_.clear();
-            for (size_t i = 0; i < n; ++i) {
-                const Color c{float(p.value->nums[3 * i]), float(p.value->nums[3 * i + 1]),
-                              float(p.value->nums[3 * i + 2])};
-                if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
-                    diag_.fail(p.line, what + ": \"Cs\" must be finite numbers");
-                polygonColors_.push_back(c);
+    // "Cs" and "N" of the polygon primitives (RI spec 3.2, sec. 5.1 and 5.6): one value for all (constant),
+    // per polygon (uniform), per point (vertex, varying) or per corner (facevarying); class None: not given.
+    // polygonValuesRead_: the primitive's "Cs" and "N" were looked at (positions() does not warn about them).
+    struct PolygonValues {
+        enum class Class { None, Constant, Uniform, Vertex, FaceVarying } cls = Class::None;
+        std::vector<Vec3> v;
+        bool given() const { return cls != Class::None; }
+        bool perCorner() const { return cls == Class::Vertex || cls == Class::FaceVarying; }
+        Vec3 at(const Corner& c, size_t polygon) const {
+            switch (cls) {
+                case Class::Constant:
+                    return v[0];
+                case Class::Uniform:
+                    return v[polygon];
+                case Class::Vertex:
+                    return v[size_t(c.point)];
+                default:
+                    return v[size_t(c.fv)];
             }
         }
+    };
+    PolygonValues polygonColors_, polygonNormals_;
+    bool polygonValuesRead_ = false;
+    size_t polygonIndex_ = 0;  // the polygon whose pieces are being added
+
+    // Reads "Cs" (type color) or "N" (type normal) of a polygon primitive with `npolygons` polygons,
+    // `npoints` points and `ncorners` corners into `out`. A value of another type or class is warned about
+    // and ignored; a wrong count or a non-finite number is an error at its line.
+    void readPolygonValues(const std::vector<Param>& ps, const std::string& name, const std::string& type,
+                           size_t npolygons, size_t npoints, size_t ncorners, const std::string& what,
+                           PolygonValues& out) {
+        polygonValuesRead_ = true;
+        out = PolygonValues{};
+        for (const Param& p : ps) {
+            if (p.name != name) continue;
+            const std::string cls = p.decl ? p.decl->cls : "";
+            using C = PolygonValues::Class;
+            const C c = cls == "constant"                             ? C::Constant
+                        : cls == "uniform"                            ? C::Uniform
+                        : cls == "vertex" || cls == "varying"         ? C::Vertex
+                        : cls == "facevarying" || cls == "facevertex" ? C::FaceVarying
+                                                                      : C::None;
+            if (!p.decl || p.decl->type != type || p.decl->arraySize != 1 || !p.value->numeric() ||
+                c == C::None) {
+                diag_.warnOnce(
+                    name + ":" + what, p.line,
+                    what + ": \"" + name + "\" is used as a " + type +
+                        " of class constant, uniform, vertex, varying or facevarying only; ignored");
+                continue;
+            }
+            const size_t n = c == C::Constant  ? 1
+                             : c == C::Uniform ? npolygons
+                             : c == C::Vertex  ? npoints
+                                               : ncorners;
+            if (p.value->nums.size() != 3 * n)
+                diag_.fail(p.line, what + ": \"" + name + "\" needs " + std::to_string(3 * n) + " numbers (" +
+                                       std::to_string(n) + " " + cls + " values), got " +
+                                       std::to_string(p.value->nums.size()));
+            out.cls = c;
+            out.v.clear();
+            for (size_t i = 0; i < n; ++i) {
+                const Vec3 x{float(p.value->nums[3 * i]), float(p.value->nums[3 * i + 1]),
+                             float(p.value->nums[3 * i + 2])};
+                if (!isFinite(x)) diag_.fail(p.line, what + ": \"" + name + "\" must be finite numbers");
+                out.v.push_back(x);
+            }
+        }
+    }
+    void readPolygonValues(const std::vector<Param>& ps, size_t npolygons, size_t npoints, size_t ncorners,
+                           const std::string& what) {
+        readPolygonValues(ps, "Cs", "color", npolygons, npoints, ncorners, what, polygonColors_);
+        readPolygonValues(ps, "N", "normal", npolygons, npoints, ncorners, what, polygonNormals_);
     }
 
     // One bilinear piece of a polygon with the s, t of its corners g[0..3] (when the primitive has them).
@@ -276,8 +315,20 @@ class PrimitiveReader {
         for (int q = 0; q < 4; ++q) piece.point[q] = k[q].point, piece.fv[q] = k[q].fv;
         piece.polygon = polygonIndex_;
         shape_.polygonPieces.push_back(piece);
-        if (!polygonColors_.empty())
-            shape_.colors.push_back(polygonColors_[polygonColors_.size() == 1 ? 0 : polygonIndex_]);
+        // A colour per polygon or for all: a material per colour (addPrimitive); per corner, and normals:
+        // the piece's vertex values.
+        if (polygonColors_.given() && !polygonColors_.perCorner())
+            shape_.colors.push_back(polygonColors_.at(k[0], polygonIndex_));
+        if (polygonNormals_.given() || polygonColors_.perCorner()) {
+            PatchVertexValues vv;
+            vv.hasN = polygonNormals_.given();
+            vv.hasCs = polygonColors_.perCorner();
+            for (int q = 0; q < 4; ++q) {
+                if (vv.hasN) vv.N[q] = polygonNormals_.at(k[q], polygonIndex_);
+                if (vv.hasCs) vv.Cs[q] = polygonColors_.at(k[q], polygonIndex_);
+            }
+            shape_.vertexValues.push_back(vv);
+        }
         if (!polygonTexCoords_.st.empty()) {
             PatchTexCoords tc;
             for (int q = 0; q < 4; ++q) tc.st[q] = polygonTexCoords_.at(k[q]);
@@ -668,7 +719,7 @@ class PrimitiveReader {
         requireWorld(r);
         std::vector<double> topo(loopSizes.begin(), loopSizes.end());
         setTopology(what + " with " + std::to_string(n) + " vertices", topo);
-        readPolygonColors(ps, 1, what);
+        readPolygonValues(ps, 1, n, n, what);
         auto pts = positions(r, ps, n, what);
         if (!pts) return skip();
         readPolygonTexCoords(r, ps, n, n, what);
@@ -748,7 +799,7 @@ class PrimitiveReader {
         topo.insert(topo.end(), nverts.begin(), nverts.end());
         topo.insert(topo.end(), verts.begin(), verts.end());
         setTopology(what + " with " + std::to_string(nloops.size()) + " polygons", topo);
-        readPolygonColors(ps, nloops.size(), what);
+        readPolygonValues(ps, nloops.size(), npoints, verts.size(), what);
         auto pts = positions(r, ps, npoints, what);
         if (!pts) return skip();
         readPolygonTexCoords(r, ps, npoints, verts.size(), what);
@@ -1058,6 +1109,7 @@ class PrimitiveReader {
             std::string name;
             std::vector<int> ints;
             std::vector<double> floats;
+            std::vector<std::string> strings;
             int line;
         };
         std::vector<Tag> tags;
@@ -1070,25 +1122,36 @@ class PrimitiveReader {
             std::vector<int> nargs = args.intArray(4, "nargs");
             std::vector<int> ints = args.intArray(5, "intargs");
             std::vector<double> floats = args.numberArray(6, "floatargs");
-            if (nargs.size() != 2 * tv.strs.size())
+            // PRMan's extension: a string array after floatargs and 3 counts per tag (ints, floats, strings).
+            const bool stringArgs = r.args.size() > 7 && r.args[7].isArray() &&
+                                    (!r.args[7].numeric() || r.args[7].nums.empty()) &&
+                                    nargs.size() == 3 * tv.strs.size();
+            const std::vector<std::string> strings = stringArgs ? r.args[7].strs : std::vector<std::string>{};
+            const size_t per = stringArgs ? 3 : 2;
+            if (nargs.size() != per * tv.strs.size())
                 diag_.fail(r.args[4].line, "SubdivisionMesh: nargs needs 2 numbers per tag (" +
-                                               std::to_string(2 * tv.strs.size()) + "), got " +
+                                               std::to_string(2 * tv.strs.size()) +
+                                               "; 3 with a stringargs array), got " +
                                                std::to_string(nargs.size()));
-            size_t io = 0, fo = 0;
+            size_t io = 0, fo = 0, so = 0;
             for (size_t t = 0; t < tv.strs.size(); ++t) {
-                int ni = nargs[2 * t], nf = nargs[2 * t + 1];
-                if (ni < 0 || nf < 0 || io + size_t(ni) > ints.size() || fo + size_t(nf) > floats.size())
-                    diag_.fail(r.args[4].line, "SubdivisionMesh: nargs for tag \"" + tv.strs[t] +
-                                                   "\" asks for more intargs/floatargs than given");
+                int ni = nargs[per * t], nf = nargs[per * t + 1], ns = stringArgs ? nargs[per * t + 2] : 0;
+                if (ni < 0 || nf < 0 || ns < 0 || io + size_t(ni) > ints.size() ||
+                    fo + size_t(nf) > floats.size() || so + size_t(ns) > strings.size())
+                    diag_.fail(r.args[4].line,
+                               "SubdivisionMesh: nargs for tag \"" + tv.strs[t] +
+                                   "\" asks for more intargs/floatargs/stringargs than given");
                 Tag tag{tv.strs[t],
                         {ints.begin() + long(io), ints.begin() + long(io + size_t(ni))},
                         {floats.begin() + long(fo), floats.begin() + long(fo + size_t(nf))},
+                        {strings.begin() + long(so), strings.begin() + long(so + size_t(ns))},
                         tv.line};
                 io += size_t(ni);
                 fo += size_t(nf);
+                so += size_t(ns);
                 tags.push_back(std::move(tag));
             }
-            start = 7;
+            start = stringArgs ? 8 : 7;
         }
         auto ps = parseParams(r, start, decls_, diag_, [&](const std::string& cls) -> size_t {
             if (cls == "vertex" || cls == "varying") return npoints;
@@ -1156,6 +1219,16 @@ class PrimitiveReader {
                     checkVertex(t.ints[i]);
                     mesh.corners.push_back({t.ints[i], float(t.floats[std::min(i, t.floats.size() - 1)])});
                 }
+            } else if (t.name == "creasemethod") {
+                // PRMan: "normal" (the uniform rule, the default) or "chaikin".
+                const std::string method = t.strings.empty() ? "" : t.strings[0];
+                if (method == "chaikin" || method == "normal")
+                    mesh.chaikinCreases = method == "chaikin";
+                else
+                    diag_.warnOnce("creasemethod", t.line,
+                                   "SubdivisionMesh: \"creasemethod\" needs the string \"normal\" or "
+                                   "\"chaikin\", got \"" +
+                                       method + "\"; the normal (uniform) rule is used");
             } else if (t.name == "hole") {
                 for (int f : t.ints) {
                     if (f < 0 || size_t(f) >= mesh.faceSizes.size())
@@ -1436,9 +1509,32 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
             patchMaterial.push_back(it->second);
         }
     }
+    // Per-vertex values (polygons' "N", per-corner "Cs"): normals to world space at shutter open (inverse
+    // transpose); a patch with vertex colours takes the surface with Cs = 1, which the engines multiply by
+    // the interpolated colour (scene.h, PatchVertexValues).
+    const std::vector<PatchVertexValues>& vertexValues = keys.front().vertexValues;
+    const Mat4 objectFromWorld = ctm.at(open).inverse();
+    uint32_t whiteMaterial = 0;
+    bool haveWhite = false;
     auto attributesOf = [&](size_t j) {
         PatchAttributes pa = a;
         if (!patchMaterial.empty()) pa.material = patchMaterial[j];
+        if (vertexValues.size() == n) {
+            PatchVertexValues vv = vertexValues[j];
+            if (vv.hasN)
+                for (Vec3& nrm : vv.N) nrm = Mat4::normalWithInverse(objectFromWorld, nrm);
+            if (vv.hasCs) {
+                if (!haveWhite) {
+                    Material m = c.state.attributes().surface;
+                    m.Cs = Color{1, 1, 1};
+                    whiteMaterial = materialIndex(scene, m);
+                    haveWhite = true;
+                }
+                pa.material = whiteMaterial;
+            }
+            pa.vertexValues = int32_t(scene.vertexValues.size());
+            scene.vertexValues.push_back(vv);
+        }
         return pa;
     };
     auto addTexCoords = [&](size_t j) {

@@ -37,6 +37,8 @@ struct PrimitiveShape {
     // The colour (RI "Cs") of each patch where the primitive gives one per polygon (uniform) or one for all
     // (constant); empty: the graphics state's Color.
     std::vector<Color> colors;
+    // Per-vertex "N" and "Cs" of each patch (polygons; N in object space); empty: none.
+    std::vector<PatchVertexValues> vertexValues;
     // Polygons: each piece's four corners (points of "P", places in the vertex list) and its polygon, so
     // that the later keys of a deformation block are cut the same way as the first.
     struct PolygonPiece {

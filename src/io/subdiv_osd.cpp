@@ -33,16 +33,16 @@ struct P3 {
 };
 
 // RenderMan's rules in OpenSubdiv's terms. Crease method: uniform (OpenSubdiv's default, which is PRMan's
-// default "normal" creasing; Chaikin is PRMan's opt-in "creasemethod" "chaikin", which RIB tags here cannot
-// select). Triangles: Catmull-Clark's own rule (TRI_SUB_CATMARK), as PRMan does.
-Sdc::Options sdcOptions(BoundaryMode mode) {
+// default "normal" creasing) or Chaikin (PRMan's opt-in tag "creasemethod" "chaikin"). Triangles:
+// Catmull-Clark's own rule (TRI_SUB_CATMARK), as PRMan does.
+Sdc::Options sdcOptions(BoundaryMode mode, bool chaikin) {
     Sdc::Options o;
     o.SetVtxBoundaryInterpolation(mode == BoundaryMode::None
                                       ? Sdc::Options::VTX_BOUNDARY_NONE
                                       : (mode == BoundaryMode::EdgesOnly
                                              ? Sdc::Options::VTX_BOUNDARY_EDGE_ONLY
                                              : Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER));
-    o.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
+    o.SetCreasingMethod(chaikin ? Sdc::Options::CREASE_CHAIKIN : Sdc::Options::CREASE_UNIFORM);
     o.SetTriangleSubdivision(Sdc::Options::TRI_SUB_CATMARK);
     return o;
 }
@@ -59,7 +59,7 @@ struct Topology {
     std::vector<float> creaseWeights, cornerWeights;
 };
 
-std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, BoundaryMode mode) {
+std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, BoundaryMode mode, bool chaikin) {
     Far::TopologyDescriptor d;
     d.numVertices = numVertices;
     d.numFaces = int(t.faceSizes.size());
@@ -73,7 +73,8 @@ std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, Boundar
     d.cornerWeights = t.cornerWeights.data();
     d.numHoles = int(t.holes.size());
     d.holeIndices = t.holes.data();
-    std::unique_ptr<Refiner> r(Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode))));
+    std::unique_ptr<Refiner> r(
+        Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode, chaikin))));
     if (!r) throw SubdivError("OpenSubdiv could not build the mesh's topology");
     return r;
 }
@@ -275,7 +276,8 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
     SubdivResult out;
     out.level = level;
     const Topology topo = topologyOf(mesh, &out.warnings);
-    std::unique_ptr<Refiner> A = makeRefiner(int(mesh.points.size()), topo, mesh.boundary);
+    std::unique_ptr<Refiner> A =
+        makeRefiner(int(mesh.points.size()), topo, mesh.boundary, mesh.chaikinCreases);
     const std::vector<char> rendered0 = renderedFaces(mesh, *A);
     Refiner::UniformOptions uniform(level);
     uniform.fullTopologyInLastLevel = true;  // edges of the last level: the shared boundary curves
@@ -370,7 +372,7 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
             t2.cornerVerts.push_back(v);
             t2.cornerWeights.push_back(L.GetVertexSharpness(v));
         }
-    std::unique_ptr<Refiner> B = makeRefiner(L.GetNumVertices(), t2, mesh.boundary);
+    std::unique_ptr<Refiner> B = makeRefiner(L.GetNumVertices(), t2, mesh.boundary, mesh.chaikinCreases);
     Bfr::RefinerSurfaceFactory<> factory(*B);
 
     // Hermite patches, face by face.
@@ -574,7 +576,8 @@ struct SubdivLimit::Impl {
 
 SubdivLimit::SubdivLimit(const SubdivMesh& mesh, int approxLevel) : impl_(std::make_unique<Impl>()) {
     validateSubdivMesh(mesh);
-    impl_->refiner = makeRefiner(int(mesh.points.size()), topologyOf(mesh), mesh.boundary);
+    impl_->refiner =
+        makeRefiner(int(mesh.points.size()), topologyOf(mesh), mesh.boundary, mesh.chaikinCreases);
     impl_->rendered = renderedFaces(mesh, *impl_->refiner);
     Bfr::SurfaceFactory::Options o;
     o.SetApproxLevelSmooth(approxLevel);

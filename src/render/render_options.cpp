@@ -24,6 +24,61 @@ void requireOneOf(const char* option, const std::string& value, std::initializer
 
 }  // namespace
 
+void parseAdaptiveThresholds(const std::string& text, AdaptiveThresholds& t) {
+    struct Name {
+        const char* name;
+        float AdaptiveThresholds::*field;
+    };
+    static const Name names[] = {
+        {"col", &AdaptiveThresholds::color},           {"poid", &AdaptiveThresholds::objectId},
+        {"psn", &AdaptiveThresholds::normal},          {"psc", &AdaptiveThresholds::shadow},
+        {"pte", &AdaptiveThresholds::texture},         {"soid", &AdaptiveThresholds::secondaryObjectId},
+        {"ssn", &AdaptiveThresholds::secondaryNormal}, {"ssc", &AdaptiveThresholds::secondaryShadow},
+        {"ste", &AdaptiveThresholds::secondaryTexture}};
+    size_t at = 0;
+    while (at <= text.size()) {
+        const size_t comma = std::min(text.find(',', at), text.size());
+        const std::string item = text.substr(at, comma - at);
+        const size_t eq = item.find('=');
+        const std::string name = item.substr(0, eq);
+        const Name* found = nullptr;
+        for (const Name& n : names)
+            if (name == n.name) found = &n;
+        if (eq == std::string::npos || !found)
+            throw std::invalid_argument(
+                "adaptive thresholds: '" + item +
+                "' is not NAME=VALUE with NAME one of col, poid, psn, psc, pte, soid, "
+                "ssn, ssc, ste");
+        const std::string value = item.substr(eq + 1);
+        char* end = nullptr;
+        errno = 0;
+        const double v = std::strtod(value.c_str(), &end);
+        if (value.empty() || *end != '\0' || errno != 0 || !std::isfinite(v) || v < 0)
+            throw std::invalid_argument("adaptive thresholds: " + name + " must be a number >= 0, got '" +
+                                        value + "'");
+        t.*(found->field) = float(v);
+        at = comma + 1;
+    }
+}
+
+std::vector<uint32_t> parseObjectIds(const std::string& text) {
+    std::vector<uint32_t> ids;
+    size_t at = 0;
+    while (at <= text.size()) {
+        const size_t comma = std::min(text.find(',', at), text.size());
+        const std::string item = text.substr(at, comma - at);
+        char* end = nullptr;
+        errno = 0;
+        const long long v = std::strtoll(item.c_str(), &end, 10);
+        if (item.empty() || *end != '\0' || errno != 0 || v < 0 || v >= 0xffffffffll)
+            throw std::invalid_argument("adaptive focus: '" + item +
+                                        "' is not an object id (an integer >= 0)");
+        ids.push_back(uint32_t(v));
+        at = comma + 1;
+    }
+    return ids;
+}
+
 void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettings& s) {
     requireOneOf("engine", o.engine, {"reyes", "rt"});
     if (!o.sampler.empty()) requireOneOf("sampler", o.sampler, {"sobol", "jittered", "centred"});
@@ -44,6 +99,8 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
         throw std::invalid_argument("adaptive sampling chooses the samples per pixel itself: give no spp");
     if (o.adaptiveThresholdGiven && !(o.adaptiveThreshold >= 0 && std::isfinite(o.adaptiveThreshold)))
         throw std::invalid_argument("adaptive threshold must be a number >= 0");
+    if (!o.adaptive && (!o.adaptiveThresholds.empty() || !o.adaptiveFocus.empty() || o.adaptiveInterpolate))
+        throw std::invalid_argument("adaptive thresholds, focus and interpolation need adaptive sampling");
 
     s.engine = o.engine;
     s.threads = o.threads;
@@ -70,7 +127,10 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     if (o.aoDistance > 0) s.ao.maxDistance = float(o.aoDistance);
     s.ao.paperWeighting = o.aoWeighting == "paper";
     s.adaptive.enabled = o.adaptive;
+    if (!o.adaptiveThresholds.empty()) parseAdaptiveThresholds(o.adaptiveThresholds, s.adaptive.thresholds);
     if (o.adaptiveThresholdGiven) s.adaptive.thresholds.color = float(o.adaptiveThreshold);
+    if (!o.adaptiveFocus.empty()) s.adaptive.focusObjects = parseObjectIds(o.adaptiveFocus);
+    s.adaptive.interpolate = o.adaptiveInterpolate;
     s.shadows = o.shadows == "on"    ? ShadowOverride::On
                 : o.shadows == "off" ? ShadowOverride::Off
                                      : ShadowOverride::Scene;

@@ -44,7 +44,17 @@ struct RenderOptions {
     bool adaptive = false;
     double adaptiveThreshold = 0;
     bool adaptiveThresholdGiven = false;
+    // The paper's other thresholds by name, "poid=0.05,ssn=0.1" (parseAdaptiveThresholds), the focus
+    // objects "3,7" and the bilinear interpolation of inactive subpixels.
+    std::string adaptiveThresholds, adaptiveFocus;
+    bool adaptiveInterpolate = false;
 };
+
+// "NAME=VALUE,..." with the names of paper 004's Table 1 (col, poid, psn, psc, pte, soid, ssn, ssc, ste)
+// into `t`; each value a number >= 0. Throws std::invalid_argument naming what is wrong.
+void parseAdaptiveThresholds(const std::string& text, AdaptiveThresholds& t);
+// "ID,ID,..." object ids (non-negative integers). Throws std::invalid_argument.
+std::vector<uint32_t> parseObjectIds(const std::string& text);
 
 // The text forms of option values, for the CLI and the Python module's strings: `n` comma-separated finite
 // numbers ("0,1"), and WIDTHxHEIGHT ("640x480"); nullopt when the text is not that.

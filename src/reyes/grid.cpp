@@ -32,11 +32,19 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     grid.front.resize(count);
     // Dice first (positions, normals, view directions of the whole grid), then shade the grid as one batch.
     thread_local std::vector<Vec3> Ps, Ns, Is;
-    thread_local std::vector<Color> Ci, Ct;
+    thread_local std::vector<Color> Ci, Ct, Cv;
+    thread_local std::vector<Vec3> shadowP;  // user normals: where shadow lookups start (terminatorSafePoint)
     // Textures on bicubic patches only (quadrics have no s, t yet).
     const bool textured =
         shade.textures && shade.material->texture >= 0 && !shade.depthOnly && !shade.quadric;
+    // Per-vertex values (polygons' "N" and "Cs"): bicubic patches only, as the reader gives them.
+    const PatchVertexValues* vv = shade.depthOnly || shade.quadric ? nullptr : shade.vertexValues;
+    const bool vertexColoured = vv && vv->hasCs;
     if (textured) Ct.resize(count);
+    if (vertexColoured) Cv.resize(count);
+    const bool userNormals =
+        vv && vv->hasN && !(view.displacement && view.displacement->displaced(piece.patch));
+    if (userNormals) shadowP.resize(count);
     Ps.resize(count);
     Ns.resize(count);
     Is.resize(count);
@@ -124,6 +132,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             if (textured)
                 Ct[v] = surfaceTextureColor(*shade.textures, *shade.material, view.projector, shade.texCoords,
                                             P, sp.dpdu, sp.dpdv, uv, shade.textureScale);
+            if (vertexColoured) Cv[v] = bilinearCorners(vv->Cs, uv.x, uv.y);
             if (displaced) {
                 const DisplacedVertex d =
                     displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P, shade.flipNormal);
@@ -132,7 +141,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 N = d.N;
             }
             Ps[v] = P;
-            Ns[v] = N;
+            // The user's normals shade; the geometric one decides the side (Sides 1 culling).
+            Ns[v] = userNormals ? vertexNormalAt(*vv, uv.x, uv.y, N) : N;
+            if (userNormals) shadowP[v] = terminatorSafePoint(*vv, patch, uv.x, uv.y, P, N);
             Is[v] = normalize(P);  // the eye is at the camera-space origin
             Vec3 r = view.projector.toRaster(P);
             grid.X[v] = rasterToFixed(r.x);
@@ -208,6 +219,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     points.N = Ns.data();
     points.I = Is.data();
     points.textureColor = textured ? Ct.data() : nullptr;
+    points.vertexColor = vertexColoured ? Cv.data() : nullptr;
     const std::span<const Material> material(shade.material, 1);
     bool queries = false, fileMaps = false;
     for (const ShadingLight& l : shade.lights) {
@@ -222,7 +234,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
         if (queries) {
             thread_local std::vector<uint32_t> patchOf;
             patchOf.assign(count, piece.patch);
-            shade.visibility->answer(VisibilityQuery{points, shade.lights, patchOf.data(), UVs.data(), 0.f},
+            SurfacePoints from = points;
+            if (userNormals) from.P = shadowP.data();
+            shade.visibility->answer(VisibilityQuery{from, shade.lights, patchOf.data(), UVs.data(), 0.f},
                                      samples);
         }
         shadeSurfaces(material, points, samples, Ci.data());
@@ -256,10 +270,11 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     if (shade.wantSurfaceAovs && !shade.depthOnly) {
         grid.albedo.resize(count), grid.P.resize(count), grid.Cs.resize(count);
         for (int v = 0; v < count; ++v) {
-            const Color Cv = textured ? Ct[v] : Color{1, 1, 1};
-            grid.albedo[v] = surfaceAlbedo(*shade.material, Cv);
+            const Material m = points.materialAt(material, size_t(v));
+            const Color Ctv = points.textureOf(size_t(v));
+            grid.albedo[v] = surfaceAlbedo(m, Ctv);
             grid.P[v] = Ps[v];
-            grid.Cs[v] = shade.material->Cs * Cv;
+            grid.Cs[v] = m.Cs * Ctv;
         }
     }
     if (maxComponent(shade.emission) > 0.f)

@@ -80,6 +80,9 @@ struct ShadeInputs {
     const Textures* textures = nullptr;
     PatchTexCoords texCoords{};
     float textureScale = 1.f;
+    // The patch's per-vertex normals (camera space) and colours (nullptr: none): the shading normal and the
+    // colour that multiplies the texture colour, interpolated at each vertex's (u,v).
+    const PatchVertexValues* vertexValues = nullptr;
     // Part of an area light (RI AreaLightSource): the radiance its front side emits, added to what the
     // surface reflects. Reyes shows it but does not light with it (area lights are ray traced).
     Color emission{0, 0, 0};

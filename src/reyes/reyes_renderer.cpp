@@ -98,6 +98,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     const double weldMs = msSince(tWeld);
 
     const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, cam.cameraFromWorld);
+    const std::vector<PatchVertexValues> vertexValues = vertexValuesInSpace(scene, cam.cameraFromWorld);
     ReyesView view(cam);
     view.patches = patches.data();
     view.quadrics = quadrics.data();
@@ -171,6 +172,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                 in.wantSurfaceAovs = (settings.output.channels & kSurfaceAovChannels) != 0;
                 in.textures = frame.textures.get();
                 in.texCoords = texCoordsOf(scene, piece.patch);
+                if (attr.vertexValues >= 0) in.vertexValues = &vertexValues[size_t(attr.vertexValues)];
                 in.textureScale = std::max(1.f, std::sqrt(attr.shadingRate));
                 if (attr.areaLight >= 0 && size_t(attr.areaLight) < scene.lights.size())
                     in.emission = scene.lights[size_t(attr.areaLight)].color;
@@ -190,7 +192,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         reconstruct(tc.tile, frame.filter, target, result.image);
         tc.filterMs += msSince(tf);
     };
-    const TileLoopResult loop = runTileLoop(layout, binned.work, settings, counters, renderBucket, &result.image);
+    const TileLoopResult loop =
+        runTileLoop(layout, binned.work, settings, counters, renderBucket, &result.image);
 
     ThreadCounters total;
     for (const ThreadCounters& tc : counters) {

@@ -43,7 +43,11 @@ Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time
                               : patchNormal(acc.patches[patch], h.u, h.v);
     N = normalize(N);
     if (!isFinite(N) || dot(N, N) == 0.f) N = Vec3{0, 0, 1};
-    return acc.flip[patch] ? -N : N;
+    if (acc.flip[patch]) N = -N;
+    // User normals (polygons' "N") shade, turned to the geometric side (as Reyes' dicer).
+    if (const PatchVertexValues* vv = acc.vertexValuesAt(patch); vv && vv->hasN)
+        N = vertexNormalAt(*vv, h.u, h.v, N);
+    return N;
 }
 
 namespace {
@@ -116,6 +120,11 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         acc.twoSided[i] = scene.attributes[i].twoSided;
         acc.material[i] = scene.attributes[i].material;
     });
+    acc.vertexValues = vertexValuesInSpace(scene, toSpace);
+    if (!acc.vertexValues.empty()) {
+        acc.vertexValuesOf.resize(n);
+        for (size_t i = 0; i < n; ++i) acc.vertexValuesOf[i] = scene.attributes[i].vertexValues;
+    }
     auto t0 = Clock::now();
     buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
                         acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,

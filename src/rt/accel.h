@@ -36,6 +36,14 @@ struct RtAccel {
     const PlacedQuadric* quadric(uint32_t patch) const {
         return quadricOf.empty() || quadricOf[patch] == kNoQuadric ? nullptr : &quadrics[quadricOf[patch]];
     }
+    // Per-vertex normals (in the accel's space) and colours (scene.h PatchVertexValues), and per patch
+    // its entry (-1: none); both empty when no surface has them.
+    std::vector<PatchVertexValues> vertexValues;
+    std::vector<int32_t> vertexValuesOf;
+    const PatchVertexValues* vertexValuesAt(uint32_t patch) const {
+        if (vertexValuesOf.empty() || vertexValuesOf[patch] < 0) return nullptr;
+        return &vertexValues[size_t(vertexValuesOf[patch])];
+    }
     Bvh bvh;
     SubpatchForest forest;
     Bounds3 bounds;        // of all traced patches (their root boxes)

@@ -38,7 +38,11 @@ struct Workspace {
     // The generation's hits as one shading batch (structure of arrays, hit k is ray hitRay[k]).
     std::vector<uint32_t> hitRay, hitMaterial;
     std::vector<Vec3> hitP, hitN, hitI;
-    std::vector<Color> hitTexture;  // per hit: its texture colour (white when untextured)
+    std::vector<Color> hitTexture;      // per hit: its texture colour (white when untextured)
+    std::vector<Color> hitVertexColor;  // per hit: its per-vertex colour (white where none)
+    // --adaptive's presample: per sample, the attributes of its first secondary hit (object kNoObject:
+    // none); empty otherwise (nothing is recorded).
+    std::vector<HitAttributes> secondary;
     LightSamples lightSamples;
     std::vector<uint32_t> shadowIdx;      // [hit * lights + light]: its shadow ray (kNone: none)
     std::vector<uint8_t> shadowedLights;  // per hit: lights in shadow (the film's shadow-count channel)
@@ -101,11 +105,12 @@ bool hitTextured(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t p
 }
 
 // The surface AOVs of camera hit k (sample s), when the film carries them: albedo, camera-space P, Cs.
-void setSurfaceAovs(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t s, SampleTile& tile) {
+void setSurfaceAovs(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t s, SampleTile& tile,
+                    const Workspace& ws) {
     if (!tile.wantsSurfaceAovs()) return;
-    const Material& m = fr.scene.materials[pts.materialOf(k)];
+    const Material m = pts.materialAt(fr.scene.materials, k);
     const Color Ct = pts.textureOf(k);
-    tile.setSurfaceAovs(s, surfaceAlbedo(m, Ct), pts.P[k], m.Cs * Ct);
+    tile.setSurfaceAovs(s, surfaceAlbedo(m, Ct), ws.hits[ws.hitRay[k]].h.p, m.Cs * Ct);  // P on the surface
 }
 
 // Radiance an area light's surface sends along a ray that hit it at `rh` from direction d: Le on the
@@ -137,6 +142,11 @@ SurfacePoints hitBatch(const Frame& fr, Workspace& ws) {
         const RayHit& rh = ws.hits[r];
         ws.hitP[k] = rh.h.p;
         ws.hitN[k] = hitNormal(acc, rh.patch, rh.h, rays.time[r]);
+        // User normals: shadow and secondary rays leave from the smooth surface they describe (scene.h,
+        // terminatorSafePoint); the P AOV keeps the hit.
+        if (const PatchVertexValues* vv = acc.vertexValuesAt(rh.patch); vv && vv->hasN)
+            ws.hitP[k] = terminatorSafePoint(*vv, acc.patches[rh.patch], rh.h.u, rh.h.v, rh.h.p,
+                                             orientedGeometricNormal(acc, rh.patch, rh.h));
         ws.hitI[k] = normalize(rays.d[r]);
         ws.hitMaterial[k] = acc.material[rh.patch];
     }
@@ -159,6 +169,15 @@ SurfacePoints hitBatch(const Frame& fr, Workspace& ws) {
                                     sp.dpdu, sp.dpdv, Vec2{rh.h.u, rh.h.v});
         }
         pts.textureColor = ws.hitTexture.data();
+    }
+    if (!acc.vertexValues.empty()) {  // per-vertex colours (polygons' "Cs"), as Reyes' dicer
+        ws.hitVertexColor.resize(n);
+        for (size_t k = 0; k < n; ++k) {
+            const RayHit& rh = ws.hits[ws.hitRay[k]];
+            const PatchVertexValues* vv = acc.vertexValuesAt(rh.patch);
+            ws.hitVertexColor[k] = vv && vv->hasCs ? bilinearCorners(vv->Cs, rh.h.u, rh.h.v) : Color{1, 1, 1};
+        }
+        pts.vertexColor = ws.hitVertexColor.data();
     }
     return pts;
 }
@@ -211,7 +230,7 @@ void addAreaLighting(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
     ws.areaShadow.clear();
     const SampleTile& tile = ws.tile;
     for (size_t k = 0; k < n; ++k) {
-        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        const Material m = pts.materialAt(fr.scene.materials, k);
         if (!surfaceUsesLights(m.type)) continue;
         const uint32_t r = ws.hitRay[k], s = rays.owner[r];
         const RayHit& rh = ws.hits[r];
@@ -248,7 +267,7 @@ void addAreaLighting(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
     }
     ws.trace.occluded(ws.areaShadow, ws.areaBlocked);
     for (size_t k = 0; k < n; ++k) {
-        Material m = fr.scene.materials[pts.materialOf(k)];
+        Material m = pts.materialAt(fr.scene.materials, k);
         if (!surfaceUsesLights(m.type)) continue;
         // A glossy surface's reflection rays see the light's surface: no highlight from it on top.
         if (m.type == MaterialType::Glossy) m.Ks = 0.f;
@@ -281,7 +300,7 @@ void addGlossRays(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t 
     const RayList& rays = ws.rays;
     const RayHit& rh = ws.hits[r];
     const uint32_t s = rays.owner[r];
-    const Material& m = fr.scene.materials[pts.materialOf(k)];
+    const Material m = pts.materialAt(fr.scene.materials, k);
     const Vec3 Nf = faceForward(pts.N[k], pts.I[k]);
     uint32_t pseed, index;
     sampleCoordinates(ws.tile, s, fr.seed, pseed, index);
@@ -316,8 +335,16 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
             if (tile.channels) {
                 tile.setAttributes(s, fr.scene.attributes[rh.patch].object, Nf, ws.shadowedLights[k],
                                    hitTextured(fr, pts, k, rh.patch));
-                setSurfaceAovs(fr, pts, k, s, tile);
+                setSurfaceAovs(fr, pts, k, s, tile, ws);
             }
+        } else if (!ws.secondary.empty() && rays.depth[r] == 1 &&
+                   (rays.kind[r] == kReflection || rays.kind[r] == kRefraction) &&
+                   ws.secondary[s].object == kNoObject) {
+            // --adaptive's presample: the first secondary hit's attributes (paper 004, L141); of a glass
+            // surface's two rays the one traced first (reflection), the same in every run.
+            ws.secondary[s] = HitAttributes{fr.scene.attributes[rh.patch].object, Nf,
+                                            uint8_t(std::min<int>(ws.shadowedLights[k], 255)),
+                                            uint8_t(hitTextured(fr, pts, k, rh.patch))};
         }
         const Color w = rays.weight[r];
         const Color c = w * ws.radiance[k];
@@ -325,7 +352,7 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
         tile.g[s] += c.y;
         tile.b[s] += c.z;
         if (rays.depth[r] >= fr.maxDepth) continue;
-        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        const Material m = pts.materialAt(fr.scene.materials, k);
         TracedLobe lobes[2];
         const int nLobes = tracedLobes(m, pts.I[k], pts.N[k], w, 1e-4f, lobes);
         for (int j = 0; j < nLobes; ++j) {
@@ -399,7 +426,7 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
     for (size_t k = 0; k < pts.count; ++k) {
         const uint32_t r = ws.hitRay[k], s = rays.owner[r];
         const RayHit& rh = ws.hits[r];
-        const Material& m = fr.scene.materials[pts.materialOf(k)];
+        const Material m = pts.materialAt(fr.scene.materials, k);
         const int depth = rays.depth[r];
         const Color w = rays.weight[r];
         const Vec3 I = pts.I[k], N = pts.N[k], Nf = faceForward(N, I), wo = -I;
@@ -513,7 +540,7 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
             tile.setAttributes(rays.owner[r], fr.scene.attributes[rh.patch].object,
                                faceForward(pts.N[k], pts.I[k]), ws.shadowedLights[k],
                                hitTextured(fr, pts, k, rh.patch));
-            setSurfaceAovs(fr, pts, k, rays.owner[r], tile);
+            setSurfaceAovs(fr, pts, k, rays.owner[r], tile, ws);
         }
     ws.shadeMs += msSince(ts);
 }
@@ -589,7 +616,7 @@ void shadeOcclusion(const Frame& fr, const AmbientOcclusionSettings& ao, uint32_
         if (tile.channels) {
             tile.setAttributes(s, fr.scene.attributes[rh.patch].object, faceForward(pts.N[k], pts.I[k]), 0,
                                false);
-            setSurfaceAovs(fr, pts, k, s, tile);
+            setSurfaceAovs(fr, pts, k, s, tile, ws);
         }
         if (aov >= 0) tile.aovValues[size_t(aov)][s] = value;
     }
@@ -770,7 +797,10 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
             ws.tile.sx[size_t(i)] = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
             ws.tile.sy[size_t(i)] = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
         }
+    ws.secondary.assign(ws.tile.sampleCount(), HitAttributes{kNoObject, Vec3{}, 0, 0});
     traceTile(fr, settings, proj, sr, ws);
+    std::vector<HitAttributes> secondary;
+    std::swap(secondary, ws.secondary);  // empty again: the extra samples record nothing
     if (!result.image.planes.empty()) {  // the attribute planes (and a filtered colour, replaced below)
         auto tf = EngineClock::now();
         reconstruct(ws.tile, filter, target, result.image);
@@ -790,7 +820,14 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
         a.normal = Vec3{pre.normalX[i], pre.normalY[i], pre.normalZ[i]};
         a.shadowCount = pre.shadowCount[i];
         a.textured = pre.hasTexture[i];
+        a.secondary = secondary[i];
         return a;
+    };
+    const std::vector<uint32_t>& focus = settings.adaptive.focusObjects;
+    auto focused = [&](const PresampleAttributes& a) {
+        for (uint32_t id : focus)
+            if (a.object == id || a.secondary.object == id) return true;
+        return false;
     };
     const int tw = target.width(), th = target.height();
     ws.activeSubpixels.assign(size_t(tw) * th * 4, 0);
@@ -808,7 +845,9 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
                     nb[k] = attributes(px + dx, py + dy);
                     n[k] = &nb[k];
                 }
-                const bool on = subpixelActive(thr, c, n);
+                const bool count =
+                    focus.empty() || focused(c) || focused(nb[0]) || focused(nb[1]) || focused(nb[2]);
+                const bool on = subpixelActive(thr, c, n, count);
                 ws.activeSubpixels[(size_t(py - target.y0) * tw + (px - target.x0)) * 4 + size_t(q)] = on;
                 active += on;
             }
@@ -839,6 +878,34 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
             for (int q = 0; q < 4; ++q) n += ws.activeSubpixels[p * 4 + size_t(q)];
             const float wc = float(4 - n) / 4.f;
             float rgba[4] = {pre.r[c] * wc, pre.g[c] * wc, pre.b[c] * wc, pre.a[c] * wc};
+            if (settings.adaptive.interpolate && n < 4) {
+                // Inactive subpixels: the presample interpolated at their centres (colour and alpha).
+                auto at = [&](int x, int y) {
+                    x = std::clamp(x, whole.x0, whole.x1 - 1), y = std::clamp(y, whole.y0, whole.y1 - 1);
+                    return size_t(y - presamplePixels.y0) * size_t(pw) + size_t(x - presamplePixels.x0);
+                };
+                for (float& v : rgba) v = 0.f;
+                for (int q = 0; q < 4; ++q) {
+                    if (ws.activeSubpixels[p * 4 + size_t(q)]) continue;
+                    size_t nbr[3];
+                    for (int k = 0; k < 3; ++k) {
+                        int dx, dy;
+                        subpixelNeighbour(q, k, dx, dy);
+                        nbr[k] = at(px + dx, py + dy);
+                    }
+                    const Color rgb =
+                        interpolatedSubpixel(Color{pre.r[c], pre.g[c], pre.b[c]},
+                                             Color{pre.r[nbr[0]], pre.g[nbr[0]], pre.b[nbr[0]]},
+                                             Color{pre.r[nbr[1]], pre.g[nbr[1]], pre.b[nbr[1]]},
+                                             Color{pre.r[nbr[2]], pre.g[nbr[2]], pre.b[nbr[2]]});
+                    const float alpha =
+                        interpolatedSubpixel(Color{pre.a[c], 0, 0}, Color{pre.a[nbr[0]], 0, 0},
+                                             Color{pre.a[nbr[1]], 0, 0}, Color{pre.a[nbr[2]], 0, 0})
+                            .x;
+                    rgba[0] += rgb.x / 4.f, rgba[1] += rgb.y / 4.f, rgba[2] += rgb.z / 4.f,
+                        rgba[3] += alpha / 4.f;
+                }
+            }
             for (int slot = 0; slot < 16; ++slot) {
                 const size_t s = p * 16 + size_t(slot);
                 if (!ws.tracedSamples[s]) continue;
@@ -1025,7 +1092,13 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
                            {"normal", t.normal},
                            {"shadow", t.shadow},
                            {"texture", t.texture < 0.f ? t.color : t.texture},
-                           {"normal_cosine", t.normalCosine}}}};
+                           {"secondary_object_id", t.secondaryObjectId},
+                           {"secondary_normal", t.secondaryNormal},
+                           {"secondary_shadow", t.secondaryShadow},
+                           {"secondary_texture", t.secondaryTexture < 0.f ? t.color : t.secondaryTexture},
+                           {"normal_cosine", t.normalCosine}}},
+                         {"focus_objects", settings.adaptive.focusObjects},
+                         {"interpolate", settings.adaptive.interpolate}};
     }
     if (occlusion)
         s["ao"] = {

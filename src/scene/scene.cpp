@@ -178,6 +178,16 @@ PlacedQuadric placeQuadric(const SceneQuadric& sq, const Mat4& toSpace) {
     return pq;
 }
 
+std::vector<PatchVertexValues> vertexValuesInSpace(const Scene& scene, const Mat4& toSpace) {
+    std::vector<PatchVertexValues> out = scene.vertexValues;
+    if (out.empty()) return out;
+    const Mat4 inv = toSpace.inverse();
+    for (PatchVertexValues& vv : out)
+        if (vv.hasN)
+            for (Vec3& n : vv.N) n = Mat4::normalWithInverse(inv, n);
+    return out;
+}
+
 void quadricHullCorners(const PlacedQuadric& pq, float u0, float u1, float v0, float v1, Vec3 corners[8]) {
     const Bounds3 b = quadricBounds(pq.q, u0, u1, v0, v1);
     for (int k = 0; k < 8; ++k)

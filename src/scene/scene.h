@@ -1,12 +1,15 @@
 // The scene both engines render: camera, image options, lights, materials and bicubic Bezier patches
 // in world space. Filled by the readers in src/io; read-only for the engines.
 #pragma once
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "core/bezier.h"
+#include "core/hostdevice.h"
 #include "core/quadric.h"
 #include "core/transform.h"
 #include "scene/camera.h"
@@ -146,6 +149,56 @@ struct PatchTexCoords {
     Vec2 st[4] = {{0, 0}, {1, 0}, {0, 1}, {1, 1}};
 };
 
+// A surface's per-vertex shading values (RI "N" and "Cs" of class vertex, varying or facevarying on
+// polygons, RI spec 3.2, sec. 5.1): the values at its (u,v) corners (0,0), (1,0), (0,1), (1,1), interpolated
+// bilinearly in between as RI interpolates varying values (docs/inputs.md, "Polygons"). N: the user's
+// normals (world space in the scene; unnormalised), which replace the surface normal in shading (both
+// engines turn them to the side of the oriented geometric normal). Cs: the surface colour, which replaces
+// the material's (the reader gives such surfaces a material with Cs = 1 and the engines multiply by this).
+struct PatchVertexValues {
+    Vec3 N[4]{};
+    Color Cs[4]{{1, 1, 1}, {1, 1, 1}, {1, 1, 1}, {1, 1, 1}};
+    bool hasN = false, hasCs = false;
+};
+
+// The bilinear interpolation of four corner values ((0,0), (1,0), (0,1), (1,1)) at (u,v).
+template <class T>
+TESSERA_HD T bilinearCorners(const T (&c)[4], float u, float v) {
+    return (c[0] * (1 - u) + c[1] * u) * (1 - v) + (c[2] * (1 - u) + c[3] * u) * v;
+}
+
+// The shading normal of a surface with user normals at (u,v): their bilinear interpolation, unit, on the
+// side of `geometric` (the oriented geometric normal); `geometric` itself where they cancel out.
+TESSERA_HD Vec3 vertexNormalAt(const PatchVertexValues& vv, float u, float v, Vec3 geometric) {
+    Vec3 n = bilinearCorners(vv.N, u, v);
+    const float len2 = dot(n, n);
+    if (!(len2 > 1e-20f) || !isFinite(n)) return geometric;
+    n = n / std::sqrt(len2);
+    return dot(n, geometric) < 0.f ? -n : n;
+}
+
+// Where shadow rays and shadow-map lookups leave a surface with user normals: the point P at (u,v) lifted
+// towards the smooth surface the normals describe (Hanika 2021, "Hacking the shadow terminator", Ray
+// Tracing Gems II, ch. 4, with bilinear weights w_i over the corners p_i): P - sum_i w_i min(0, (P -
+// p_i).n_i) n_i, the unit corner normals turned to the side of `geometric`. Without it a coarse mesh shades
+// smoothly but shadows itself facet by facet along the terminator. `patch`: the surface in the normals'
+// space.
+TESSERA_HD Vec3 terminatorSafePoint(const PatchVertexValues& vv, const BezierPatch& patch, float u, float v,
+                                    Vec3 P, Vec3 geometric) {
+    const Vec3 corner[4] = {patch.cp[0], patch.cp[3], patch.cp[12], patch.cp[15]};
+    const float w[4] = {(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v};
+    const float side = dot(bilinearCorners(vv.N, u, v), geometric) < 0.f ? -1.f : 1.f;
+    Vec3 lifted = P;
+    for (int i = 0; i < 4; ++i) {
+        const float len2 = dot(vv.N[i], vv.N[i]);
+        if (!(len2 > 1e-20f)) continue;
+        const Vec3 n = vv.N[i] * (side / std::sqrt(len2));
+        const float below = std::min(0.f, dot(P - corner[i], n));
+        lifted = lifted - n * (w[i] * below);
+    }
+    return isFinite(lifted) ? lifted : P;
+}
+
 // Displacement shaders (docs/textures.md, "Displacement"): RI bumpy (P += Km * texture(texturename, s, t) *
 // normalize(N), RI spec 3.2, appendix A) and Tessera's offset (P += Km * normalize(N): a constant amplitude,
 // which RI's standard shaders do not offer). Amplitudes are in camera-space ("current") units, as RI's bumpy.
@@ -234,6 +287,8 @@ struct PatchAttributes {
     // The area light (index into Scene::lights) this surface is part of, emitting from its front side (the
     // side its oriented normal faces); -1: none.
     int32_t areaLight = -1;
+    // Per-vertex normals and colours (index into Scene::vertexValues; -1: none).
+    int32_t vertexValues = -1;
 };
 
 struct Scene {
@@ -253,6 +308,9 @@ struct Scene {
     // Texture coordinates per patch (index as `patches`), or empty when every patch has the default s = u,
     // t = v; see texCoordsOf.
     std::vector<PatchTexCoords> texCoords;
+    // Per-vertex N and Cs of the surfaces that have them (PatchAttributes::vertexValues). Like the texture
+    // coordinates they stay with the patch at every motion key; N is world space at shutter open.
+    std::vector<PatchVertexValues> vertexValues;
     // The texture files materials refer to (Material::texture), resolved to paths by the reader.
     std::vector<std::string> textures;
     std::vector<DisplacementShader> displacements;  // PatchAttributes::displacement
@@ -272,6 +330,16 @@ std::array<size_t, kSurfaceKinds> surfaceKindCounts(const Scene& scene);
 inline PatchTexCoords texCoordsOf(const Scene& scene, size_t i) {
     return i < scene.texCoords.size() ? scene.texCoords[i] : PatchTexCoords{};
 }
+
+// The per-vertex values of patch `i` (nullptr: none).
+inline const PatchVertexValues* vertexValuesOf(const Scene& scene, size_t i) {
+    const int32_t k = scene.attributes[i].vertexValues;
+    return k >= 0 ? &scene.vertexValues[size_t(k)] : nullptr;
+}
+
+// The scene's per-vertex values with their normals in the space `toSpace` maps world space to (camera
+// space for the engines; inverse transpose), index as Scene::vertexValues.
+std::vector<PatchVertexValues> vertexValuesInSpace(const Scene& scene, const Mat4& toSpace);
 
 // World-space control points of patch `i` at scene time `time` (linear between its keys).
 BezierPatch patchAtTime(const Scene& scene, size_t i, float time);

@@ -37,7 +37,7 @@ void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& poi
                    size_t begin, size_t end, Color* Ci) {
     const size_t nL = ls.lights;
     for (size_t i = begin; i < end; ++i)
-        Ci[i] = shadeSurfacePoint(materials[points.materialOf(i)], points.N[i], points.I[i],
+        Ci[i] = shadeSurfacePoint(points.materialAt(materials, i), points.N[i], points.I[i],
                                   ls.sample.data() + i * nL, ls.visibility.data() + i * nL, nL,
                                   points.textureOf(i));
 }
@@ -47,7 +47,7 @@ void shadeSurfacesUnoccluded(std::span<const ShadingLight> lights, std::span<con
     for (size_t i = 0; i < points.count; ++i) {
         const Vec3 P = points.P[i];
         Ci[i] = shadeSurfaceLights(
-            materials[points.materialOf(i)], points.N[i], points.I[i], lights.size(),
+            points.materialAt(materials, i), points.N[i], points.I[i], lights.size(),
             [&](size_t l) { return sampleLight(lights[l], P); }, [](size_t) { return 1.f; },
             points.textureOf(i));
     }

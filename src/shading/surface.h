@@ -27,8 +27,17 @@ struct SurfacePoints {
     // Per point: the texture colour of a textured surface (paintedplastic's texture(texturename)), white
     // for untextured points; nullptr: no point is textured (shading/texture.h, shadeTexture).
     const Color* textureColor = nullptr;
+    // Per point: the colour that multiplies the material's Cs (per-vertex "Cs", scene.h PatchVertexValues);
+    // nullptr: none.
+    const Color* vertexColor = nullptr;
     uint32_t materialOf(size_t i) const { return material ? material[i] : 0u; }
     Color textureOf(size_t i) const { return textureColor ? textureColor[i] : Color{1, 1, 1}; }
+    // The material point i is shaded with: its own, Cs times the point's vertex colour.
+    Material materialAt(std::span<const Material> materials, size_t i) const {
+        Material m = materials[materialOf(i)];
+        if (vertexColor) m.Cs = m.Cs * vertexColor[i];
+        return m;
+    }
 };
 
 // The light samples of a batch, [point * lights + light]. A sample with needsVisibility set asks the engine
