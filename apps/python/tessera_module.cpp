@@ -202,6 +202,8 @@ Request parseOptions(const py::kwargs& kw) {
             o.micropolygonSampling = cast<std::string>(k, v);
         else if (key == "displacement_split")
             o.displacementSplit = cast<double>(k, v);
+        else if (key == "displacement_normals")
+            o.displacementNormals = cast<std::string>(k, v);
         else if (key == "blur")
             o.noBlur = !cast<bool>(k, v);
         else if (key == "blur_sampling")
@@ -413,6 +415,7 @@ Options (None or absent: the scene's own value), the CLI's long names with '_' f
   engine='reyes'|'rt', res=(w, h) or 'WxH', spp, shading_rate, threads (0: all cores), seed,
   sampler='sobol'|'jittered'|'centred', shadows='on'|'off'|'scene', reyes_shadows='map'|'raytrace',
   bucket_size, subpatch_depth, max_grid, micropolygon_sampling='bbox'|'nearest', displacement_split,
+  displacement_normals='exact'|'grid',
   max_depth, light_samples, cull_backfaces, ray_binning,
   blur (False: --no-blur), blur_sampling='simple'|'interleaved'|'bbox', blur_tile, blur_permutations,
   shutter=(open, close), dof=(fstop, focallength, focaldistance),

@@ -296,6 +296,7 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
     // Mixed in only when given, so that the hash of every earlier tile is unchanged.
     if (!a.micropolygonSampling.empty()) mix("micropolygon-sampling=" + a.micropolygonSampling);
     if (a.displacementSplit >= 0) mix("displacement-split=" + std::to_string(a.displacementSplit));
+    if (a.displacementNormals != "exact") mix("displacement-normals=" + a.displacementNormals);
     return fmt::format("{:016x}", h.h);
 }
 
@@ -982,6 +983,13 @@ int main(int argc, char** argv) {
                      "mip map of the texture, paper 001) is at most this many micropolygon sides; 0: off "
                      "(default 1)")
         ->check(inRange(0, 1e6));
+    render
+        ->add_option("--displacement-normals", ra.displacementNormals,
+                     "Reyes: displace along the exact normals shared by neighbouring patches (exact) or, for "
+                     "benchmarks only, along each patch's own normal with shading normals from grid "
+                     "differences (grid: paper 000's approximate baseline, which can crack)")
+        ->check(CLI::IsMember({"exact", "grid"}))
+        ->capture_default_str();
     render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
         ->check(intRange(0, 12));
     render

@@ -112,6 +112,9 @@ struct RenderSettings {
     // displacement (from the min/max mip map of the texture) is at most this many micropolygon sides, at
     // most kMaxDisplacementSplitDepth halvings deep; 0: off (edges are measured undisplaced).
     float displacementSplit = 1.f;
+    // Reyes: displace along the exact, shared normals (paper 000 sec. 3.1); false only for the benchmarks
+    // (--displacement-normals grid: the paper's approximate baseline, which can crack).
+    bool exactDisplacementNormals = true;
     SamplerKind sampler = SamplerKind::Sobol;  // camera sample pattern (film/sampler.h)
     // Ray tracer
     Integrator integrator = Integrator::Direct;

@@ -38,6 +38,7 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
         requireOneOf("micropolygon sampling", o.micropolygonSampling, {"bbox", "nearest"});
     if (!(o.displacementSplit < 0 || (o.displacementSplit >= 0 && std::isfinite(o.displacementSplit))))
         throw std::invalid_argument("displacement split must be a number >= 0 (0 = off)");
+    requireOneOf("displacement normals", o.displacementNormals, {"exact", "grid"});
     if (o.threads < 0) throw std::invalid_argument("threads must be >= 0 (0 = all cores)");
     if (o.bucketSize < 4 || o.bucketSize > 1024) throw std::invalid_argument("bucket size must be 4..1024");
     if (o.integrator != "direct" && o.engine != "rt")
@@ -71,6 +72,7 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     s.micropolygonSampling =
         mpSampling == "nearest" ? MicropolygonSampling::Nearest : MicropolygonSampling::BoundingBox;
     if (o.displacementSplit >= 0) s.displacementSplit = float(o.displacementSplit);
+    s.exactDisplacementNormals = o.displacementNormals == "exact";
     s.gloss = o.gloss == "microfacet" ? GlossModel::Microfacet : GlossModel::Paper;
     s.integrator = o.integrator == "ao"     ? Integrator::AmbientOcclusion
                    : o.integrator == "path" ? Integrator::Path

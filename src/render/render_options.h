@@ -32,8 +32,9 @@ struct RenderOptions {
     // (negative: the default, 1; 0: no displacement-aware splitting).
     std::string micropolygonSampling;
     double displacementSplit = -1;
-    int maxDepth = -1;     // -1: 4 for the direct integrator, 16 for the path tracer
-    int lightSamples = 0;  // 0: each area light's own "samples"
+    std::string displacementNormals = "exact";  // exact, grid (benchmarks only)
+    int maxDepth = -1;                          // -1: 4 for the direct integrator, 16 for the path tracer
+    int lightSamples = 0;                       // 0: each area light's own "samples"
     bool cullBackfaces = false, noRayBinning = false;
     // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's Hider parameters.
     bool noBlur = false;

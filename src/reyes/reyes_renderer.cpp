@@ -143,6 +143,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         makeDisplacementFrame(scene, frame.textures.get(), patches, float(cam.cameraFromWorld.maxStretch()));
     if (displacement.any()) view.displacement = &displacement;
     view.displacementSplit = settings.displacementSplit;
+    view.exactDisplacementNormals = settings.exactDisplacementNormals;
     view.lens = frame.blur.lens;
     if (motion.blurred()) {
         view.knotPatches.push_back(patches.data());

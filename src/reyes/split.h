@@ -106,6 +106,10 @@ struct ReyesView {
     // from the texture's min/max mip map, within this many micropolygon sides (split.cpp,
     // displacementSegments).
     float displacementSplit = 0.f;
+    // false: displace along the undisplaced patch's own normal at each vertex and shade with normals from
+    // the displaced grid's differences, as paper 000 does before its fix (sec. 3.1): what the exact,
+    // shared normals cost is measured against it (bench/displacement_bench.sh). Shared edges can crack.
+    bool exactDisplacementNormals = true;
     explicit ReyesView(const Camera& cam) : projector(cam) {}
 };
 
