@@ -4,6 +4,7 @@
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -15,6 +16,8 @@
 #include "reyes/grid.h"
 #include "reyes/pipeline.h"
 #include "rib_test_util.h"
+#include "shading/minmax_mip.h"
+#include "shading/texture.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -283,4 +286,154 @@ TEST(Displacement, ACreaseStaysClosed) {
             for (int x = 0; x < img.width; ++x) holes += img.pixel(x, y)[3] < 1.f - 1e-4f;  // filter rounding
         EXPECT_EQ(holes, 0) << "Km " << km;
     }
+}
+
+// The min/max mip map (paper 001 sec. 3.1) against brute force: on a random texture of odd size, the read of
+// any texel rectangle at the level of its extent bounds the true min and max of its texels, and is exact
+// for one aligned block; st reads wrap as the lookups do (periodic) and reach past the border as black.
+TEST(TextureMinMaxMip, ReadsBoundTheTexelsOfRandomRectangles) {
+    std::mt19937 rng(12);
+    const int w = 37, h = 23;
+    std::vector<float> px(size_t(w) * h);
+    std::uniform_real_distribution<float> U(-3.f, 5.f);
+    for (float& p : px) p = U(rng);
+    const MinMaxMip mip = buildMinMaxMip(w, h, px);
+    ASSERT_EQ(mip.levels.size(), 7u);  // 37x23, 19x12, 10x6, 5x3, 3x2, 2x1, 1x1
+    auto brute = [&](int x0, int x1, int y0, int y1, float& lo, float& hi) {
+        lo = INFINITY, hi = -INFINITY;
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x)
+                lo = std::min(lo, px[size_t(y) * w + x]), hi = std::max(hi, px[size_t(y) * w + x]);
+    };
+    const float globalLo = *std::min_element(px.begin(), px.end()),
+                globalHi = *std::max_element(px.begin(), px.end());
+    int tighter = 0;
+    for (int trial = 0; trial < 2000; ++trial) {
+        int x0 = int(rng() % w), x1 = int(rng() % w), y0 = int(rng() % h), y1 = int(rng() % h);
+        if (trial % 2)
+            x1 = std::min(w - 1, x0 + int(rng() % 4)), y1 = std::min(h - 1, y0 + int(rng() % 4));  // small
+        if (x1 < x0) std::swap(x0, x1);
+        if (y1 < y0) std::swap(y0, y1);
+        float lo = INFINITY, hi = -INFINITY, tlo, thi;
+        minMaxInRect(mip, x0, x1, y0, y1, lo, hi);
+        brute(x0, x1, y0, y1, tlo, thi);
+        ASSERT_LE(lo, tlo) << x0 << ".." << x1 << " x " << y0 << ".." << y1;
+        ASSERT_GE(hi, thi) << x0 << ".." << x1 << " x " << y0 << ".." << y1;
+        ASSERT_GE(lo, globalLo);
+        ASSERT_LE(hi, globalHi);
+        tighter += hi - lo < globalHi - globalLo;
+    }
+    EXPECT_GT(tighter, 500);  // the small rectangles read much less than the whole range
+    // One aligned block of level L reads exactly its texels.
+    for (int L = 0; L < 4; ++L)
+        for (int j = 0; j < 3; ++j) {
+            const int n = 1 << L, x0 = j * n, y0 = (j % 2) * n;
+            float lo = INFINITY, hi = -INFINITY, tlo, thi;
+            minMaxInRect(mip, x0, x0 + n - 1, y0, y0 + n - 1, lo, hi);
+            brute(x0, x0 + n - 1, y0, y0 + n - 1, tlo, thi);
+            EXPECT_EQ(lo, tlo);
+            EXPECT_EQ(hi, thi);
+        }
+    // st reads: the bilinear footprint of the rectangle, wrapped (periodic) or past the border (black: 0).
+    for (int trial = 0; trial < 500; ++trial) {
+        std::uniform_real_distribution<float> S(-1.5f, 2.5f), D(0.f, 0.3f);
+        const float s0 = S(rng), t0 = S(rng), s1 = s0 + D(rng), t1 = t0 + D(rng);
+        float lo, hi;
+        ASSERT_TRUE(minMaxInST(mip, s0, s1, t0, t1, lo, hi));
+        float tlo = INFINITY, thi = -INFINITY;
+        const int xa = int(std::floor(s0 * w - 0.5f)), xb = int(std::floor(s1 * w - 0.5f)) + 1;
+        const int ya = int(std::floor(t0 * h - 0.5f)), yb = int(std::floor(t1 * h - 0.5f)) + 1;
+        for (int y = ya; y <= yb; ++y)
+            for (int x = xa; x <= xb; ++x) {
+                const float v = px[size_t(((y % h) + h) % h) * w + size_t(((x % w) + w) % w)];
+                tlo = std::min(tlo, v), thi = std::max(thi, v);
+            }
+        ASSERT_LE(lo, tlo);
+        ASSERT_GE(hi, thi);
+    }
+    MinMaxMip black = buildMinMaxMip(w, h, px, TexelWrap::Black, TexelWrap::Black);
+    float lo, hi;
+    ASSERT_TRUE(minMaxInST(black, 0.95f, 1.2f, 0.4f, 0.5f, lo, hi));
+    EXPECT_LE(lo, 0.f);
+    EXPECT_GE(hi, 0.f);
+}
+
+// The pyramid a render builds reads the texture file's texels through OpenImageIO: equal to the pyramid of
+// the values written.
+TEST(TextureMinMaxMip, IsBuiltFromTheFilesTexels) {
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> U(-1.f, 2.f);
+    std::vector<float> px(20 * 20);
+    for (float& p : px) p = U(rng);
+    const std::string path = writeGrey("mip.exr", 20, px);
+    const std::vector<std::string> files{path};
+    const Textures textures(files);
+    const MinMaxMip& mip = textures.minMaxMip(0);
+    const MinMaxMip ref = buildMinMaxMip(20, 20, px);
+    ASSERT_EQ(mip.levels.size(), ref.levels.size());
+    for (size_t l = 0; l < ref.levels.size(); ++l) {
+        EXPECT_EQ(mip.levels[l].lo, ref.levels[l].lo) << l;
+        EXPECT_EQ(mip.levels[l].hi, ref.levels[l].hi) << l;
+    }
+    EXPECT_EQ(mip.wrapS, TexelWrap::Periodic);
+}
+
+namespace {
+
+// The teapot at 160x120 displaced by a texture of random noise (high frequency: a texel is about a pixel),
+// rendered with displacement-aware splitting at `threshold` (0: off).
+RenderResult noisyTeapot(float threshold, const std::string& texture) {
+    const std::string scenes = std::string(TESSERA_SOURCE_DIR) + "/scenes/";
+    const std::string rib = writeRib(
+        "Format 160 120 1\nPixelSamples 2 2\nPixelFilter \"box\" 1 1\n"
+        "Projection \"perspective\" \"fov\" 32\nTranslate 0 0 10\nRotate -115 1 0 0\n"
+        "Rotate 19 0 0 1\nTranslate -0.625 0 -1.25\nWorldBegin\nSurface \"constant\"\n"
+        "Displacement \"bumpy\" \"Km\" 0.08 \"texturename\" \"" +
+            texture + "\"\nScale 0.025 0.025 0.025\nReadArchive \"" + scenes +
+            "archives/teapot_geometry.rib\"\nWorldEnd\n",
+        "noisy_teapot.rib");
+    const Scene s = loadScene(rib, [](const std::string&) {});
+    RenderSettings rs;
+    rs.threads = 2;
+    rs.displacementSplit = threshold;
+    return render(s, rs);
+}
+
+}  // namespace
+
+// Displacement-aware splitting (paper 001 sec. 3.1): with a high-frequency texture the teapot is split into
+// more pieces and micropolygons, and its displaced micropolygons get smaller on screen (mean and largest
+// side, measured from the diced grids); a larger threshold splits less; every pixel inside stays covered.
+TEST(DisplacementSplit, HighFrequencyTextureGetsMorePiecesAndSmallerMicropolygons) {
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> U(0.f, 1.f);
+    std::vector<float> px(64 * 64);
+    for (float& p : px) p = U(rng);
+    const std::string tex = writeGrey("noise64.exr", 64, px);
+    const RenderResult off = noisyTeapot(0.f, tex), on = noisyTeapot(1.f, tex), loose = noisyTeapot(4.f, tex);
+    auto count = [](const RenderResult& r, const char* key) { return r.stats.at(key).get<uint64_t>(); };
+    auto side = [](const RenderResult& r, const char* key) {
+        return r.stats.at("displaced").at(key).get<double>();
+    };
+    EXPECT_GT(count(on, "pieces"), count(off, "pieces"));
+    EXPECT_GT(count(on, "micropolygons"), count(off, "micropolygons"));
+    EXPECT_GT(count(on, "grid_vertices"), count(off, "grid_vertices"));
+    EXPECT_LT(side(on, "mean_longest_side_px"), side(off, "mean_longest_side_px"));
+    EXPECT_LT(side(on, "max_longest_side_px"), side(off, "max_longest_side_px"));
+    EXPECT_LE(count(loose, "micropolygons"), count(on, "micropolygons"));
+    EXPECT_GE(count(loose, "micropolygons"), count(off, "micropolygons"));
+    // No pinholes with the extra splitting: every pixel whose 5x5 neighbourhood the unsplit render covers
+    // fully is covered fully (shared edges split alike from both sides).
+    int inside = 0, holes = 0;
+    for (int y = 2; y < off.image.height - 2; ++y)
+        for (int x = 2; x < off.image.width - 2; ++x) {
+            bool all = true;
+            for (int dy = -2; dy <= 2; ++dy)
+                for (int dx = -2; dx <= 2; ++dx) all = all && off.image.pixel(x + dx, y + dy)[3] == 1.f;
+            if (!all) continue;
+            ++inside;
+            holes += on.image.pixel(x, y)[3] != 1.f;
+        }
+    EXPECT_GT(inside, 3000);
+    EXPECT_EQ(holes, 0);
 }

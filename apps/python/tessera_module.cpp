@@ -198,6 +198,12 @@ Request parseOptions(const py::kwargs& kw) {
             o.cullBackfaces = cast<bool>(k, v);
         else if (key == "ray_binning")
             o.noRayBinning = !cast<bool>(k, v);
+        else if (key == "micropolygon_sampling")
+            o.micropolygonSampling = cast<std::string>(k, v);
+        else if (key == "displacement_split")
+            o.displacementSplit = cast<double>(k, v);
+        else if (key == "displacement_normals")
+            o.displacementNormals = cast<std::string>(k, v);
         else if (key == "blur")
             o.noBlur = !cast<bool>(k, v);
         else if (key == "blur_sampling")
@@ -421,7 +427,9 @@ scene: a path (RIB, .bpt, OBJ, Micropolis) or a tessera.Scene; or rib="..." for 
 Options (None or absent: the scene's own value), the CLI's long names with '_' for '-':
   engine='reyes'|'rt', res=(w, h) or 'WxH', spp, shading_rate, threads (0: all cores), seed,
   sampler='sobol'|'jittered'|'centred', shadows='on'|'off'|'scene', reyes_shadows='map'|'raytrace',
-  bucket_size, subpatch_depth, max_grid, max_depth, light_samples, cull_backfaces, ray_binning,
+  bucket_size, subpatch_depth, max_grid, micropolygon_sampling='bbox'|'nearest', displacement_split,
+  displacement_normals='exact'|'grid',
+  max_depth, light_samples, cull_backfaces, ray_binning,
   blur (False: --no-blur), blur_sampling='simple'|'interleaved'|'bbox', blur_tile, blur_permutations,
   shutter=(open, close), dof=(fstop, focallength, focaldistance),
   integrator='direct'|'path'|'ao', ao_samples, ao_distance, ao_weighting='cosine'|'paper',

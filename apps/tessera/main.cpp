@@ -293,7 +293,13 @@ std::string sceneHash(const RenderArgs& a, const Scene& scene) {
     mix(std::to_string(a.lightSamples));
     mix(a.gloss);
     mix(std::to_string(a.passes));
-    mix(a.adaptiveThresholds + "|" + a.adaptiveFocus + "|" + std::to_string(a.adaptiveInterpolate));
+    // Mixed in only when given, so that the hash of every earlier tile is unchanged.
+    if (!a.micropolygonSampling.empty()) mix("micropolygon-sampling=" + a.micropolygonSampling);
+    if (a.displacementSplit >= 0) mix("displacement-split=" + std::to_string(a.displacementSplit));
+    if (a.displacementNormals != "exact") mix("displacement-normals=" + a.displacementNormals);
+    if (!a.adaptiveThresholds.empty()) mix("adaptive-thresholds=" + a.adaptiveThresholds);
+    if (!a.adaptiveFocus.empty()) mix("adaptive-focus=" + a.adaptiveFocus);
+    if (a.adaptiveInterpolate) mix("adaptive-interpolate");
     return fmt::format("{:016x}", h.h);
 }
 
@@ -972,6 +978,26 @@ int main(int argc, char** argv) {
     render->add_option("--bucket-size", ra.bucketSize, "Bucket side in pixels")->check(intRange(4, 1024));
     render->add_option("--max-grid", ra.maxGridEdge, "Reyes: micropolygons per grid edge")
         ->check(intRange(1, 256));
+    render
+        ->add_option("--micropolygon-sampling", ra.micropolygonSampling,
+                     "Reyes: test every film sample in a micropolygon's bounding box (bbox) or only the one "
+                     "nearest its middle point (nearest: paper 000's sampler, which leaves holes; blurred "
+                     "grids use bbox); default: the RIB Hider's \"micropolygonsampling\", else bbox")
+        ->check(CLI::IsMember({"bbox", "nearest"}));
+    render
+        ->add_option("--displacement-split", ra.displacementSplit,
+                     "Reyes: split displaced edges until their projected displacement variation (min/max "
+                     "mip map of the texture, paper 001) is at most this many micropolygon sides; 0: off "
+                     "(default 1)")
+        ->check(inRange(0, 1e6))
+        ->default_str("1");  // the sentinel -1 means "the default"
+    render
+        ->add_option("--displacement-normals", ra.displacementNormals,
+                     "Reyes: displace along the exact normals shared by neighbouring patches (exact) or, for "
+                     "benchmarks only, along each patch's own normal with shading normals from grid "
+                     "differences (grid: paper 000's approximate baseline, which can crack)")
+        ->check(CLI::IsMember({"exact", "grid"}))
+        ->capture_default_str();
     render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
         ->check(intRange(0, 12));
     render

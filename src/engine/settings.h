@@ -98,12 +98,30 @@ inline const char* reyesShadowsName(ReyesShadows m) {
     return m == ReyesShadows::Raytrace ? "raytrace" : "map";
 }
 
+// How Reyes samples the micropolygons of unblurred grids (--micropolygon-sampling; paper 000 sec. 3.2):
+// every film sample inside a micropolygon's bounding box is tested (BoundingBox), or only the one sample
+// nearest its middle point (Nearest: the paper's nearest-neighbour sampler, which leaves holes where a
+// micropolygon covers more than one sample; kept to measure them, docs/textures.md). Blurred grids and
+// shadow-map passes always use the bounding box.
+enum class MicropolygonSampling : uint8_t { BoundingBox, Nearest };
+inline const char* micropolygonSamplingName(MicropolygonSampling m) {
+    return m == MicropolygonSampling::Nearest ? "nearest" : "bbox";
+}
+
 struct RenderSettings {
-    std::string engine = "reyes";              // "reyes" or "rt"
-    int threads = 0;                           // 0: all hardware threads
-    uint32_t seed = 0;                         // sample pattern seed
-    int bucketSize = 32;                       // pixels per bucket side
-    int maxGridEdge = 16;                      // Reyes: micropolygons per grid edge before splitting
+    std::string engine = "reyes";  // "reyes" or "rt"
+    int threads = 0;               // 0: all hardware threads
+    uint32_t seed = 0;             // sample pattern seed
+    int bucketSize = 32;           // pixels per bucket side
+    int maxGridEdge = 16;          // Reyes: micropolygons per grid edge before splitting
+    MicropolygonSampling micropolygonSampling = MicropolygonSampling::BoundingBox;  // Reyes
+    // Reyes, displaced surfaces (paper 001 sec. 3.1): split an edge until the projected variation of its
+    // displacement (from the min/max mip map of the texture) is at most this many micropolygon sides, at
+    // most kMaxDisplacementSplitDepth halvings deep; 0: off (edges are measured undisplaced).
+    float displacementSplit = 1.f;
+    // Reyes: displace along the exact, shared normals (paper 000 sec. 3.1); false only for the benchmarks
+    // (--displacement-normals grid: the paper's approximate baseline, which can crack).
+    bool exactDisplacementNormals = true;
     SamplerKind sampler = SamplerKind::Sobol;  // camera sample pattern (film/sampler.h)
     // Ray tracer
     Integrator integrator = Integrator::Direct;

@@ -425,7 +425,8 @@ class RibReader {
     }
     // Hider "hidden" (RI spec 3.2, sec. 4.1.5) with our motion-blur parameters (docs/motion.md):
     // "string blursampling" "simple" | "interleaved" | "bbox", "int blurtilesize" K (2..16),
-    // "int blurpermutations" P (1..4096).
+    // "int blurpermutations" P (1..4096); and Reyes' micropolygon sampler (paper 000 sec. 3.2):
+    // "string micropolygonsampling" "bbox" | "nearest".
     void hider(const Request& r, const Arguments& args) {
         args.atLeast(1, "type ...parameterlist...");
         const std::string& type = args.string(0);
@@ -453,6 +454,14 @@ class RibReader {
                                            std::to_string(lo) + " to " + std::to_string(hi) + ", found " +
                                            fmtNum(v));
                 (tile ? scene_.image.blurTileSize : scene_.image.blurPermutations) = int(v);
+            } else if (p.name == "micropolygonsampling") {
+                std::string v = paramString(r, p, diag_);
+                if (v != "bbox" && v != "nearest")
+                    diag_.fail(p.line,
+                               "Hider \"hidden\": \"micropolygonsampling\" must be \"bbox\" or "
+                               "\"nearest\", found \"" +
+                                   printable(v) + "\"");
+                scene_.image.micropolygonSampling = v;
             } else if (p.name == "jitter") {
                 const float v = paramFloat(r, p, diag_);
                 if (v != 0.f && v != 1.f)
@@ -1230,7 +1239,8 @@ class RibReader {
             PrimitiveContext context = primitiveContext();
             if (!m.shapes.empty() && m.shapes.front().subdivLevel > 0)
                 context.subdivLevel = m.shapes.front().subdivLevel;  // the same patches in every key
-            PrimitiveShape key = readPrimitiveShape(r, context, m.shapes.empty() ? nullptr : &m.shapes.front());
+            PrimitiveShape key =
+                readPrimitiveShape(r, context, m.shapes.empty() ? nullptr : &m.shapes.front());
             m.shapes.push_back(std::move(key));
             const PrimitiveShape &a = m.shapes.front(), &b = m.shapes.back();
             if (b.topology != a.topology || b.topologyHash != a.topologyHash ||

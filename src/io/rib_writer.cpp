@@ -184,9 +184,12 @@ void writeRib(const Scene& scene, std::ostream& o) {
     if (cam.lensRadius() > 0.f)
         o << "DepthOfField " << num(cam.fStop) << " " << num(cam.focalLength) << " " << num(cam.focalDistance)
           << "\n";
-    if (!img.blurSampling.empty() || img.blurTileSize > 0 || img.blurPermutations > 0 || !img.jitter) {
+    if (!img.blurSampling.empty() || img.blurTileSize > 0 || img.blurPermutations > 0 || !img.jitter ||
+        !img.micropolygonSampling.empty()) {
         o << "Hider \"hidden\"";
         if (!img.jitter) o << " \"int jitter\" [0]";
+        if (!img.micropolygonSampling.empty())
+            o << " \"string micropolygonsampling\" " << quoted(img.micropolygonSampling);
         if (!img.blurSampling.empty()) o << " \"string blursampling\" " << quoted(img.blurSampling);
         if (img.blurTileSize > 0) o << " \"int blurtilesize\" [" << img.blurTileSize << "]";
         if (img.blurPermutations > 0) o << " \"int blurpermutations\" [" << img.blurPermutations << "]";

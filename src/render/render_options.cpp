@@ -89,6 +89,11 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     requireOneOf("gloss", o.gloss, {"paper", "microfacet"});
     if (!o.blurSampling.empty())
         requireOneOf("blur sampling", o.blurSampling, {"simple", "interleaved", "bbox"});
+    if (!o.micropolygonSampling.empty())
+        requireOneOf("micropolygon sampling", o.micropolygonSampling, {"bbox", "nearest"});
+    if (!(o.displacementSplit < 0 || (o.displacementSplit >= 0 && std::isfinite(o.displacementSplit))))
+        throw std::invalid_argument("displacement split must be a number >= 0 (0 = off)");
+    requireOneOf("displacement normals", o.displacementNormals, {"exact", "grid"});
     if (o.threads < 0) throw std::invalid_argument("threads must be >= 0 (0 = all cores)");
     if (o.bucketSize < 4 || o.bucketSize > 1024) throw std::invalid_argument("bucket size must be 4..1024");
     if (o.integrator != "direct" && o.engine != "rt")
@@ -119,6 +124,12 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     s.cullBackfaces = o.cullBackfaces;
     s.rayBinning = !o.noRayBinning;
     s.maxGridEdge = o.maxGridEdge;
+    const std::string mpSampling =
+        !o.micropolygonSampling.empty() ? o.micropolygonSampling : scene.image.micropolygonSampling;
+    s.micropolygonSampling =
+        mpSampling == "nearest" ? MicropolygonSampling::Nearest : MicropolygonSampling::BoundingBox;
+    if (o.displacementSplit >= 0) s.displacementSplit = float(o.displacementSplit);
+    s.exactDisplacementNormals = o.displacementNormals == "exact";
     s.gloss = o.gloss == "microfacet" ? GlossModel::Microfacet : GlossModel::Paper;
     s.integrator = o.integrator == "ao"     ? Integrator::AmbientOcclusion
                    : o.integrator == "path" ? Integrator::Path

@@ -27,8 +27,14 @@ struct RenderOptions {
     std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
     std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
     int bucketSize = 32, subpatchDepth = 6, maxGridEdge = 16;
-    int maxDepth = -1;     // -1: 4 for the direct integrator, 16 for the path tracer
-    int lightSamples = 0;  // 0: each area light's own "samples"
+    // Reyes (docs/textures.md): the micropolygon sampler, bbox or nearest ("": the scene's Hider
+    // "micropolygonsampling", else bbox); and the displacement split threshold in micropolygon sides
+    // (negative: the default, 1; 0: no displacement-aware splitting).
+    std::string micropolygonSampling;
+    double displacementSplit = -1;
+    std::string displacementNormals = "exact";  // exact, grid (benchmarks only)
+    int maxDepth = -1;                          // -1: 4 for the direct integrator, 16 for the path tracer
+    int lightSamples = 0;                       // 0: each area light's own "samples"
     bool cullBackfaces = false, noRayBinning = false;
     // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's Hider parameters.
     bool noBlur = false;
@@ -67,8 +73,8 @@ std::optional<std::pair<int, int>> parseResolution(const std::string& text);
 void applySceneOverrides(Scene& scene, const RenderOptions& o);
 
 // Fills `s` (all but view and output) from `o` and the scene's own render options (Hider "jitter",
-// "blursampling", "blurtilesize", "blurpermutations"). Throws std::invalid_argument for an unknown name or
-// a value out of range, naming the option.
+// "blursampling", "blurtilesize", "blurpermutations", "micropolygonsampling"). Throws std::invalid_argument
+// for an unknown name or a value out of range, naming the option.
 void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettings& s);
 
 // The statistics' record of what was asked for, beside the engines' counters: "shadows" (mode, casting

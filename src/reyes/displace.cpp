@@ -140,6 +140,11 @@ DisplacementFrame makeDisplacementFrame(const Scene& scene, const Textures* text
     return f;
 }
 
+float displacementAmplitude(const ReyesView& view, const DisplacementFrame& frame, uint32_t patch, Vec2 uv,
+                            const SurfacePoint& sp) {
+    return amplitude(view, frame, patch, uv, sp);
+}
+
 DisplacedVertex displaceVertex(const ReyesView& view, const DisplacementFrame& frame, uint32_t patch,
                                const PieceEdge* owner, int k, Vec2 uv, Vec3 P, bool flip, bool normal) {
     const BezierPatch& bp = view.patches[patch];

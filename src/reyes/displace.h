@@ -59,4 +59,9 @@ struct DisplacedVertex {
 DisplacedVertex displaceVertex(const ReyesView& view, const DisplacementFrame& frame, uint32_t patch,
                                const PieceEdge* owner, int k, Vec2 uv, Vec3 P, bool flip, bool normal = true);
 
+// Only the shader's amplitude at `uv` of displaced patch `patch` (Km * texture, or Km), unshared: for
+// the benchmarks' approximate-normal mode (ReyesView::exactDisplacementNormals false).
+float displacementAmplitude(const ReyesView& view, const DisplacementFrame& frame, uint32_t patch, Vec2 uv,
+                            const SurfacePoint& sp);
+
 }  // namespace tessera

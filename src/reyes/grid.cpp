@@ -133,7 +133,11 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 Ct[v] = surfaceTextureColor(*shade.textures, *shade.material, view.projector, shade.texCoords,
                                             P, sp.dpdu, sp.dpdv, uv, shade.textureScale);
             if (vertexColoured) Cv[v] = bilinearCorners(vv->Cs, uv.x, uv.y);
-            if (displaced) {
+            if (displaced && !view.exactDisplacementNormals) {
+                const Vec3 d = N * displacementAmplitude(view, *view.displacement, piece.patch, uv, sp);
+                if (moves) offsets[v] = d;
+                P = P + d;
+            } else if (displaced) {
                 const DisplacedVertex d =
                     displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P, shade.flipNormal);
                 if (moves) offsets[v] = d.P - P;
@@ -151,6 +155,22 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             grid.Z[v] = P.z;
             grid.front[v] = dot(N, P) < 0.f;
         }
+    }
+    if (displaced && !shade.depthOnly && !view.exactDisplacementNormals) {
+        // The approximate mode's shading normals: central differences of the displaced grid (one-sided at
+        // its borders), kept on the side of the undisplaced normal.
+        const int stride = nu + 1;
+        for (int j = 0; j <= nv; ++j)
+            for (int i = 0; i <= nu; ++i) {
+                const int v = j * stride + i;
+                const Vec3 du = Ps[j * stride + std::min(i + 1, nu)] - Ps[j * stride + std::max(i - 1, 0)];
+                const Vec3 dv = Ps[std::min(j + 1, nv) * stride + i] - Ps[std::max(j - 1, 0) * stride + i];
+                Vec3 n = cross(du, dv);
+                if (!(dot(n, n) > 0.f)) continue;
+                n = normalize(n);
+                Ns[v] = dot(n, Ns[v]) < 0.f ? -n : n;
+                grid.front[v] = dot(Ns[v], Ps[v]) < 0.f;
+            }
     }
     if (shade.depthOnly) {
         // Depth maps see both sides (as shadow rays do); no colour.

@@ -1,6 +1,7 @@
 #include "reyes/rasterize.h"
 
 #include <algorithm>
+#include <cstdint>
 
 #include "reyes/edge_functions.h"
 
@@ -89,7 +90,50 @@ uint64_t rasterizeGridImpl(const Grid& g, SampleTile& tile, float nearZ) {
     return tests;
 }
 
+template <bool kAttributes>
+uint64_t rasterizeGridNearestImpl(const Grid& g, SampleTile& tile, float nearZ) {
+    uint64_t tests = 0;
+    const Rect& reg = tile.region;
+    const int stride = g.nu + 1;
+    const int spp = tile.spp, tw = reg.width();
+    for (int j = 0; j < g.nv; ++j) {
+        for (int i = 0; i < g.nu; ++i) {
+            const int a = j * stride + i, b = a + 1, c = a + stride + 1, d = a + stride;
+            if (!g.twoSided && !(g.front[a] | g.front[b] | g.front[c] | g.front[d])) continue;
+            // The middle point, fixed point (floor of the mean), and the pixel that holds it.
+            const int64_t mx = (int64_t(g.X[a]) + g.X[b] + g.X[c] + g.X[d]) >> 2;
+            const int64_t my = (int64_t(g.Y[a]) + g.Y[b] + g.Y[c] + g.Y[d]) >> 2;
+            const int64_t px = mx >> kSubpixelBits, py = my >> kSubpixelBits;
+            if (px < reg.x0 || px >= reg.x1 || py < reg.y0 || py >= reg.y1) continue;
+            const size_t pix = size_t(py - reg.y0) * tw + size_t(px - reg.x0);
+            size_t si = pix * spp;
+            int64_t best = INT64_MAX;
+            for (int s = 0; s < spp; ++s) {
+                const size_t k = pix * spp + size_t(s);
+                const int64_t dx = tile.sx[k] - mx, dy = tile.sy[k] - my;
+                const int64_t d2 = dx * dx + dy * dy;
+                if (d2 < best) best = d2, si = k;
+            }
+            ++tests;
+            const int64_t sx = tile.sx[si], sy = tile.sy[si];
+            const TriangleSetup t0 = setupTriangle(g, a, b, c);
+            bool hit = t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ);
+            if (!hit) {
+                const TriangleSetup t1 = setupTriangle(g, a, c, d);
+                hit = t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ);
+            }
+            if (hit) tile.pixelHit[pix] = 1;
+        }
+    }
+    return tests;
+}
+
 }  // namespace
+
+uint64_t rasterizeGridNearest(const Grid& g, SampleTile& tile, float nearZ) {
+    return tile.channels ? rasterizeGridNearestImpl<true>(g, tile, nearZ)
+                         : rasterizeGridNearestImpl<false>(g, tile, nearZ);
+}
 
 uint64_t rasterizeGrid(const Grid& g, SampleTile& tile, float nearZ) {
     return tile.channels ? rasterizeGridImpl<true>(g, tile, nearZ) : rasterizeGridImpl<false>(g, tile, nearZ);

@@ -13,4 +13,12 @@ namespace tessera {
 // Returns the number of sample tests performed.
 uint64_t rasterizeGrid(const Grid& grid, SampleTile& tile, float nearZ);
 
+// Paper 000's nearest-neighbour sampler (sec. 3.2): "only the pixel center, which is nearest to the middle
+// point of a micropolygon is considered". Per micropolygon, one sample is tested (inside, then depth):
+// among the samples of the pixel holding the micropolygon's middle point (the mean of its four corners),
+// the one nearest that point (ties: the lower slot). At one sample per pixel with centred samples that is
+// exactly the paper's pixel centre; with N samples per pixel a micropolygon still covers at most one, so
+// holes stay unless micropolygons shrink to about 1/N pixel. Returns the number of samples tested.
+uint64_t rasterizeGridNearest(const Grid& grid, SampleTile& tile, float nearZ);
+
 }  // namespace tessera

@@ -23,11 +23,47 @@ namespace tessera {
 namespace {
 
 struct ThreadCounters {
-    uint64_t grids = 0, micropolygons = 0, sampleTests = 0;
+    uint64_t grids = 0, micropolygons = 0, gridVertices = 0, sampleTests = 0;
+    uint64_t emptySamples = 0, emptyPixels = 0, nearestFallbackGrids = 0;
+    // Displaced grids: their micropolygons, the sum of each one's longest side and the longest (pixels).
+    uint64_t displacedMicropolygons = 0;
+    double displacedSideSum = 0;
+    float displacedSideMax = 0.f;
     double diceMs = 0, sampleMs = 0, filterMs = 0;
     SampleTile tile;
     BlurStrata strata;
 };
+
+// Counts the samples of `target` that no micropolygon covered, and the pixels none of whose samples was.
+void countEmpty(const SampleTile& tile, const Rect& target, uint64_t& samples, uint64_t& pixels) {
+    const int tw = tile.region.width();
+    for (int y = target.y0; y < target.y1; ++y)
+        for (int x = target.x0; x < target.x1; ++x) {
+            const size_t pix = size_t(y - tile.region.y0) * tw + size_t(x - tile.region.x0);
+            int empty = 0;
+            for (int k = 0; k < tile.spp; ++k) empty += tile.a[pix * tile.spp + size_t(k)] == 0.f;
+            samples += uint64_t(empty);
+            pixels += empty == tile.spp;
+        }
+}
+
+// Screen size of a grid's micropolygons: per micropolygon its longest side in pixels, summed into `sum`,
+// the largest into `largest`.
+void micropolygonSides(const Grid& g, double& sum, float& largest) {
+    const int stride = g.nu + 1;
+    auto len2 = [&](int p, int q) {
+        const int64_t dx = int64_t(g.X[p]) - g.X[q], dy = int64_t(g.Y[p]) - g.Y[q];
+        return dx * dx + dy * dy;
+    };
+    for (int j = 0; j < g.nv; ++j)
+        for (int i = 0; i < g.nu; ++i) {
+            const int a = j * stride + i, b = a + 1, c = a + stride + 1, d = a + stride;
+            const float side =
+                std::sqrt(float(std::max({len2(a, b), len2(b, c), len2(c, d), len2(d, a)}))) / kSubpixelScale;
+            sum += side;
+            largest = std::max(largest, side);
+        }
+}
 
 }  // namespace
 
@@ -107,6 +143,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     const DisplacementFrame displacement =
         makeDisplacementFrame(scene, frame.textures.get(), patches, float(cam.cameraFromWorld.maxStretch()));
     if (displacement.any()) view.displacement = &displacement;
+    view.displacementSplit = settings.displacementSplit;
+    view.exactDisplacementNormals = settings.exactDisplacementNormals;
     view.lens = frame.blur.lens;
     if (motion.blurred()) {
         view.knotPatches.push_back(patches.data());
@@ -140,6 +178,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     const BucketedPieces binned = binPieces(pieces, layout, rx + 1, ry + 1, frame.samplesPerPixel());
     GridCache grids(binned);
 
+    const bool nearest = settings.micropolygonSampling == MicropolygonSampling::Nearest;
     // Dice, shade, sample and filter, bucket by bucket. Workers take buckets in scanline order so the
     // grids alive at any moment are those near one row of buckets.
     tbb::enumerable_thread_specific<ThreadCounters> counters;
@@ -179,15 +218,27 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                 diceAndShade(view, piece, in, g);
                 ++tc.grids;
                 tc.micropolygons += uint64_t(g.nu) * g.nv;
+                tc.gridVertices += uint64_t(g.vertexCount());
+                if (displacement.displaced(piece.patch)) {
+                    tc.displacedMicropolygons += uint64_t(g.nu) * g.nv;
+                    micropolygonSides(g, tc.displacedSideSum, tc.displacedSideMax);
+                }
                 tc.diceMs += msSince(td);
             });
             auto ts = EngineClock::now();
-            tc.sampleTests += grid.blurred ? rasterizeBlurredGrid(grid, tc.tile, view.projector.nearClip,
-                                                                  blurContext, tc.strata)
-                                           : rasterizeGrid(grid, tc.tile, view.projector.nearClip);
+            if (grid.blurred) {
+                // The nearest-neighbour sampler has no moving form: blurred grids keep the bounding box.
+                tc.nearestFallbackGrids += nearest;
+                tc.sampleTests +=
+                    rasterizeBlurredGrid(grid, tc.tile, view.projector.nearClip, blurContext, tc.strata);
+            } else {
+                tc.sampleTests += nearest ? rasterizeGridNearest(grid, tc.tile, view.projector.nearClip)
+                                          : rasterizeGrid(grid, tc.tile, view.projector.nearClip);
+            }
             tc.sampleMs += msSince(ts);
             grids.release(pi);
         }
+        countEmpty(tc.tile, target, tc.emptySamples, tc.emptyPixels);
         auto tf = EngineClock::now();
         reconstruct(tc.tile, frame.filter, target, result.image);
         tc.filterMs += msSince(tf);
@@ -199,6 +250,13 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     for (const ThreadCounters& tc : counters) {
         total.grids += tc.grids;
         total.micropolygons += tc.micropolygons;
+        total.gridVertices += tc.gridVertices;
+        total.emptySamples += tc.emptySamples;
+        total.emptyPixels += tc.emptyPixels;
+        total.nearestFallbackGrids += tc.nearestFallbackGrids;
+        total.displacedMicropolygons += tc.displacedMicropolygons;
+        total.displacedSideSum += tc.displacedSideSum;
+        total.displacedSideMax = std::max(total.displacedSideMax, tc.displacedSideMax);
         total.sampleTests += tc.sampleTests;
         total.diceMs += tc.diceMs;
         total.sampleMs += tc.sampleMs;
@@ -224,7 +282,22 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     s["pieces"] = pieces.size();
     s["grids"] = total.grids;
     s["micropolygons"] = total.micropolygons;
+    s["grid_vertices"] = total.gridVertices;
     s["sample_tests"] = total.sampleTests;
+    // Holes of the sampler (paper 000 sec. 4.2): film samples and pixels of the rendered region that no
+    // micropolygon covers (of a closed scene that fills the frame, all of them are holes).
+    s["micropolygon_sampling"] = micropolygonSamplingName(settings.micropolygonSampling);
+    s["empty_samples"] = total.emptySamples;
+    s["empty_pixels"] = total.emptyPixels;
+    if (nearest) s["nearest_fallback_grids"] = total.nearestFallbackGrids;
+    if (displacement.any())
+        s["displaced"] = {
+            {"micropolygons", total.displacedMicropolygons},
+            {"mean_longest_side_px", total.displacedMicropolygons
+                                         ? total.displacedSideSum / double(total.displacedMicropolygons)
+                                         : 0.0},
+            {"max_longest_side_px", total.displacedSideMax},
+            {"split_threshold", view.displacementSplit}};
     writeTileLoopStats(layout, loop, s);
     s["stage_ms"] = {{"shadow_maps", shadowMaps ? shadowMaps->renderMs() : 0.0},
                      {"weld", weldMs},

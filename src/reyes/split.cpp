@@ -50,12 +50,6 @@ float measureLength(const ReyesView& view, PointAt&& pointAt) {
     return len;
 }
 
-// Segment count of a source edge from its projected polyline length.
-template <class PointAt>
-int32_t measureRate(const ReyesView& view, float side, PointAt&& pointAt) {
-    return rateFromLength(measureLength(view, pointAt), side);
-}
-
 // Lattice of a source edge of projected length `pixels`.
 void setEdgeLattice(PieceEdge& edge, float pixels, float side) {
     edge.collapsed = pixels < kCollapsedPixels;
@@ -64,12 +58,114 @@ void setEdgeLattice(PieceEdge& edge, float pixels, float side) {
     edge.k1 = edge.total;
 }
 
-PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, float side) {
+// Edge lengths of surfaces that are not displaced: as measured.
+struct NoDisplacement {
+    template <class PointAt>
+    float operator()(float pixels, int, Vec2, Vec2, float, float, PointAt&&) const {
+        return pixels;
+    }
+};
+
+// Displacement-aware splitting (paper 001 sec. 3.1). A displaced patch's edge is measured as at least
+// n micropolygon sides long, n the segments that keep each segment's projected displacement variation
+// (edge-width: max - min of Km * texture over the segment, from the min/max mip map at the level of its
+// texel extent) within view.displacementSplit sides: the part of the edge is halved while its variation
+// is larger, at most kMaxDisplacementSplitDepth times and not below one texel (the finest entry). The
+// existing criterion (ceil(length / side) segments, split above maxGridEdge) then does the rest, so the
+// threshold is folded into it. A patch boundary takes the larger variation of the two displaced patches
+// that share it, each in its own s, t, in the edge's canonical parameter: both sides measure the same
+// (crack-free), and the shared points move by their mean, whose variation is no larger.
+struct EdgeDisplacement {
+    const ReyesView& view;
+    uint32_t patch;
+    float side;
+
+    // Variation (camera-space units) of patch q's displacement over its (u,v) segment p0 -> p1, and the
+    // segment's largest extent in texels.
+    float variation(uint32_t q, Vec2 p0, Vec2 p1, float& texels) const {
+        const DisplacementFrame& f = *view.displacement;
+        texels = 0.f;
+        if (!f.displaced(q) || !f.textures) return 0.f;
+        const DisplacementShader& d = f.scene->displacements[size_t(f.shader[q])];
+        if (d.type != DisplacementType::Bumpy || d.texture < 0) return 0.f;  // offset: constant
+        const MinMaxMip& mip = f.textures->minMaxMip(uint32_t(d.texture));
+        if (mip.empty()) return 0.f;
+        // s, t is bilinear in (u,v): over the segment's (u,v) rectangle its extremes are at the corners.
+        const PatchTexCoords tc = texCoordsOf(*f.scene, q);
+        const float u0 = std::min(p0.x, p1.x), u1 = std::max(p0.x, p1.x);
+        const float v0 = std::min(p0.y, p1.y), v1 = std::max(p0.y, p1.y);
+        float s0 = 1e30f, s1 = -1e30f, t0 = 1e30f, t1 = -1e30f;
+        for (const Vec2 uv : {Vec2{u0, v0}, Vec2{u1, v0}, Vec2{u0, v1}, Vec2{u1, v1}}) {
+            const Vec2 st = texCoordsAt(tc, uv.x, uv.y);
+            s0 = std::min(s0, st.x), s1 = std::max(s1, st.x), t0 = std::min(t0, st.y),
+            t1 = std::max(t1, st.y);
+        }
+        texels = std::max((s1 - s0) * float(mip.width()), (t1 - t0) * float(mip.height()));
+        float lo, hi;
+        if (!minMaxInST(mip, s0, s1, t0, t1, lo, hi)) return 0.f;
+        return std::fabs(d.Km) * (hi - lo);
+    }
+
+    // Segments part [s0, s1] of a source edge (patch boundary `boundary`, or -1: an interior line of this
+    // patch) from (u,v) a (s = 0) to b needs; pointAt(s) its camera-space point.
+    template <class PointAt>
+    int segments(int boundary, Vec2 a, Vec2 b, float s0, float s1, PointAt&& pointAt, int depth) const {
+        const DisplacementFrame& f = *view.displacement;
+        auto uvAt = [](Vec2 p, Vec2 q, float s) {
+            return Vec2{p.x * (1.f - s) + q.x * s, p.y * (1.f - s) + q.y * s};
+        };
+        float texels = 0.f;
+        float dv = variation(patch, uvAt(a, b, s0), uvAt(a, b, s1), texels);
+        float radius = f.radius[patch];
+        if (boundary >= 0) {
+            const int32_t nb = f.edgeNeighbour[size_t(patch) * 4 + size_t(boundary)];
+            if (nb >= 0) {
+                Vec3 cp[4];
+                Vec2 qa, qb;
+                canonicalBoundary(view.patches[uint32_t(nb) / 4], nb % 4, cp, qa, qb);
+                float qt = 0.f;
+                dv = std::max(dv, variation(uint32_t(nb) / 4, uvAt(qa, qb, s0), uvAt(qa, qb, s1), qt));
+                texels = std::max(texels, qt);
+                radius = std::max(radius, f.radius[uint32_t(nb) / 4]);
+            }
+        }
+        if (!(dv > 0.f)) return 1;
+        // Camera-space units to pixels at the segment's nearest depth (less the displacement radius).
+        const Projector& pr = view.projector;
+        float perUnit = std::max(std::fabs(pr.sx), std::fabs(pr.sy));
+        if (pr.perspective) {
+            float z = std::min({pointAt(s0).z, pointAt(0.5f * (s0 + s1)).z, pointAt(s1).z});
+            z -= radius;
+            perUnit /= std::max(z, std::max(pr.nearClip, view.lengthNearZ));
+        }
+        if (dv * perUnit <= view.displacementSplit * side || depth >= kMaxDisplacementSplitDepth ||
+            texels <= 1.f)
+            return 1;
+        const float sm = 0.5f * (s0 + s1);
+        return segments(boundary, a, b, s0, sm, pointAt, depth + 1) +
+               segments(boundary, a, b, sm, s1, pointAt, depth + 1);
+    }
+
+    // The length of part [s0, s1] (pixels, as measured) raised to the segments its displacement needs.
+    template <class PointAt>
+    float operator()(float pixels, int boundary, Vec2 a, Vec2 b, float s0, float s1,
+                     PointAt&& pointAt) const {
+        if (pixels < kCollapsedPixels) return pixels;  // one point: nothing to split
+        const int n = segments(boundary, a, b, s0, s1, pointAt, 0);
+        // ceil(0.999 n) = n: the lattice then has at least n segments.
+        return n > 1 ? std::max(pixels, 0.999f * float(n) * side) : pixels;
+    }
+};
+
+template <class Displaced>
+PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, float side,
+                       const Displaced& displaced) {
     PieceEdge edge;
     Vec3 cp[4];
     canonicalBoundary(patch, e, cp, edge.a, edge.b);
     edge.boundary = int8_t(e);
-    setEdgeLattice(edge, measureLength(view, [&](float t) { return evalCurve(cp, t); }), side);
+    auto curveAt = [&](float t) { return evalCurve(cp, t); };
+    setEdgeLattice(edge, displaced(measureLength(view, curveAt), e, edge.a, edge.b, 0.f, 1.f, curveAt), side);
     // The piece walks every edge in increasing parameter; reversed if the canonical start is the far end.
     static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
     edge.reversed = !(edge.a.x == kStart[e].x && edge.a.y == kStart[e].y);
@@ -109,31 +205,30 @@ Vec2 lerpUV(const PieceEdge& e, float s) {
 }
 
 // A new interior source edge from (u,v) point p to q, walked p -> q by the piece that owns it.
-template <class PointAt>
-PieceEdge interiorEdge(const ReyesView& view, PointAt&& surfaceAt, Vec2 p, Vec2 q, float side) {
+template <class PointAt, class Displaced>
+PieceEdge interiorEdge(const ReyesView& view, PointAt&& surfaceAt, Vec2 p, Vec2 q, float side,
+                       const Displaced& displaced) {
     PieceEdge edge;
     bool swap = (q.x < p.x) || (q.x == p.x && q.y < p.y);
     edge.a = swap ? q : p;
     edge.b = swap ? p : q;
     edge.reversed = swap;
     edge.boundary = -1;
-    setEdgeLattice(
-        edge,
-        measureLength(view,
-                      [&](float t) {
-                          Vec2 uv{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t};
-                          return surfaceAt(uv);
-                      }),
-        side);
+    auto lineAt = [&](float t) {
+        return surfaceAt(Vec2{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t});
+    };
+    setEdgeLattice(edge, displaced(measureLength(view, lineAt), -1, edge.a, edge.b, 0.f, 1.f, lineAt), side);
     return edge;
 }
 
 // The segments of a piece's middle u and v isolines (straight lines of its bilinear (u,v) quad).
-template <class PointAt>
-void measureInterior(const ReyesView& view, PointAt&& surfaceAt, Piece& piece, float side) {
+template <class PointAt, class Displaced>
+void measureInterior(const ReyesView& view, PointAt&& surfaceAt, Piece& piece, float side,
+                     const Displaced& displaced) {
     auto lerp = [](Vec2 p, Vec2 q, float t) { return Vec2{p.x + (q.x - p.x) * t, p.y + (q.y - p.y) * t}; };
     auto isoline = [&](Vec2 p, Vec2 q) {
-        return measureRate(view, side, [&](float t) { return surfaceAt(lerp(p, q, t)); });
+        auto lineAt = [&](float t) { return surfaceAt(lerp(p, q, t)); };
+        return rateFromLength(displaced(measureLength(view, lineAt), -1, p, q, 0.f, 1.f, lineAt), side);
     };
     const Vec2* c = piece.uv;
     piece.interiorU = isoline(lerp(c[0], c[3], 0.5f), lerp(c[1], c[2], 0.5f));
@@ -335,9 +430,10 @@ Vec2 cutPieceEdge(const ReyesView& view, const PieceEdge& e, bool roundUp, float
 // a rectangle of it, `surfaceAt` evaluates a point (for interior split lines), `measure(edge, s0, s1)`
 // the projected length of part [s0, s1] of an edge's source curve, evaluated exactly as when the edge was
 // made (so that pieces sharing it agree).
-template <class SurfaceAt, class Measure>
+template <class SurfaceAt, class Measure, class Displaced>
 void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hullOf, SurfaceAt&& surfaceAt,
-                 Measure&& measure, float side, std::vector<Piece>& out, SplitCounters& counters) {
+                 Measure&& measure, const Displaced& displaced, float side, std::vector<Piece>& out,
+                 SplitCounters& counters) {
     size_t before = out.size();
     std::vector<SplitJob> stack;
     stack.push_back({root, 0});
@@ -345,7 +441,7 @@ void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hull
         SplitJob job = stack.back();
         stack.pop_back();
         Piece& p = job.piece;
-        measureInterior(view, surfaceAt, p, side);
+        measureInterior(view, surfaceAt, p, side, displaced);
         Verdict v = classify(view, hullOf, p);
         if (v == Verdict::Cull) {
             ++counters.culled;
@@ -375,13 +471,13 @@ void splitPieces(const ReyesView& view, const Piece& root, const PieceHull& hull
         if (acrossU) {
             const Vec2 m0 = cutPieceEdge(view, p.edge[0], false, side, measure, lo.edge[0], hi.edge[0]);
             const Vec2 m2 = cutPieceEdge(view, p.edge[2], true, side, measure, lo.edge[2], hi.edge[2]);
-            PieceEdge mid = interiorEdge(view, surfaceAt, m0, m2, side);
+            PieceEdge mid = interiorEdge(view, surfaceAt, m0, m2, side, displaced);
             lo.uv[1] = m0, lo.uv[2] = m2, lo.edge[1] = mid;
             hi.uv[0] = m0, hi.uv[3] = m2, hi.edge[3] = mid;
         } else {
             const Vec2 m3 = cutPieceEdge(view, p.edge[3], false, side, measure, lo.edge[3], hi.edge[3]);
             const Vec2 m1 = cutPieceEdge(view, p.edge[1], true, side, measure, lo.edge[1], hi.edge[1]);
-            PieceEdge mid = interiorEdge(view, surfaceAt, m3, m1, side);
+            PieceEdge mid = interiorEdge(view, surfaceAt, m3, m1, side, displaced);
             lo.uv[3] = m3, lo.uv[2] = m1, lo.edge[2] = mid;
             hi.uv[0] = m3, hi.uv[1] = m1, hi.edge[0] = mid;
         }
@@ -402,6 +498,36 @@ Piece rootPiece(uint32_t index) {
 
 }  // namespace
 
+namespace {
+
+template <class Displaced>
+void splitPatchWith(const ReyesView& view, uint32_t patchIndex, float side, const Displaced& displaced,
+                    std::vector<Piece>& out, SplitCounters& counters) {
+    const BezierPatch& patch = view.patches[patchIndex];
+    Piece root = rootPiece(patchIndex);
+    for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side, displaced);
+    const PieceHull hull{view, &patch, nullptr};
+    auto surfaceAt = [&](Vec2 uv) { return evalPatch(patch, uv.x, uv.y); };
+    // Part of an edge's source curve: a boundary through its canonical control points (as boundaryEdge
+    // measured it, so the neighbouring patch measures the same), a split line through the patch.
+    auto measure = [&](const PieceEdge& e, float s0, float s1) {
+        if (e.boundary >= 0) {
+            Vec3 cp[4];
+            Vec2 a, b;
+            canonicalBoundary(patch, e.boundary, cp, a, b);
+            auto curveAt = [&](float s) { return evalCurve(cp, s); };
+            return displaced(measureLength(view, [&](float t) { return curveAt(s0 + (s1 - s0) * t); }),
+                             e.boundary, e.a, e.b, s0, s1, curveAt);
+        }
+        auto lineAt = [&](float s) { return surfaceAt(lerpUV(e, s)); };
+        return displaced(measureLength(view, [&](float t) { return lineAt(s0 + (s1 - s0) * t); }), -1, e.a,
+                         e.b, s0, s1, lineAt);
+    };
+    splitPieces(view, root, hull, surfaceAt, measure, displaced, side, out, counters);
+}
+
+}  // namespace
+
 void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vector<Piece>& out,
                 SplitCounters& counters) {
     const BezierPatch& patch = view.patches[patchIndex];
@@ -412,22 +538,13 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
             ++counters.culled;
             return;
         }
-    Piece root = rootPiece(patchIndex);
-    for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side);
-    const PieceHull hull{view, &patch, nullptr};
-    auto surfaceAt = [&](Vec2 uv) { return evalPatch(patch, uv.x, uv.y); };
-    // Part of an edge's source curve: a boundary through its canonical control points (as boundaryEdge
-    // measured it, so the neighbouring patch measures the same), a split line through the patch.
-    auto measure = [&](const PieceEdge& e, float s0, float s1) {
-        if (e.boundary >= 0) {
-            Vec3 cp[4];
-            Vec2 a, b;
-            canonicalBoundary(patch, e.boundary, cp, a, b);
-            return measureLength(view, [&](float t) { return evalCurve(cp, s0 + (s1 - s0) * t); });
-        }
-        return measureLength(view, [&](float t) { return surfaceAt(lerpUV(e, s0 + (s1 - s0) * t)); });
-    };
-    splitPieces(view, root, hull, surfaceAt, measure, side, out, counters);
+    const bool displaced =
+        view.displacementSplit > 0.f && view.displacement && view.displacement->displaced(patchIndex);
+    if (displaced) {
+        splitPatchWith(view, patchIndex, side, EdgeDisplacement{view, patchIndex, side}, out, counters);
+    } else {
+        splitPatchWith(view, patchIndex, side, NoDisplacement{}, out, counters);
+    }
 }
 
 void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index, float side,
@@ -440,7 +557,7 @@ void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index
     auto measure = [&](const PieceEdge& e, float s0, float s1) {
         return measureLength(view, [&](float t) { return surfaceAt(lerpUV(e, s0 + (s1 - s0) * t)); });
     };
-    splitPieces(view, root, hull, surfaceAt, measure, side, out, counters);
+    splitPieces(view, root, hull, surfaceAt, measure, NoDisplacement{}, side, out, counters);
 }
 
 void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t index, float micropolygonSide,

@@ -101,8 +101,22 @@ struct ReyesView {
     float lengthNearZ = 0.f;
     // Displaced patches (nullptr or empty: none): bounds grow by each patch's radius, dicing displaces.
     const DisplacementFrame* displacement = nullptr;
+    // Displacement-aware splitting (paper 001 sec. 3.1; 0: off): a displaced patch's edge gets at least
+    // the segments that keep each one's projected displacement variation, max - min of Km * texture read
+    // from the texture's min/max mip map, within this many micropolygon sides (split.cpp,
+    // displacementSegments).
+    float displacementSplit = 0.f;
+    // false: displace along the undisplaced patch's own normal at each vertex and shade with normals from
+    // the displaced grid's differences, as paper 000 does before its fix (sec. 3.1): what the exact,
+    // shared normals cost is measured against it (bench/displacement_bench.sh). Shared edges can crack.
+    bool exactDisplacementNormals = true;
     explicit ReyesView(const Camera& cam) : projector(cam) {}
 };
+
+// The clamp of displacement-aware splitting (paper 001 sec. 3.1: "clamping to a maximal entry"): one
+// measurement of an edge halves it at most this often for its displacement (at most 2^6 segments); what is
+// still larger after that is covered by the bounding-box sampler.
+constexpr int kMaxDisplacementSplitDepth = 6;
 
 struct SplitCounters {
     uint64_t splits = 0, culled = 0, pieces = 0;

@@ -53,6 +53,9 @@ struct ImageOptions {
     // RIB Hider "hidden" "jitter" [0]: film samples at their strata's centres (SamplerKind::Centred), as
     // shadow-map depth passes are rendered; the CLI's --sampler overrides it.
     bool jitter = true;
+    // RIB Hider "hidden" "string micropolygonsampling" (bbox, nearest; "" = the renderer's default, bbox):
+    // Reyes' micropolygon sampler (paper 000 sec. 3.2); the CLI's --micropolygon-sampling overrides it.
+    std::string micropolygonSampling;
 };
 
 // Area: RI AreaLightSource "arealight" (docs/light_transport.md): the surfaces declared after it in its

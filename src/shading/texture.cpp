@@ -89,6 +89,7 @@ Textures::Textures(std::span<const std::string> files) : count_(files.size()) {
     std::string error;
     set_ = api_->open(files, error);
     if (!set_) throw std::runtime_error(error);
+    mips_ = std::make_unique<LazyMip[]>(files.size());
 }
 
 Textures::~Textures() {
@@ -124,6 +125,20 @@ float Textures::value(uint32_t texture, const TextureLookup& q, float& dds, floa
 
 void Textures::range(uint32_t texture, float& lo, float& hi) const {
     api_->range(set_, texture, lo, hi);
+}
+
+const MinMaxMip& Textures::minMaxMip(uint32_t texture) const {
+    LazyMip& m = mips_[texture];
+    std::call_once(m.once, [&] {
+        int w = 0, h = 0, ws = 0, wt = 0;
+        std::vector<float> px;
+        if (!api_->texels(set_, texture, w, h, px, ws, wt)) return;
+        auto wrap = [](int c) {
+            return c == 1 ? TexelWrap::Clamp : c == 2 ? TexelWrap::Black : TexelWrap::Periodic;
+        };
+        m.mip = buildMinMaxMip(w, h, px, wrap(ws), wrap(wt));
+    });
+    return m.mip;
 }
 
 Color surfaceTextureColor(const Textures& textures, const Material& m, const Projector& pr,

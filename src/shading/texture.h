@@ -10,6 +10,7 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@
 #include "core/vec.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
+#include "shading/minmax_mip.h"
 
 namespace tessera {
 
@@ -99,8 +101,16 @@ class Textures {
     float value(uint32_t texture, const TextureLookup& q, float& dds, float& ddt) const;
     // Smallest and largest value of the first channel over the whole texture (its finest level).
     void range(uint32_t texture, float& lo, float& hi) const;
+    // The min/max mip map of the first channel (paper 001 sec. 3.1), built on first use from the file's
+    // finest level (thread-safe); empty when the texels cannot be read.
+    const MinMaxMip& minMaxMip(uint32_t texture) const;
 
   private:
+    struct LazyMip {
+        std::once_flag once;
+        MinMaxMip mip;
+    };
+    std::unique_ptr<LazyMip[]> mips_;
     const TextureModuleApi* api_ = nullptr;  // the OpenImageIO module (texture_module.h)
     void* set_ = nullptr;                    // its open textures
     size_t count_ = 0;

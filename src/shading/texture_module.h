@@ -11,13 +11,14 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace tessera {
 
 struct TextureLookup;
 
 // Bumped whenever a field of TextureModuleApi changes meaning; the loader refuses another version.
-inline constexpr uint32_t kTextureModuleVersion = 1;
+inline constexpr uint32_t kTextureModuleVersion = 2;
 
 struct TextureModuleApi {
     uint32_t version;
@@ -32,6 +33,11 @@ struct TextureModuleApi {
                    float* dds, float* ddt);
     // Smallest and largest first-channel value over the finest level (computed once, thread-safe).
     void (*range)(const void* set, uint32_t texture, float& lo, float& hi);
+    // The first channel of the finest level as floats (row 0 at the top) and the lookups' wrap modes in s
+    // and t (0 periodic, 1 clamp, 2 black), read through ImageBuf from the file the lookups read; false
+    // (and nothing set) when it cannot be read.
+    bool (*texels)(const void* set, uint32_t texture, int& width, int& height, std::vector<float>& out,
+                   int& swrap, int& twrap);
     // "" when OIIO reads `path` as a non-empty image, otherwise OIIO's reason.
     std::string (*readError)(const std::string& path);
     // RI MakeTexture through OIIO's make_texture; "" on success, otherwise the reason.

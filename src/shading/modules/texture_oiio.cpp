@@ -114,6 +114,37 @@ void range(const void* setp, uint32_t texture, float& lo, float& hi) {
     lo = e.lo, hi = e.hi;
 }
 
+// One wrap mode word of OIIO's "wrapmodes" ("periodic", "clamp", "black", ...) as 0, 1, 2.
+int wrapCode(const std::string& word) {
+    if (word == "clamp" || word == "mirror") return 1;
+    if (word == "black") return 2;
+    return 0;  // periodic, default
+}
+
+bool texels(const void* setp, uint32_t texture, int& width, int& height, std::vector<float>& out, int& swrap,
+            int& twrap) {
+    const TextureSet& set = *static_cast<const TextureSet*>(setp);
+    const TextureEntry& e = *set.entries[texture];
+    OIIO::ImageBuf buf(e.path);
+    if (!buf.read(0, 0, 0, 1, true, OIIO::TypeFloat)) return false;
+    const OIIO::ROI roi = buf.roi();
+    if (roi.width() < 1 || roi.height() < 1) return false;
+    std::vector<float> px(size_t(roi.width()) * size_t(roi.height()));
+    if (!buf.get_pixels(OIIO::ROI(roi.xbegin, roi.xend, roi.ybegin, roi.yend, 0, 1, 0, 1), OIIO::TypeFloat,
+                        px.data()))
+        return false;
+    width = roi.width(), height = roi.height();
+    out = std::move(px);
+    swrap = twrap = 0;
+    if (e.wrap == OIIO::TextureOpt::WrapDefault) {  // the file names its modes: "s,t" or one for both
+        const std::string modes = buf.spec().get_string_attribute("wrapmodes");
+        const size_t comma = modes.find(',');
+        swrap = wrapCode(modes.substr(0, comma));
+        twrap = wrapCode(comma == std::string::npos ? modes : modes.substr(comma + 1));
+    }
+    return true;
+}
+
 std::string readError(const std::string& path) {
     auto in = OIIO::ImageInput::open(path);
     if (!in) return oiioError("not an image OpenImageIO can read");
@@ -134,7 +165,7 @@ std::string makeTexture(const std::string& picture, const std::string& texture, 
 }
 
 const TextureModuleApi kApi{
-    kTextureModuleVersion, openSet, closeSet, channels, lookup, range, readError, makeTexture};
+    kTextureModuleVersion, openSet, closeSet, channels, lookup, range, texels, readError, makeTexture};
 
 }  // namespace
 }  // namespace tessera
