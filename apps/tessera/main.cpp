@@ -988,9 +988,9 @@ int main(int argc, char** argv) {
         ->add_option("--displacement-split", ra.displacementSplit,
                      "Reyes: split displaced edges until their projected displacement variation (min/max "
                      "mip map of the texture, paper 001) is at most this many micropolygon sides; 0: off "
-                     "(default 1)")
+                     "(default 4)")
         ->check(inRange(0, 1e6))
-        ->default_str("1");  // the sentinel -1 means "the default"
+        ->default_str("4");  // the sentinel -1 means "the default"
     render
         ->add_option("--displacement-normals", ra.displacementNormals,
                      "Reyes: displace along the exact normals shared by neighbouring patches (exact) or, for "

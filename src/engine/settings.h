@@ -118,7 +118,7 @@ struct RenderSettings {
     // Reyes, displaced surfaces (paper 001 sec. 3.1): split an edge until the projected variation of its
     // displacement (from the min/max mip map of the texture) is at most this many micropolygon sides, at
     // most kMaxDisplacementSplitDepth halvings deep; 0: off (edges are measured undisplaced).
-    float displacementSplit = 1.f;
+    float displacementSplit = 4.f;
     // Reyes: displace along the exact, shared normals (paper 000 sec. 3.1); false only for the benchmarks
     // (--displacement-normals grid: the paper's approximate baseline, which can crack).
     bool exactDisplacementNormals = true;

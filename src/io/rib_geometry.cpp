@@ -1140,7 +1140,8 @@ class PrimitiveReader {
                     fo + size_t(nf) > floats.size() || so + size_t(ns) > strings.size())
                     diag_.fail(r.args[4].line,
                                "SubdivisionMesh: nargs for tag \"" + tv.strs[t] +
-                                   "\" asks for more intargs/floatargs/stringargs than given");
+                                   (stringArgs ? "\" asks for more intargs/floatargs/stringargs than given"
+                                               : "\" asks for more intargs/floatargs than given"));
                 Tag tag{tv.strs[t],
                         {ints.begin() + long(io), ints.begin() + long(io + size_t(ni))},
                         {floats.begin() + long(fo), floats.begin() + long(fo + size_t(nf))},
