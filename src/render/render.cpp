@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "engine/clock.h"
+#include "render/displaced_dicer.h"
 #include "reyes/reyes_renderer.h"
 #include "rt/ray_visibility.h"
 #include "rt/rt_renderer.h"
@@ -61,20 +62,19 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
             else
                 result = renderReyes(scene, settings);
         } else if (settings.engine == "rt") {
-            result = renderRt(scene, settings);
+            // Displaced patches: micro-grids diced by Reyes' code (render/displaced_dicer.h).
+            const DisplacedDicerFactory dicer = [&](const FrameSetup& frame) {
+                return makeReyesDisplacedDicer(scene, settings, frame);
+            };
+            result = renderRt(scene, settings, &dicer);
         } else {
             throw std::invalid_argument("unknown engine '" + settings.engine + "' (use reyes or rt)");
         }
     });
-    // The ray tracer does not displace yet (docs/textures.md): say so rather than silently render another
-    // shape.
+    // The ray tracer displaces (rt/displaced.h; it warns itself about moving displaced patches, which it
+    // traces undisplaced); Reyes' ray-traced shadows come from the undisplaced surfaces.
     if (anyDisplaced(scene)) {
-        if (settings.engine == "rt")
-            result.warnings.push_back(
-                "the scene has displaced surfaces: --engine rt ignores displacement (renders them "
-                "undisplaced); "
-                "--engine reyes displaces");
-        else if (reyesTracesShadows(scene, settings))
+        if (settings.engine != "rt" && reyesTracesShadows(scene, settings))
             result.warnings.push_back(
                 "--reyes-shadows raytrace traces the undisplaced surfaces: shadows of displacement need "
                 "--reyes-shadows map");

@@ -101,6 +101,9 @@ struct ReyesView {
     float lengthNearZ = 0.f;
     // Displaced patches (nullptr or empty: none): bounds grow by each patch's radius, dicing displaces.
     const DisplacementFrame* displacement = nullptr;
+    // false: keep every piece, off screen, behind the eye or across the eye plane too, split by its rates
+    // alone (the ray tracer's displaced micro-grids, rt/displaced.h: reflections and shadows see them).
+    bool cull = true;
     explicit ReyesView(const Camera& cam) : projector(cam) {}
 };
 

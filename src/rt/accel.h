@@ -7,6 +7,7 @@
 #include "core/transform.h"
 #include "engine/motion.h"
 #include "rt/bvh.h"
+#include "rt/displaced.h"
 #include "rt/intersect.h"
 #include "rt/subpatch_tree.h"
 #include "scene/scene.h"
@@ -38,6 +39,9 @@ struct RtAccel {
     }
     Bvh bvh;
     SubpatchForest forest;
+    // Displaced patches (rt/displaced.h): their micro-grids, intersected instead of the patch; their
+    // subpatch boxes bound the grids' triangles.
+    DisplacedGrids displaced;
     Bounds3 bounds;        // of all traced patches (their root boxes)
     float offset = 1e-4f;  // self-intersection offset along the normal for secondary ray origins
     double bvhMs = 0, subpatchMs = 0;
@@ -86,8 +90,11 @@ inline void soaToPatch(const PatchSoa& s, BezierPatch& out) {
 // `motion` (in the space of `toSpace`, i.e. camera space for the renderer): the moving patches' keys;
 // nullptr or a static timeline: a static accel, bit-identical to one built without it.
 // `maxTimeSlabs`: see buildSubpatchForest (1: boxes swept over the whole shutter only).
+// `dicer` (nullptr: none): the patches it calls displaced (static bicubic patches only) are diced by it and
+// traced as micro-grids (rt/displaced.h).
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs);
+                  RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs,
+                  const DisplacedDicer* dicer = nullptr);
 
 // The ray against quadric surface `patch` (analytic, core/quadric.h), restricted to the (u,v) rectangle
 // [u0,u1] x [v0,v1] (a subpatch leaf's; a hit on its border counts for both neighbours): the nearest hit
