@@ -1,7 +1,7 @@
 // Reyes displacement (issue 12, paper 000 sec. 3.1): a constant displacement of a plane and of a curved
 // bicubic equals the offset surface; a displaced teapot has no pinholes; the bound contains every displaced
-// point; bad bounds and unknown displacement shaders are errors; the ray tracer no longer warns that it ignores it
-// (it displaces: tests/test_rt_displacement.cpp).
+// point; bad bounds and unknown displacement shaders are errors; the ray tracer no longer warns that it
+// ignores it (it displaces: tests/test_rt_displacement.cpp).
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
