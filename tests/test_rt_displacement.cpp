@@ -243,14 +243,25 @@ TEST(RtDisplacement, DisplacedTeapotAgreesWithReyes) {
     const RenderResult reyes = renderWith(s, "reyes"), rt = renderWith(s, "rt");
     for (const std::string& w : rt.warnings) EXPECT_EQ(w.find("displace"), std::string::npos) << w;
     const ImageDiff d = compareImages(reyes.image, rt.image, 0.1f);
-    const ImageDiff dO = compareImages(renderWith(orig, "reyes").image, renderWith(orig, "rt").image, 0.1f);
+    const Image rtO = renderWith(orig, "rt").image;
+    const ImageDiff dO = compareImages(renderWith(orig, "reyes").image, rtO, 0.1f);
+    // Reyes with the ray tracer's shadow rays (--reyes-shadows raytrace) traces the same micro-grids.
+    RenderSettings rs;
+    rs.threads = 2;
+    rs.reyesShadows = ReyesShadows::Raytrace;
+    const RenderResult reyesRt = render(orig, rs);
+    for (const std::string& w : reyesRt.warnings) EXPECT_EQ(w.find("displace"), std::string::npos) << w;
+    const ImageDiff dR = compareImages(reyesRt.image, rtO, 0.1f);
     std::printf(
         "displaced teapot 320x240 16 spp, eye light: alpha differs on %.3f%% of pixels, PSNR %.2f dB\n",
         100 * d.alphaMismatch, d.psnrColor);
     std::printf("  original RIB lights (key light's shadows): alpha %.3f%%, PSNR %.2f dB\n",
                 100 * dO.alphaMismatch, dO.psnrColor);
+    std::printf("  original RIB lights, Reyes with ray-traced shadows: alpha %.3f%%, PSNR %.2f dB\n",
+                100 * dR.alphaMismatch, dR.psnrColor);
     EXPECT_LT(d.alphaMismatch, 0.005);
     EXPECT_GE(d.psnrColor, 35.0);
+    EXPECT_GE(dR.psnrColor, 35.0);
     EXPECT_LT(dO.alphaMismatch, 0.005);
     EXPECT_GT(rt.stats["displaced"]["triangles"].get<uint64_t>(), 10000u);
 }

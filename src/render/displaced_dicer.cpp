@@ -20,7 +20,7 @@ constexpr size_t kMaxVerticesPerPatch = size_t(1) << 22;
 class ReyesDisplacedDicer final : public DisplacedDicer {
   public:
     ReyesDisplacedDicer(const Scene& scene, const RenderSettings& settings, const FrameSetup& frame)
-        : scene_(scene), view_(frame.camera) {
+        : scene_(scene), textures_(frame.textures), view_(frame.camera) {
         const Camera& cam = frame.camera;
         // As renderReyes: camera space, moving patches at shutter open, shared edges welded.
         patches_ = patchesInCameraSpace(scene, cam.cameraFromWorld);
@@ -81,6 +81,7 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
 
   private:
     const Scene& scene_;
+    std::shared_ptr<const Textures> textures_;  // what displacement_ looks up (kept past the FrameSetup)
     std::vector<BezierPatch> patches_;
     std::vector<PlacedQuadric> quadrics_;
     std::vector<uint8_t> moving_;
