@@ -25,14 +25,18 @@ using namespace tessera::test;
 
 namespace {
 
-// The scene's accel in camera space with its displaced patches diced as renderRt dices them.
-void buildDisplacedAccel(const Scene& scene, RtAccel& acc, const RenderSettings& rs = RenderSettings()) {
+// The scene's accel in camera space with its displaced patches diced as renderRt dices them (`lazy`:
+// built when first reached, whatever the budget).
+void buildDisplacedAccel(const Scene& scene, RtAccel& acc, bool lazy = false) {
+    const RenderSettings rs;
     const FrameSetup frame(scene, rs);
-    const std::unique_ptr<DisplacedDicer> dicer = makeReyesDisplacedDicer(scene, rs, frame);
-    ASSERT_TRUE(dicer);
+    RtDisplacementOptions d;
+    d.dicer = makeReyesDisplacedDicer(scene, rs, frame);
+    d.forceLazy = lazy;
+    ASSERT_TRUE(d.dicer);
     buildRtAccel(scene, frame.camera.cameraFromWorld, rs.subpatchDepth, false, acc, nullptr,
-                 kDefaultTimeSlabs, dicer.get());
-    ASSERT_FALSE(acc.displaced.meshes.empty());
+                 kDefaultTimeSlabs, &d);
+    ASSERT_TRUE(acc.displaced.any());
 }
 
 // A perspective view of one bicubic patch (RIB control points, world = camera space shifted by 5 in z),
@@ -162,31 +166,35 @@ TEST(RtDisplacement, ConstantOffsetOfACurvedBicubicHitsTheOffsetSurface) {
 TEST(RtDisplacement, WavefrontAndScalarPathsAgree) {
     Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/displaced_teapot.rib", {});
     s.camera.width = 200, s.camera.height = 150;
-    RtAccel acc;
-    buildDisplacedAccel(s, acc);
-    std::mt19937 rng(3);
-    std::uniform_real_distribution<float> U(0.f, 1.f);
-    std::vector<Ray> rays;
-    const Bounds3 b = acc.bounds;
-    for (int i = 0; i < 3000; ++i) {
-        const Vec3 p{b.lo.x + U(rng) * (b.hi.x - b.lo.x), b.lo.y + U(rng) * (b.hi.y - b.lo.y),
-                     b.lo.z + U(rng) * (b.hi.z - b.lo.z)};
-        rays.push_back(Ray{{0, 0, 0}, normalize(p), 1e-3f, 1e30f});
-    }
-    for (bool shadow : {false, true}) {
-        TraceOptions opt;
-        opt.anyHit = shadow;
-        std::vector<RayHit> batch;
-        traceBatch(acc, rays, opt, batch);
-        int disagree = 0, hits = 0;
-        for (size_t i = 0; i < rays.size(); ++i) {
-            RayHit h;
-            const bool hit = traceRayScalar(acc, rays[i], opt, h);
-            hits += hit;
-            disagree += hit != batch[i].hit || (!shadow && hit && h.h.t != batch[i].h.t);
+    for (bool lazy : {false, true}) {
+        SCOPED_TRACE(lazy ? "lazy" : "up front");
+        RtAccel acc;
+        buildDisplacedAccel(s, acc, lazy);
+        EXPECT_EQ(acc.displaced.lazy(), lazy);
+        std::mt19937 rng(3);
+        std::uniform_real_distribution<float> U(0.f, 1.f);
+        std::vector<Ray> rays;
+        const Bounds3 b = acc.bounds;
+        for (int i = 0; i < 3000; ++i) {
+            const Vec3 p{b.lo.x + U(rng) * (b.hi.x - b.lo.x), b.lo.y + U(rng) * (b.hi.y - b.lo.y),
+                         b.lo.z + U(rng) * (b.hi.z - b.lo.z)};
+            rays.push_back(Ray{{0, 0, 0}, normalize(p), 1e-3f, 1e30f});
         }
-        EXPECT_GT(hits, 500);
-        EXPECT_EQ(disagree, 0) << (shadow ? "shadow" : "closest");
+        for (bool shadow : {false, true}) {
+            TraceOptions opt;
+            opt.anyHit = shadow;
+            std::vector<RayHit> batch;
+            traceBatch(acc, rays, opt, batch);
+            int disagree = 0, hits = 0;
+            for (size_t i = 0; i < rays.size(); ++i) {
+                RayHit h;
+                const bool hit = traceRayScalar(acc, rays[i], opt, h);
+                hits += hit;
+                disagree += hit != batch[i].hit || (!shadow && hit && h.h.t != batch[i].h.t);
+            }
+            EXPECT_GT(hits, 500);
+            EXPECT_EQ(disagree, 0) << (shadow ? "shadow" : "closest");
+        }
     }
 }
 
@@ -318,4 +326,38 @@ TEST(RtDisplacement, DisplacedTeapotAndCatmullClarkHaveNoPinholes) {
             EXPECT_GT(alphaSum(r.image), 2000.0);
             EXPECT_GT(r.stats["displaced"]["patches"].get<uint64_t>(), 0u);
         }
+}
+
+// Under a memory budget too small for all grids, they are built lazily (conservative subpatch boxes) and
+// the least recently used dropped and built again: the image is the one of the grids built up front (the
+// same triangles; only ties between triangles sharing an edge may resolve differently), the budget holds,
+// and there are still no pinholes.
+TEST(RtDisplacement, LazyGridsUnderABudgetRenderTheSameImage) {
+    Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/displaced_teapot.rib", {});
+    s.camera.width = 200, s.camera.height = 150;
+    s.image.filter = FilterType::Box;
+    s.image.filterWidthX = s.image.filterWidthY = 1;
+    s.image.pixelSamplesX = s.image.pixelSamplesY = 2;
+    RenderSettings rs;
+    rs.engine = "rt";
+    rs.threads = 2;
+    const RenderResult eager = render(s, rs);
+    rs.displacementCacheMb = 1;
+    const RenderResult lazy = render(s, rs);
+    const nlohmann::json& d = lazy.stats["displaced"];
+    EXPECT_FALSE(eager.stats["displaced"]["lazy"].get<bool>());
+    EXPECT_TRUE(d["lazy"].get<bool>());
+    EXPECT_GT(d["grids_dropped"].get<uint64_t>(), 0u);
+    EXPECT_GT(d["grids_built"].get<uint64_t>(), d["patches"].get<uint64_t>());
+    // The budget holds, but for the grid being built when it is passed (at most one grid over).
+    EXPECT_LE(d["peak_resident_bytes"].get<uint64_t>(),
+              (uint64_t(1) << 20) + d["bytes_all"].get<uint64_t>() / 8);
+    const ImageDiff diff = compareImages(eager.image, lazy.image, 0.1f);
+    std::printf("lazy (1 MiB, %llu builds, %llu dropped) vs up front: alpha %.4f%%, PSNR %.2f dB\n",
+                (unsigned long long)d["grids_built"].get<uint64_t>(),
+                (unsigned long long)d["grids_dropped"].get<uint64_t>(), 100 * diff.alphaMismatch,
+                diff.psnrColor);
+    EXPECT_EQ(diff.alphaMismatch, 0.0);
+    EXPECT_GE(diff.psnrColor, 50.0);
+    EXPECT_EQ(countPinholes(lazy.image, 1.f), 0);
 }

@@ -46,7 +46,9 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
     bool displaced(uint32_t patch) const override {
         return displacement_.displaced(patch) && (moving_.empty() || !moving_[patch]);
     }
-    void dice(uint32_t patch, MicroGrid& out) const override {
+    float radius(uint32_t patch) const override { return displacement_.radius[patch]; }
+    BezierPatch basePatch(uint32_t patch) const override { return patches_[patch]; }
+    void dice(uint32_t patch, MicroGrid& out, bool uvOnly) const override {
         const PatchAttributes& attr = scene_.attributes[patch];
         float side = std::sqrt(std::max(attr.shadingRate, 1e-4f));
         std::vector<Piece> pieces;
@@ -64,10 +66,12 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
         std::vector<Vec2> uv;
         for (const Piece& piece : pieces) {
             int nu, nv;
-            dicePieceVertices(view_, piece, attr.flipNormal, nu, nv, P, N, uv);
-            const uint32_t base = uint32_t(out.P.size());
-            out.P.insert(out.P.end(), P.begin(), P.end());
-            out.N.insert(out.N.end(), N.begin(), N.end());
+            dicePieceVertices(view_, piece, attr.flipNormal, nu, nv, P, N, uv, uvOnly);
+            const uint32_t base = uint32_t(out.uv.size());
+            if (!uvOnly) {
+                out.P.insert(out.P.end(), P.begin(), P.end());
+                out.N.insert(out.N.end(), N.begin(), N.end());
+            }
             out.uv.insert(out.uv.end(), uv.begin(), uv.end());
             // Two triangles per micropolygon, wound (u, then v) like dP/du x dP/dv.
             for (int j = 0; j < nv; ++j)

@@ -28,10 +28,12 @@ bool anyDisplaced(const Scene& scene) {
 RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSettings& settings) {
     const auto t0 = EngineClock::now();
     RtAccel acc;
-    std::unique_ptr<DisplacedDicer> dicer;
-    if (anyDisplaced(scene)) dicer = makeReyesDisplacedDicer(scene, settings, FrameSetup(scene, settings));
+    RtDisplacementOptions displacement;
+    if (anyDisplaced(scene))
+        displacement.dicer = makeReyesDisplacedDicer(scene, settings, FrameSetup(scene, settings));
+    displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
     buildRtAccel(scene, viewCamera(scene, settings).cameraFromWorld, settings.subpatchDepth, false, acc,
-                 nullptr, kDefaultTimeSlabs, dicer.get());
+                 nullptr, kDefaultTimeSlabs, &displacement);
     const double buildMs = msSince(t0);
     // Per-ray traversal: a grid's lists of shadow rays are too short for the shadow binning to pay.
     const RayTracedVisibility visibility(acc, rt::TraceServiceOptions{false, false});

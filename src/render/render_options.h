@@ -27,8 +27,9 @@ struct RenderOptions {
     std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
     std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
     int bucketSize = 32, subpatchDepth = 6, maxGridEdge = 16;
-    int maxDepth = -1;     // -1: 4 for the direct integrator, 16 for the path tracer
-    int lightSamples = 0;  // 0: each area light's own "samples"
+    int displacementCacheMb = 512;  // rt: memory for displaced micro-grids (RenderSettings)
+    int maxDepth = -1;              // -1: 4 for the direct integrator, 16 for the path tracer
+    int lightSamples = 0;           // 0: each area light's own "samples"
     bool cullBackfaces = false, noRayBinning = false;
     // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's Hider parameters.
     bool noBlur = false;

@@ -280,17 +280,21 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
 }  // namespace
 
 void dicePieceVertices(const ReyesView& view, const Piece& piece, bool flipNormal, int& nu, int& nv,
-                       std::vector<Vec3>& P, std::vector<Vec3>& N, std::vector<Vec2>& UV) {
+                       std::vector<Vec3>& P, std::vector<Vec3>& N, std::vector<Vec2>& UV, bool uvOnly) {
     const BezierPatch& patch = view.patches[piece.patch];
     nu = pieceGridU(piece), nv = pieceGridV(piece);
     const size_t count = size_t(nu + 1) * size_t(nv + 1);
-    P.resize(count), N.resize(count), UV.resize(count);
+    UV.resize(count);
+    if (!uvOnly) P.resize(count), N.resize(count);
     const bool displaced = view.displacement && view.displacement->displaced(piece.patch);
     for (int j = 0; j <= nv; ++j)
         for (int i = 0; i <= nu; ++i) {
             const PieceEdge* owner = nullptr;
             int k = 0;
             const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);
+            const size_t v = size_t(j) * size_t(nu + 1) + size_t(i);
+            UV[v] = uv;
+            if (uvOnly) continue;
             // As diceAndShadeSurface: canonical lattice positions on edges, the patch's exact normal.
             const SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
             Vec3 p = owner ? latticePosition(patch, *owner, k) : sp.p;
@@ -304,8 +308,7 @@ void dicePieceVertices(const ReyesView& view, const Piece& piece, bool flipNorma
                     displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, p, flipNormal);
                 p = d.P, n = d.N;
             }
-            const size_t v = size_t(j) * size_t(nu + 1) + size_t(i);
-            P[v] = p, N[v] = n, UV[v] = uv;
+            P[v] = p, N[v] = n;
         }
 }
 

@@ -69,7 +69,8 @@ void buildPatchBvh(size_t n, PatchBox&& patchBox, Bvh& bvh, Bounds3* all) {
 }  // namespace
 
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs, const DisplacedDicer* dicer) {
+                  RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs,
+                  const RtDisplacementOptions* displacement) {
     const size_t n = scene.patches.size();
     acc.motion = motion && motion->blurred() ? *motion : FrameMotion();
     acc.movingPatches = 0;
@@ -122,34 +123,18 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
                         acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,
                         quadricPtr);
     acc.subpatchMs = msSince(t0);
-    // Displaced patches: their micro-grids, and their subpatch boxes from the grids' triangles.
+    // Displaced patches: their micro-grids (now or lazily) and their subpatch boxes.
     acc.displaced = DisplacedGrids();
-    if (dicer) {
+    if (displacement && displacement->dicer) {
         const auto td = Clock::now();
-        DisplacedGrids& dg = acc.displaced;
         std::vector<uint32_t> which;
         for (uint32_t i = 0; i < n; ++i)
             if (scene.attributes[i].kind == SurfaceKind::BicubicBezier && !acc.moving(i) &&
-                dicer->displaced(i))
+                displacement->dicer->displaced(i))
                 which.push_back(i);
-        if (!which.empty()) {
-            dg.meshOf.assign(n, DisplacedGrids::kNone);
-            dg.meshes.resize(which.size());
-            tbb::parallel_for(size_t(0), which.size(), [&](size_t m) {
-                MicroGrid grid;
-                dicer->dice(which[m], grid);
-                std::vector<Bounds3> leaves;
-                buildDisplacedMesh(std::move(grid), acc.forest.depth, dg.meshes[m], leaves);
-                setSubpatchLeafBoxes(acc.forest, which[m], leaves);
-            });
-            for (size_t m = 0; m < which.size(); ++m) {
-                dg.meshOf[which[m]] = uint32_t(m);
-                dg.triangles += dg.meshes[m].tri.size() / 3;
-                dg.vertices += dg.meshes[m].P.size();
-                dg.bytes += dg.meshes[m].bytes();
-            }
-        }
-        dg.buildMs = msSince(td);
+        buildDisplacedGrids(which, displacement->dicer, acc.forest.depth, displacement->budgetBytes,
+                            displacement->forceLazy, acc.forest, acc.displaced);
+        acc.displaced.buildMs = msSince(td);
     }
     acc.patchSoa.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {

@@ -15,10 +15,12 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "core/vec.h"
 #include "rt/intersect.h"
+#include "rt/subpatch_tree.h"
 
 namespace tessera {
 
@@ -32,13 +34,18 @@ struct MicroGrid {
 };
 
 // Dices displaced patches for the accel (implemented with Reyes' code by the render layer). Thread-safe:
-// dice() runs in parallel over patches.
+// dice() runs in parallel over patches, and lazily from the trace stages.
 class DisplacedDicer {
   public:
     virtual ~DisplacedDicer() = default;
     // Whether the ray tracer intersects `patch` as a displaced micro-grid.
     virtual bool displaced(uint32_t patch) const = 0;
-    virtual void dice(uint32_t patch, MicroGrid& out) const = 0;
+    // How far displacement moves the patch's points, and the undisplaced patch it dices (accel space).
+    virtual float radius(uint32_t patch) const = 0;
+    virtual BezierPatch basePatch(uint32_t patch) const = 0;
+    // The micro-grid of `patch`; `uvOnly`: only the vertices' (u,v) and the triangles (no evaluation, no
+    // displacement: cheap), the same (u,v) and triangles as a full dice.
+    virtual void dice(uint32_t patch, MicroGrid& out, bool uvOnly = false) const = 0;
 };
 
 struct FrameSetup;  // engine/frame.h
@@ -64,18 +71,59 @@ struct DisplacedMesh {
     }
 };
 
-// The frame's displaced patches (empty meshOf: none).
-struct DisplacedGrids {
+// The frame's displaced patches and their micro-grids. When all grids fit the memory budget they are built
+// up front and the patches' subpatch boxes are the boxes of their triangles; otherwise the boxes are
+// conservative (the hull of the (u,v) rectangle a leaf's triangles span, grown by the displacement radius)
+// and a patch's grid is built the first time a ray reaches one of its leaves, least recently used grids
+// being dropped when the budget is passed (a reader holds its grid through a shared_ptr, so dropping is
+// safe while it is in use; a dropped grid is built again, identically, when needed).
+class DisplacedGrids {
+  public:
     static constexpr uint32_t kNone = 0xffffffffu;
-    std::vector<uint32_t> meshOf;  // per patch: its mesh, or kNone (intersected by Newton)
-    std::vector<DisplacedMesh> meshes;
+    DisplacedGrids();
+    ~DisplacedGrids();
+    DisplacedGrids(DisplacedGrids&&) noexcept;
+    DisplacedGrids& operator=(DisplacedGrids&&) noexcept;
+
+    bool any() const { return !slotOf_.empty(); }
+    bool displaced(uint32_t patch) const { return !slotOf_.empty() && slotOf_[patch] != kNone; }
+    // The patch's grid (nullptr when not displaced), built now if it is not resident.
+    std::shared_ptr<const DisplacedMesh> mesh(uint32_t patch) const;
+    bool lazy() const { return lazy_; }
+    size_t patchCount() const { return slotCount_; }
+    size_t budgetBytes() const { return budget_; }
+    // Statistics: the grids' total size (all of them, built once each), resident now and at most.
     uint64_t triangles = 0, vertices = 0;
-    size_t bytes = 0;
+    size_t bytesAll = 0;
     double buildMs = 0;
-    const DisplacedMesh* mesh(uint32_t patch) const {
-        return meshOf.empty() || meshOf[patch] == kNone ? nullptr : &meshes[meshOf[patch]];
-    }
+    size_t residentBytes() const;
+    size_t peakBytes() const;
+    uint64_t builds() const;
+    uint64_t evictions() const;
+
+  private:
+    friend void buildDisplacedGrids(std::span<const uint32_t>, std::shared_ptr<const DisplacedDicer>, int,
+                                    size_t, bool, SubpatchForest&, DisplacedGrids&);
+    struct Slot;
+    struct Shared;
+    std::shared_ptr<const DisplacedMesh> build(uint32_t slot) const;
+    std::vector<uint32_t> slotOf_;  // per patch: its slot, or kNone (intersected by Newton)
+    std::vector<uint32_t> patchOf_;
+    size_t slotCount_ = 0;
+    bool lazy_ = false;
+    size_t budget_ = 0;
+    std::shared_ptr<const DisplacedDicer> dicer_;
+    int depth_ = 0;
+    std::unique_ptr<Slot[]> slots_;
+    std::unique_ptr<Shared> shared_;
 };
+
+// Patches `which` (displaced by `dicer`) of a forest of `patchCount` trees: their grids built up front when
+// they fit `budgetBytes`, lazily otherwise (`forceLazy`: always lazily, for tests), and their subpatch
+// boxes in `forest` set accordingly (setSubpatchLeafBoxes).
+void buildDisplacedGrids(std::span<const uint32_t> which, std::shared_ptr<const DisplacedDicer> dicer,
+                         int depth, size_t budgetBytes, bool forceLazy, SubpatchForest& forest,
+                         DisplacedGrids& out);
 
 // Sort a diced grid's triangles into the subpatch leaves of a tree of `depth` (by their (u,v) centroids),
 // build each leaf's BVH, and return the leaves' boxes (grown a little, so rays through shared edges reach

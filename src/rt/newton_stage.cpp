@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "rt/newton_lanes.h"
 #if defined(__SSE2__)
@@ -50,7 +51,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         float selfHeight[16];
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
-        Vec3 bestNs;  // a displaced micro-grid hit's shading normal (zero otherwise)
+        Vec3 bestNs;                 // a displaced micro-grid hit's shading normal (zero otherwise)
+        uint32_t meshPatch = kNone;  // the displaced patch whose grid `mesh` holds
+        std::shared_ptr<const DisplacedMesh> mesh;
         ProjectedPatch<float> pp;
         alignas(16) float depth[16];  // the control points' distances along the ray (t units)
         // Motion blur: the ray's time and, when the projected patch moves, that patch at the ray's time
@@ -215,8 +218,11 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     ++s.cur;
                     continue;
                 }
-                if (const DisplacedMesh* dm = acc.displaced.mesh(c.patch)) {
-                    // A displaced patch: the triangles of its micro-grid in this leaf (rt/displaced.h).
+                if (acc.displaced.displaced(c.patch)) {
+                    // A displaced patch: the triangles of its micro-grid in this leaf (rt/displaced.h), the
+                    // grid held by the lane while its ray stays on the patch (built now if not resident).
+                    if (s.meshPatch != c.patch) s.mesh = acc.displaced.mesh(c.patch), s.meshPatch = c.patch;
+                    const DisplacedMesh* dm = s.mesh.get();
                     PatchHit h;
                     auto accept = [&](const PatchHit& ph) {
                         if (c.patch == s.opt.ignorePatch && ph.t < s.opt.ignoreT) return false;

@@ -867,9 +867,12 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     // micro-grids (rt/displaced.h).
     const auto tBuild = EngineClock::now();
     RtAccel acc;
-    const std::unique_ptr<DisplacedDicer> displacedDicer = dicer && *dicer ? (*dicer)(frame) : nullptr;
+    RtDisplacementOptions displacement;
+    if (dicer && *dicer) displacement.dicer = (*dicer)(frame);
+    const bool displacedDicer = displacement.dicer != nullptr;
+    displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
     buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc,
-                 &frame.motion, kDefaultTimeSlabs, displacedDicer.get());
+                 &frame.motion, kDefaultTimeSlabs, &displacement);
     const double buildMs = msSince(tBuild);
     if (displacedDicer)
         for (size_t i = 0; i < scene.patches.size(); ++i)
@@ -996,15 +999,20 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
                    {"patch_bytes", acc.patches.size() * sizeof(BezierPatch)},
                    {"bytes_per_patch", double(acc.bvh.memoryBytes() + acc.forest.memoryBytes()) / double(np)},
                    {"workspace_bytes", wsBytes},
-                   {"displaced_bytes", acc.displaced.bytes}};
+                   {"displaced_bytes", acc.displaced.peakBytes()}};
     s["build_ms"] = buildMs;
     s["build"] = {
         {"bvh_ms", acc.bvhMs}, {"subpatch_ms", acc.subpatchMs}, {"displaced_ms", acc.displaced.buildMs}};
-    if (!acc.displaced.meshes.empty())
-        s["displaced"] = {{"patches", acc.displaced.meshes.size()},
+    if (acc.displaced.any())
+        s["displaced"] = {{"patches", acc.displaced.patchCount()},
                           {"triangles", acc.displaced.triangles},
                           {"vertices", acc.displaced.vertices},
-                          {"bytes", acc.displaced.bytes},
+                          {"bytes_all", acc.displaced.bytesAll},
+                          {"budget_bytes", acc.displaced.budgetBytes()},
+                          {"lazy", acc.displaced.lazy()},
+                          {"grids_built", acc.displaced.builds()},
+                          {"grids_dropped", acc.displaced.evictions()},
+                          {"peak_resident_bytes", acc.displaced.peakBytes()},
                           {"build_ms", acc.displaced.buildMs}};
     s["trace_ms"] = traceMs;
     s["mrays_per_s"] = traceMs > 0 ? double(totalRays) / (traceMs * 1e3) : 0.0;

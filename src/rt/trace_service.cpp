@@ -128,7 +128,7 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
                 }
                 continue;
             }
-            if (const DisplacedMesh* dm = acc.displaced.mesh(patch)) {  // its micro-grid, leaf by leaf
+            if (const std::shared_ptr<const DisplacedMesh> dm = acc.displaced.mesh(patch)) {  // leaf by leaf
                 const WatertightRay wr = makeWatertightRay(r);
                 for (uint32_t leaf = 0; leaf < uint32_t(dm->leafRoot.size()); ++leaf)
                     if (intersectDisplacedLeaf(*dm, leaf, r, wr, accept, h)) {
