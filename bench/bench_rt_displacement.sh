@@ -26,8 +26,9 @@ for res in 800x600 400x300; do
     # The grids built lazily under a budget of about half what they need (up front: 36 MiB at 800x600, 9 MiB
     # at 400x300). Much smaller budgets thrash: every tile rebuilds grids (800x600 at 4 MiB ran > 20 min).
     mb=$([ "$res" = 800x600 ] && echo 16 || echo 4)
-    "$BIN" render displaced_teapot.rib --engine rt --res "$res" --threads "$THREADS" -q --displacement-cache-mb "$mb" \
-        -o "$TMP/displaced_teapot_rt-lazy${mb}MiB_$res.png" --stats "$TMP/displaced_teapot_rt-lazy${mb}MiB_$res.json"
+    name="displaced_teapot_rt-lazy${mb}MiB_$res"
+    "$BIN" render displaced_teapot.rib --engine rt --res "$res" --threads "$THREADS" -q \
+        --displacement-cache-mb "$mb" -o "$TMP/$name.png" --stats "$TMP/$name.json"
 done
 mkdir -p "$ROOT/bench/results"
 OUT="$ROOT/bench/results/rt_displacement_$(date -u +%Y%m%dT%H%M%SZ).json"
