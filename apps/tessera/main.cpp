@@ -1001,6 +1001,11 @@ int main(int argc, char** argv) {
     render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
         ->check(intRange(0, 12));
     render
+        ->add_option("--displacement-cache-mb", ra.displacementCacheMb,
+                     "rt: memory for displaced micro-grids, MiB (built up front when they fit, else lazily "
+                     "and the least recently used dropped); default 512")
+        ->check(intRange(1, 1 << 20));
+    render
         ->add_option("--max-depth", ra.maxDepth,
                      "rt: ray bounces; default 4 (direct: mirror and glass lobes), 16 (path, with Russian "
                      "roulette from the third)")

@@ -128,6 +128,9 @@ struct RenderSettings {
     AmbientOcclusionSettings ao;
     AdaptiveSettings adaptive;
     int subpatchDepth = 6;
+    // Displaced patches' micro-grids (rt/displaced.h): built up front when they fit, else lazily and kept
+    // within this many MiB.
+    int displacementCacheMb = 512;
     int maxDepth = 4;  // direct: traced lobes per path; path: bounces
     // Area lights: shadow rays per shading point of the direct integrator (0: each light's own "samples").
     int lightSamples = 0;

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "engine/clock.h"
+#include "render/displaced_dicer.h"
 #include "reyes/reyes_renderer.h"
 #include "rt/ray_visibility.h"
 #include "rt/rt_renderer.h"
@@ -13,25 +14,32 @@
 namespace tessera {
 namespace {
 
+bool anyDisplaced(const Scene& scene) {
+    for (const PatchAttributes& a : scene.attributes)
+        if (a.displacement >= 0) return true;
+    return false;
+}
+
 // Reyes with --reyes-shadows raytrace: the ray tracer's accel over the scene in the camera space Reyes
 // shades in (at shutter open, where Reyes shades moving geometry), and its shadow rays as Reyes' answers
 // to the visibility queries of the lights that cast shadows.
+// Displaced patches are traced as the micro-grids Reyes dices (render/displaced_dicer.h), so the shadows
+// are those of the displaced surfaces.
 RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSettings& settings) {
     const auto t0 = EngineClock::now();
     RtAccel acc;
-    buildRtAccel(scene, viewCamera(scene, settings).cameraFromWorld, settings.subpatchDepth, false, acc);
+    RtDisplacementOptions displacement;
+    if (anyDisplaced(scene))
+        displacement.dicer = makeReyesDisplacedDicer(scene, settings, FrameSetup(scene, settings));
+    displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
+    buildRtAccel(scene, viewCamera(scene, settings).cameraFromWorld, settings.subpatchDepth, false, acc,
+                 nullptr, kDefaultTimeSlabs, &displacement);
     const double buildMs = msSince(t0);
     // Per-ray traversal: a grid's lists of shadow rays are too short for the shadow binning to pay.
     const RayTracedVisibility visibility(acc, rt::TraceServiceOptions{false, false});
     RenderResult result = renderReyes(scene, settings, &visibility);
     result.stats["shadows"]["accel_build_ms"] = buildMs;
     return result;
-}
-
-bool anyDisplaced(const Scene& scene) {
-    for (const PatchAttributes& a : scene.attributes)
-        if (a.displacement >= 0) return true;
-    return false;
 }
 
 // Whether Reyes needs the ray tracer's shadow rays: for every light that casts shadows under
@@ -61,24 +69,15 @@ RenderResult render(const Scene& scene, const RenderSettings& settings) {
             else
                 result = renderReyes(scene, settings);
         } else if (settings.engine == "rt") {
-            result = renderRt(scene, settings);
+            // Displaced patches: micro-grids diced by Reyes' code (render/displaced_dicer.h).
+            const DisplacedDicerFactory dicer = [&](const FrameSetup& frame) {
+                return makeReyesDisplacedDicer(scene, settings, frame);
+            };
+            result = renderRt(scene, settings, &dicer);
         } else {
             throw std::invalid_argument("unknown engine '" + settings.engine + "' (use reyes or rt)");
         }
     });
-    // The ray tracer does not displace yet (docs/textures.md): say so rather than silently render another
-    // shape.
-    if (anyDisplaced(scene)) {
-        if (settings.engine == "rt")
-            result.warnings.push_back(
-                "the scene has displaced surfaces: --engine rt ignores displacement (renders them "
-                "undisplaced); "
-                "--engine reyes displaces");
-        else if (reyesTracesShadows(scene, settings))
-            result.warnings.push_back(
-                "--reyes-shadows raytrace traces the undisplaced surfaces: shadows of displacement need "
-                "--reyes-shadows map");
-    }
     // RI Imager "background": Ci += (1 - alpha) * background, alpha = 1 (premultiplied colour), on the
     // pixels the engines wrote; the attribute planes are left as rendered.
     if (scene.image.hasBackground) {

@@ -117,6 +117,7 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
                                                              : SamplerKind::Centred;
     s.bucketSize = o.bucketSize;
     s.subpatchDepth = o.subpatchDepth;
+    s.displacementCacheMb = o.displacementCacheMb;
     // Bounces: 4 traced lobes for the direct integrator; 16 for the path tracer, whose Russian roulette
     // ends most paths far earlier (the cap only bounds mirror-and-glass chains).
     s.maxDepth = o.maxDepth >= 0 ? o.maxDepth : o.integrator == "path" ? 16 : 4;

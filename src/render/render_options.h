@@ -29,10 +29,11 @@ struct RenderOptions {
     int bucketSize = 32, subpatchDepth = 6, maxGridEdge = 16;
     // Reyes (docs/textures.md): the micropolygon sampler, bbox or nearest ("": the scene's Hider
     // "micropolygonsampling", else bbox); and the displacement split threshold in micropolygon sides
-    // (negative: the default, 1; 0: no displacement-aware splitting).
+    // (negative: the default, 4; 0: no displacement-aware splitting).
     std::string micropolygonSampling;
     double displacementSplit = -1;
     std::string displacementNormals = "exact";  // exact, grid (benchmarks only)
+    int displacementCacheMb = 512;              // rt: memory for displaced micro-grids (RenderSettings)
     int maxDepth = -1;                          // -1: 4 for the direct integrator, 16 for the path tracer
     int lightSamples = 0;                       // 0: each area light's own "samples"
     bool cullBackfaces = false, noRayBinning = false;

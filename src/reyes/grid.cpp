@@ -14,6 +14,32 @@ int snapIndex(int i, int n, int segments) {
     return (2 * i * segments + n) / (2 * n);
 }
 
+// Grid vertex (i,j) of a piece diced nu x nv: its (u,v) on the patch and the edge that owns it (nullptr:
+// interior) with its lattice index k. Boundary-curve edges win at corners, so a corner on a patch boundary
+// is evaluated exactly as the neighbouring patch evaluates it.
+Vec2 pieceVertexUV(const Piece& piece, int i, int j, int nu, int nv, const PieceEdge*& owner, int& k) {
+    const PieceEdge* e = piece.edge;
+    owner = nullptr;
+    k = 0;
+    auto consider = [&](const PieceEdge& edge, int idx, int n) {
+        if (owner && !(owner->boundary < 0 && edge.boundary >= 0)) return;
+        owner = &edge;
+        k = edge.latticeAt(snapIndex(idx, n, edge.segments()));
+    };
+    if (j == 0) consider(e[0], i, nu);
+    if (j == nv) consider(e[2], i, nu);
+    if (i == 0) consider(e[3], j, nv);
+    if (i == nu) consider(e[1], j, nv);
+    if (owner) return latticeUV(*owner, k);
+    // Interior: bilinear map of the piece's (u,v) quad.
+    const float s = float(i) / nu, t = float(j) / nv;
+    const Vec2 a = piece.uv[0], b = piece.uv[1], c = piece.uv[2], d = piece.uv[3];
+    Vec2 uv;
+    uv.x = (1 - t) * ((1 - s) * a.x + s * b.x) + t * ((1 - s) * d.x + s * c.x);
+    uv.y = (1 - t) * ((1 - s) * a.y + s * b.y) + t * ((1 - s) * d.y + s * c.y);
+    return uv;
+}
+
 // Dice and shade a piece of a bicubic Bezier patch or, with shade.quadric, of a quadric.
 void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     const BezierPatch& patch = view.patches[piece.patch];
@@ -68,30 +94,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
 
     for (int j = 0; j <= nv; ++j) {
         for (int i = 0; i <= nu; ++i) {
-            // Which edge (if any) owns this vertex: boundary-curve edges win at corners, so a corner on a
-            // patch boundary is evaluated exactly as the neighbouring patch evaluates it.
             const PieceEdge* owner = nullptr;
             int k = 0;
-            auto consider = [&](const PieceEdge& edge, int idx, int n) {
-                if (owner && !(owner->boundary < 0 && edge.boundary >= 0)) return;
-                owner = &edge;
-                k = edge.latticeAt(snapIndex(idx, n, edge.segments()));
-            };
-            if (j == 0) consider(e[0], i, nu);
-            if (j == nv) consider(e[2], i, nu);
-            if (i == 0) consider(e[3], j, nv);
-            if (i == nu) consider(e[1], j, nv);
-
-            Vec2 uv;
-            if (owner) {
-                uv = latticeUV(*owner, k);
-            } else {
-                // Interior: bilinear map of the piece's (u,v) quad.
-                float s = float(i) / nu, t = float(j) / nv;
-                Vec2 a = piece.uv[0], b = piece.uv[1], c = piece.uv[2], d = piece.uv[3];
-                uv.x = (1 - t) * ((1 - s) * a.x + s * b.x) + t * ((1 - s) * d.x + s * c.x);
-                uv.y = (1 - t) * ((1 - s) * a.y + s * b.y) + t * ((1 - s) * d.y + s * c.y);
-            }
+            const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);
             const int v = j * (nu + 1) + i;
             if (shade.depthOnly) {  // a shadow map's pass: positions only
                 Vec3 P = quadric ? quadricPoint(*quadric, uv)
@@ -308,6 +313,39 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
 }
 
 }  // namespace
+
+void dicePieceVertices(const ReyesView& view, const Piece& piece, bool flipNormal, int& nu, int& nv,
+                       std::vector<Vec3>& P, std::vector<Vec3>& N, std::vector<Vec2>& UV, bool uvOnly) {
+    const BezierPatch& patch = view.patches[piece.patch];
+    nu = pieceGridU(piece), nv = pieceGridV(piece);
+    const size_t count = size_t(nu + 1) * size_t(nv + 1);
+    UV.resize(count);
+    if (!uvOnly) P.resize(count), N.resize(count);
+    const bool displaced = view.displacement && view.displacement->displaced(piece.patch);
+    for (int j = 0; j <= nv; ++j)
+        for (int i = 0; i <= nu; ++i) {
+            const PieceEdge* owner = nullptr;
+            int k = 0;
+            const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);
+            const size_t v = size_t(j) * size_t(nu + 1) + size_t(i);
+            UV[v] = uv;
+            if (uvOnly) continue;
+            // As diceAndShadeSurface: canonical lattice positions on edges, the patch's exact normal.
+            const SurfacePoint sp = evalPatchDeriv(patch, uv.x, uv.y);
+            Vec3 p = owner ? latticePosition(patch, *owner, k) : sp.p;
+            Vec3 n = cross(sp.dpdu, sp.dpdv);
+            const float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);
+            if (!(dot(n, n) > 1e-12f * scale * scale)) n = patchNormal(patch, uv.x, uv.y);
+            n = normalize(n);
+            if (flipNormal) n = -n;
+            if (displaced) {
+                const DisplacedVertex d =
+                    displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, p, flipNormal);
+                p = d.P, n = d.N;
+            }
+            P[v] = p, N[v] = n;
+        }
+}
 
 void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     switch (shade.kind) {

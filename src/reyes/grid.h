@@ -93,4 +93,13 @@ struct ShadeInputs {
 // their edge's own lattice points (stitching), so shared edges are identical on both sides.
 void diceAndShade(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid);
 
+// The vertices `piece` dices into, without shading (the same lattice, snapping and displacement as
+// diceAndShade, bicubic patches only): per vertex of the (nu+1) x (nv+1) grid (row-major, u fastest) the
+// position, the unit normal (orientation applied; the displaced surface's when displaced) and the (u,v)
+// on the patch. The ray tracer's micro-grids of displaced patches (rt/displaced.h). `uvOnly`: the (u,v) only
+// (P and N untouched).
+void dicePieceVertices(const ReyesView& view, const Piece& piece, bool flipNormal, int& nu, int& nv,
+                       std::vector<Vec3>& P, std::vector<Vec3>& N, std::vector<Vec2>& UV,
+                       bool uvOnly = false);
+
 }  // namespace tessera

@@ -352,6 +352,11 @@ Verdict classify(const ReyesView& view, const PieceHull& hullOf, Piece& piece) {
         }
         x0 = std::min(x0, kx0), y0 = std::min(y0, ky0), x1 = std::max(x1, kx1), y1 = std::max(y1, ky1);
     }
+    if (!view.cull) {  // nothing is culled: split by the rates alone
+        int maxSeg = std::max(piece.interiorU, piece.interiorV);
+        for (const PieceEdge& e : piece.edge) maxSeg = std::max(maxSeg, e.rate());
+        return maxSeg > view.maxGridEdge ? Verdict::Split : Verdict::Dice;
+    }
     if (!anyInRange || outsideAll) return Verdict::Cull;
     if (!straddles) {
         if (x1 < view.cullX0 || x0 > view.cullX1 || y1 < view.cullY0 || y0 > view.cullY1)

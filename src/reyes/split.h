@@ -110,6 +110,9 @@ struct ReyesView {
     // the displaced grid's differences, as paper 000 does before its fix (sec. 3.1): what the exact,
     // shared normals cost is measured against it (bench/displacement_bench.sh). Shared edges can crack.
     bool exactDisplacementNormals = true;
+    // false: keep every piece, off screen, behind the eye or across the eye plane too, split by its rates
+    // alone (the ray tracer's displaced micro-grids, rt/displaced.h: reflections and shadows see them).
+    bool cull = true;
     explicit ReyesView(const Camera& cam) : projector(cam) {}
 };
 

@@ -30,6 +30,7 @@ Vec3 orientedGeometricNormal(const RtAccel& acc, uint32_t patch, const PatchHit&
 }
 
 Vec3 hitNormal(const RtAccel& acc, uint32_t patch, const PatchHit& h, float time) {
+    if (dot(h.ns, h.ns) > 0.f) return h.ns;  // a displaced micro-grid's interpolated normal (oriented)
     if (const PlacedQuadric* pq = acc.quadric(patch)) {
         Vec3 N;
         evalPlacedQuadric(*pq, h.u, h.v, &N);  // the same closed form as Reyes' dicer
@@ -72,7 +73,8 @@ void buildPatchBvh(size_t n, PatchBox&& patchBox, Bvh& bvh, Bounds3* all) {
 }  // namespace
 
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs) {
+                  RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs,
+                  const RtDisplacementOptions* displacement) {
     const size_t n = scene.patches.size();
     acc.motion = motion && motion->blurred() ? *motion : FrameMotion();
     acc.movingPatches = 0;
@@ -130,6 +132,19 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
                         acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,
                         quadricPtr);
     acc.subpatchMs = msSince(t0);
+    // Displaced patches: their micro-grids (now or lazily) and their subpatch boxes.
+    acc.displaced = DisplacedGrids();
+    if (displacement && displacement->dicer) {
+        const auto td = Clock::now();
+        std::vector<uint32_t> which;
+        for (uint32_t i = 0; i < n; ++i)
+            if (scene.attributes[i].kind == SurfaceKind::BicubicBezier && !acc.moving(i) &&
+                displacement->dicer->displaced(i))
+                which.push_back(i);
+        buildDisplacedGrids(which, displacement->dicer, acc.forest.depth, displacement->budgetBytes,
+                            displacement->forceLazy, acc.forest, acc.displaced);
+        acc.displaced.buildMs = msSince(td);
+    }
     acc.patchSoa.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
         PatchSoa& ps = acc.patchSoa[i];

@@ -7,6 +7,7 @@
 #include "core/transform.h"
 #include "engine/motion.h"
 #include "rt/bvh.h"
+#include "rt/displaced.h"
 #include "rt/intersect.h"
 #include "rt/subpatch_tree.h"
 #include "scene/scene.h"
@@ -46,6 +47,9 @@ struct RtAccel {
     }
     Bvh bvh;
     SubpatchForest forest;
+    // Displaced patches (rt/displaced.h): their micro-grids, intersected instead of the patch; their
+    // subpatch boxes bound the grids' triangles.
+    DisplacedGrids displaced;
     Bounds3 bounds;        // of all traced patches (their root boxes)
     float offset = 1e-4f;  // self-intersection offset along the normal for secondary ray origins
     double bvhMs = 0, subpatchMs = 0;
@@ -94,8 +98,17 @@ inline void soaToPatch(const PatchSoa& s, BezierPatch& out) {
 // `motion` (in the space of `toSpace`, i.e. camera space for the renderer): the moving patches' keys;
 // nullptr or a static timeline: a static accel, bit-identical to one built without it.
 // `maxTimeSlabs`: see buildSubpatchForest (1: boxes swept over the whole shutter only).
+// `displacement` (nullptr or no dicer: none): the patches its dicer calls displaced (static bicubic patches
+// only) are traced as micro-grids (rt/displaced.h), built up front when they fit the budget, lazily
+// otherwise.
+struct RtDisplacementOptions {
+    std::shared_ptr<const DisplacedDicer> dicer;
+    size_t budgetBytes = size_t(512) << 20;  // --displacement-cache-mb
+    bool forceLazy = false;                  // build lazily even when everything fits (tests)
+};
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
-                  RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs);
+                  RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs,
+                  const RtDisplacementOptions* displacement = nullptr);
 
 // The ray against quadric surface `patch` (analytic, core/quadric.h), restricted to the (u,v) rectangle
 // [u0,u1] x [v0,v1] (a subpatch leaf's; a hit on its border counts for both neighbours): the nearest hit

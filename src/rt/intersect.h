@@ -11,8 +11,8 @@
 #include <immintrin.h>
 #endif
 
-#include "core/hostdevice.h"
 #include "core/bezier.h"
+#include "core/hostdevice.h"
 #include "rt/subpatch_tree.h"
 
 namespace tessera {
@@ -50,7 +50,7 @@ TESSERA_HD Vec3 safeInverse(Vec3 d) {
 // Slab test; on a hit returns the entry and exit distances (clamped to [tmin, tmax]). Plain compares
 // (minss/maxss), no initializer lists: this is the traversal's inner kernel.
 TESSERA_HD bool rayBoxInterval(const Bounds3& b, const Vec3& o, const Vec3& inv, float tmin, float tmax,
-                           float& tEnter, float& tExit) {
+                               float& tEnter, float& tExit) {
     const float tx0 = (b.lo.x - o.x) * inv.x, tx1 = (b.hi.x - o.x) * inv.x;
     const float ty0 = (b.lo.y - o.y) * inv.y, ty1 = (b.hi.y - o.y) * inv.y;
     const float tz0 = (b.lo.z - o.z) * inv.z, tz1 = (b.hi.z - o.z) * inv.z;
@@ -129,6 +129,9 @@ struct PatchHit {
     float t = std::numeric_limits<float>::infinity();
     float u = 0, v = 0;
     Vec3 p, dpdu, dpdv;  // at the root (dpdu x dpdv may vanish at a collapsed edge)
+    // A displaced patch's micro-grid hit (rt/displaced.h): the unit shading normal interpolated from the
+    // displaced vertices, orientation applied (zero for every other hit).
+    Vec3 ns;
     int iterations = 0;
     bool hit = false;
 };
@@ -151,7 +154,7 @@ struct alignas(16) ProjectedPatch {
 
 template <class T>
 TESSERA_HD void projectPatch(const BezierPatch& patch, const T n1[3], const T n2[3], T d1, T d2,
-                         ProjectedPatch<T>& pp) {
+                             ProjectedPatch<T>& pp) {
     for (int k = 0; k < 16; ++k) {
         const Vec3& c = patch.cp[k];
         pp.a1[k] = n1[0] * T(c.x) + n1[1] * T(c.y) + n1[2] * T(c.z) + d1;
@@ -167,7 +170,7 @@ TESSERA_HD void projectPatch(const BezierPatch& patch, const RayPlanes& pl, Proj
 // R = (r1, r2) and its Jacobian [j11 j12; j21 j22] (columns d/du, d/dv) at (u, v): scalar reference.
 template <class T>
 TESSERA_HD void evalProjected(const ProjectedPatch<T>& pp, T u, T v, T& r1, T& r2, T& j11, T& j12, T& j21,
-                          T& j22) {
+                              T& j22) {
     T bu[4], bv[4], du[4], dv[4];
     T s = 1 - u, t = u;
     bu[0] = s * s * s, bu[1] = 3 * t * s * s, bu[2] = 3 * t * t * s, bu[3] = t * t * t;

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "rt/newton_lanes.h"
 #if defined(__SSE2__)
@@ -50,6 +51,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         float selfHeight[16];
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
+        Vec3 bestNs;                 // a displaced micro-grid hit's shading normal (zero otherwise)
+        uint32_t meshPatch = kNone;  // the displaced patch whose grid `mesh` holds
+        std::shared_ptr<const DisplacedMesh> mesh;
         ProjectedPatch<float> pp;
         alignas(16) float depth[16];  // the control points' distances along the ray (t units)
         // Motion blur: the ray's time and, when the projected patch moves, that patch at the ray's time
@@ -136,6 +140,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 best.h.p = sp.p;
                 best.h.dpdu = sp.dpdu;
                 best.h.dpdv = sp.dpdv;
+                best.h.ns = s.bestNs;
             }
             s.r = kNone;
         };
@@ -154,7 +159,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 if (anyHit) s.opt.anyHit = true;
                 s.pl = makeRayPlanes(s.ray.o, s.ray.d);
                 s.invDD = 1.f / dot(s.ray.d, s.ray.d);
-                s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false;
+                s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false, s.bestNs = Vec3{};
                 s.originN = rays.originN[r];
                 s.selfPlane = false;
                 s.rootPatch = kNone;
@@ -206,6 +211,31 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                         s.bestPatch = c.patch, s.bestU = h.u, s.bestV = h.v;
                         s.bestHasDeriv = true;
                         s.bestSp = SurfacePoint{h.p, h.dpdu, h.dpdv};
+                        s.bestNs = Vec3{};
+                        s.ray.tmax = h.t;
+                        if (s.opt.anyHit) s.cur = s.end - 1;  // shadow rays stop at the first hit
+                    }
+                    ++s.cur;
+                    continue;
+                }
+                if (acc.displaced.displaced(c.patch)) {
+                    // A displaced patch: the triangles of its micro-grid in this leaf (rt/displaced.h), the
+                    // grid held by the lane while its ray stays on the patch (built now if not resident).
+                    if (s.meshPatch != c.patch) s.mesh = acc.displaced.mesh(c.patch), s.meshPatch = c.patch;
+                    const DisplacedMesh* dm = s.mesh.get();
+                    PatchHit h;
+                    auto accept = [&](const PatchHit& ph) {
+                        if (c.patch == s.opt.ignorePatch && ph.t < s.opt.ignoreT) return false;
+                        if (s.opt.respectSides && !acc.twoSided[c.patch] &&
+                            dot(orientedGeometricNormal(acc, c.patch, ph), s.ray.d) > 0.f)
+                            return false;  // back face of a one-sided surface
+                        return true;
+                    };
+                    if (intersectDisplacedLeaf(*dm, c.leaf, s.ray, makeWatertightRay(s.ray), accept, h)) {
+                        s.bestPatch = c.patch, s.bestU = h.u, s.bestV = h.v;
+                        s.bestHasDeriv = true;
+                        s.bestSp = SurfacePoint{h.p, h.dpdu, h.dpdv};
+                        s.bestNs = h.ns;
                         s.ray.tmax = h.t;
                         if (s.opt.anyHit) s.cur = s.end - 1;  // shadow rays stop at the first hit
                     }
@@ -317,6 +347,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 }
                 if (ok) {
                     s.bestPatch = c.patch, s.bestU = uc, s.bestV = vc, s.bestHasDeriv = haveDeriv;
+                    s.bestNs = Vec3{};
                     s.ray.tmax = t;
                     if (s.opt.anyHit) s.cur = s.end - 1;  // shadow rays stop at the first hit
                 }

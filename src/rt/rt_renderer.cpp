@@ -923,18 +923,32 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
 
 }  // namespace
 
-RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
+RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
+                      const DisplacedDicerFactory* dicer) {
     const FrameSetup frame(scene, settings);
     RenderResult result = frame.startResult(settings);
     const Camera& cam = frame.camera;
     const int nx = frame.nx, ny = frame.ny;
 
-    // Build: camera space (eye at the origin), both levels of the hierarchy.
+    // Build: camera space (eye at the origin), both levels of the hierarchy, and the displaced patches'
+    // micro-grids (rt/displaced.h).
     const auto tBuild = EngineClock::now();
     RtAccel acc;
+    RtDisplacementOptions displacement;
+    if (dicer && *dicer) displacement.dicer = (*dicer)(frame);
+    const bool displacedDicer = displacement.dicer != nullptr;
+    displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
     buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc,
-                 &frame.motion);
+                 &frame.motion, kDefaultTimeSlabs, &displacement);
     const double buildMs = msSince(tBuild);
+    if (displacedDicer)
+        for (size_t i = 0; i < scene.patches.size(); ++i)
+            if (acc.moving(uint32_t(i)) && scene.attributes[i].displacement >= 0) {
+                result.warnings.push_back(
+                    "the scene has displaced surfaces that move: --engine rt traces those undisplaced "
+                    "(--engine reyes displaces them)");
+                break;
+            }
     // Binning (camera and shadow rays) pays when the subpatch leaves are few compared with the samples, i.e.
     // boxes cover several samples each: the per-tile descent then replaces many per-ray box tests. With
     // many small leaves the descent costs more than the traversal it replaces (teapot 0.001 and bigguy
@@ -1051,9 +1065,22 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings) {
                    {"subpatch_bytes", acc.forest.memoryBytes()},
                    {"patch_bytes", acc.patches.size() * sizeof(BezierPatch)},
                    {"bytes_per_patch", double(acc.bvh.memoryBytes() + acc.forest.memoryBytes()) / double(np)},
-                   {"workspace_bytes", wsBytes}};
+                   {"workspace_bytes", wsBytes},
+                   {"displaced_bytes", acc.displaced.peakBytes()}};
     s["build_ms"] = buildMs;
-    s["build"] = {{"bvh_ms", acc.bvhMs}, {"subpatch_ms", acc.subpatchMs}};
+    s["build"] = {
+        {"bvh_ms", acc.bvhMs}, {"subpatch_ms", acc.subpatchMs}, {"displaced_ms", acc.displaced.buildMs}};
+    if (acc.displaced.any())
+        s["displaced"] = {{"patches", acc.displaced.patchCount()},
+                          {"triangles", acc.displaced.triangles},
+                          {"vertices", acc.displaced.vertices},
+                          {"bytes_all", acc.displaced.bytesAll},
+                          {"budget_bytes", acc.displaced.budgetBytes()},
+                          {"lazy", acc.displaced.lazy()},
+                          {"grids_built", acc.displaced.builds()},
+                          {"grids_dropped", acc.displaced.evictions()},
+                          {"peak_resident_bytes", acc.displaced.peakBytes()},
+                          {"build_ms", acc.displaced.buildMs}};
     s["trace_ms"] = traceMs;
     s["mrays_per_s"] = traceMs > 0 ? double(totalRays) / (traceMs * 1e3) : 0.0;
     writeTileLoopStats(layout, loop, s);

@@ -16,6 +16,9 @@
 
 namespace tessera {
 
-RenderResult renderRt(const Scene& scene, const RenderSettings& settings);
+// `dicer` (nullptr: none): makes the frame's dicer of displaced patches (rt/displaced.h; the render layer's
+// render/displaced_dicer.h), which are then traced as micro-grids; without it they are traced undisplaced.
+RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
+                      const DisplacedDicerFactory* dicer = nullptr);
 
 }  // namespace tessera

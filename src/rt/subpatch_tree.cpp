@@ -404,4 +404,19 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
         });
 }
 
+void setSubpatchLeafBoxes(SubpatchForest& f, uint32_t patch, std::span<const Bounds3> leaves) {
+    Bounds3* boxes = f.boxes.data() + size_t(patch) * f.nodesPerPatch;
+    const uint32_t first = f.firstLeaf();
+    for (uint32_t l = 0; l < leaves.size() && first + l < f.nodesPerPatch; ++l) boxes[first + l] = leaves[l];
+    for (uint32_t n = first; n-- > 0;) {
+        boxes[n] = boxes[2 * n + 1];
+        boxes[n].extend(boxes[2 * n + 2]);
+    }
+    writeQuads(boxes, f.depth, f.quads.data() + size_t(patch) * f.quadsPerPatch);
+    if (!f.backfacing.empty())
+        std::fill_n(f.backfacing.data() + size_t(patch) * f.nodesPerPatch, f.nodesPerPatch, uint8_t(0));
+    if (!f.quadBack.empty())
+        std::fill_n(f.quadBack.data() + size_t(patch) * f.quadsPerPatch, f.quadsPerPatch, uint8_t(0));
+}
+
 }  // namespace tessera

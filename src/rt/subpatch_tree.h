@@ -165,4 +165,9 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                          size_t slabBudgetBytes = kTimeSlabBudgetBytes,
                          std::span<const PlacedQuadric* const> quadrics = {});
 
+// Replace the boxes of `patch`'s tree with ones built from its leaf boxes (`leaves`: 2^depth of them, in
+// leaf order; an inner node is the union of its children) and clear its back-facing marks: a displaced
+// patch's leaves bound its micro-grid's triangles (rt/displaced.h). Static patches only (no time slabs).
+void setSubpatchLeafBoxes(SubpatchForest& forest, uint32_t patch, std::span<const Bounds3> leaves);
+
 }  // namespace tessera

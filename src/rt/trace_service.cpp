@@ -128,6 +128,18 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
                 }
                 continue;
             }
+            if (const std::shared_ptr<const DisplacedMesh> dm = acc.displaced.mesh(patch)) {  // leaf by leaf
+                const WatertightRay wr = makeWatertightRay(r);
+                for (uint32_t leaf = 0; leaf < uint32_t(dm->leafRoot.size()); ++leaf)
+                    if (intersectDisplacedLeaf(*dm, leaf, r, wr, accept, h)) {
+                        out.hit = true;
+                        out.patch = patch;
+                        out.h = h;
+                        r.tmax = h.t;
+                        if (opt.anyHit) return true;
+                    }
+                continue;
+            }
             BezierPatch moved;
             if (acc.moving(patch)) patchAtTime(acc, patch, opt.time, moved);  // at the ray's time
             if (intersectPatch<float>(acc.moving(patch) ? moved : acc.patches[patch], acc.forest, patch, r, h,
