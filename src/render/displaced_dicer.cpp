@@ -39,6 +39,8 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
         view_.projector = frame.projector;
         if (displacement_.any()) view_.displacement = &displacement_;
         view_.maxGridEdge = std::max(1, settings.maxGridEdge);
+        // The same displacement-aware splitting as Reyes' (paper 001), so both engines see one surface.
+        view_.displacementSplit = settings.displacementSplit;
         view_.cull = false;
         view_.cullX0 = view_.cullY0 = -1e30f, view_.cullX1 = view_.cullY1 = 1e30f;
     }
