@@ -124,6 +124,70 @@ TEST(Displacement, ConstantOffsetOfAPlaneIsTheOffsetPlane) {
     }
 }
 
+// A known height field: a plane z = 0 (s along x, t along y) displaced by bumpy with h(s, t) = 0.5 + 0.5
+// sin(2 pi s) (a 256 x 256 texture, periodic like the lookups) is the surface z = c Km h(s) (c = +-1, the
+// side of the patch's normal, read from the rendered P). Its analytic normal is (-c Km dh/dx, 0, 1) up to
+// its sign, dh/dx = (pi / 2) cos(2 pi s); the shading normals of both engines (the N AOV, facing the viewer)
+// match it within 2 degrees wherever the pixel's footprint lies inside the plane.
+TEST(Displacement, HeightFieldNormalsMatchTheAnalyticOnes) {
+    const int n = 256;
+    std::vector<float> px(size_t(n) * n);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            px[size_t(j) * n + i] = 0.5f + 0.5f * float(std::sin(2 * 3.14159265358979 * (i + 0.5) / n));
+    const std::string tex = writeGrey("sine256.exr", n, px);
+    const float Km = 0.1f;
+    const int res = 64;
+    Loaded l = load(orthoRib(res,
+                             "Displacement \"bumpy\" \"Km\" " + std::to_string(Km) + " \"texturename\" \"" +
+                                 tex + "\"\nPatch \"bilinear\" \"P\" [-1 -1 0  1 -1 0  -1 1 0  1 1 0]",
+                             1.2f));
+    const Projector pr(l.scene.camera);
+    for (const char* engine : {"reyes", "rt"}) {
+        SCOPED_TRACE(engine);
+        RenderSettings rs;
+        rs.engine = engine;
+        rs.threads = 2;
+        rs.output.channels = kChannelNormal | kChannelPosition;
+        const Image img = render(l.scene, rs).image;
+        const ImagePlane *N = img.plane("N"), *P = img.plane("P");
+        ASSERT_NE(N, nullptr);
+        ASSERT_NE(P, nullptr);
+        auto at = [&](const ImagePlane* plane, int x, int y) {
+            const size_t i = img.index(x, y) * 3;
+            return Vec3{plane->values[i], plane->values[i + 1], plane->values[i + 2]};
+        };
+        auto pixelOf = [&](float wx, float wy) {  // world (x, y) -> pixel
+            return std::pair<int, int>{int(pr.ox + pr.sx * wx), int(pr.oy + pr.sy * wy)};
+        };
+        // c: where h is largest (s = 1/4, x = -1/2) against where it is smallest (s = 3/4, x = 1/2).
+        const auto [xa, ya] = pixelOf(-0.5f, 0.f);
+        const auto [xb, yb] = pixelOf(0.5f, 0.f);
+        const float dz = at(P, xa, ya).z - at(P, xb, yb).z;
+        ASSERT_NEAR(std::fabs(dz), Km, 0.1f * Km) << "the relief of the height field";
+        const float c = dz > 0 ? 1.f : -1.f;
+        int compared = 0;
+        double worst = 0;
+        for (int y = 0; y < res; ++y)
+            for (int x = 0; x < res; ++x) {
+                const float wx = (x + 0.5f - pr.ox) / pr.sx, wy = (y + 0.5f - pr.oy) / pr.sy;
+                if (std::fabs(wx) > 0.9f || std::fabs(wy) > 0.9f) continue;
+                const float s = (wx + 1) / 2;
+                const float dhdx = float(3.14159265358979 / 2 * std::cos(2 * 3.14159265358979 * s));
+                // Camera space is world space moved along z; facing the viewer (at -z) means n.z < 0.
+                Vec3 want = normalize(Vec3{-c * Km * dhdx, 0, 1});
+                if (want.z > 0) want = -want;
+                const Vec3 got = normalize(at(N, x, y));
+                const double deg =
+                    std::acos(std::clamp(double(dot(got, want)), -1.0, 1.0)) * 180 / 3.14159265358979;
+                worst = std::max(worst, deg);
+                ++compared;
+            }
+        EXPECT_GT(compared, 2000);
+        EXPECT_LT(worst, 2.0) << "largest angle to the analytic normal, degrees";
+    }
+}
+
 // The same on a strongly curved bicubic (a dome, like a patch of a sphere): every displaced point lies at
 // distance d from the undisplaced surface (closest-point distance, an independent check of the exact normal),
 // within the dicing tolerance; two such patches sharing an edge move its points identically.

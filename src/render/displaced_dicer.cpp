@@ -42,6 +42,11 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
         // The same displacement-aware splitting as Reyes' (paper 001), so both engines see one surface.
         view_.displacementSplit = settings.displacementSplit;
         view_.cull = false;
+        // Shared displaced edges between patches of different ShadingRate: measured alike by both (split.h).
+        sides_.resize(scene.attributes.size());
+        for (size_t i = 0; i < sides_.size(); ++i)
+            sides_[i] = std::sqrt(std::max(scene.attributes[i].shadingRate, 1e-4f));
+        view_.patchSide = sides_.data();
         view_.cullX0 = view_.cullY0 = -1e30f, view_.cullX1 = view_.cullY1 = 1e30f;
     }
     bool any() const { return displacement_.any(); }
@@ -90,6 +95,7 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
     std::shared_ptr<const Textures> textures_;  // what displacement_ looks up (kept past the FrameSetup)
     std::vector<BezierPatch> patches_;
     std::vector<PlacedQuadric> quadrics_;
+    std::vector<float> sides_;  // per patch, sqrt of its shading rate (ReyesView::patchSide)
     std::vector<uint8_t> moving_;
     DisplacementFrame displacement_;
     ReyesView view_;

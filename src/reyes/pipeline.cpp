@@ -26,14 +26,20 @@ std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float
                                 const std::atomic<bool>* cancel, SplitStats& stats) {
     const size_t n = scene.patches.size();
     std::vector<std::vector<Piece>> perPatch(n);
+    // Every patch's micropolygon side, for the edges that displaced neighbours share (ReyesView::patchSide).
+    std::vector<float> sides(n);
+    for (size_t i = 0; i < n; ++i) {
+        const float rate = shadingRateOverride > 0.f ? shadingRateOverride : scene.attributes[i].shadingRate;
+        sides[i] = std::sqrt(std::max(rate, 1e-4f));
+    }
+    ReyesView withSides = view;
+    withSides.patchSide = sides.data();
     std::atomic<uint64_t> splits{0}, pieceCulls{0}, patchesCulled{0};
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
         // Ctrl-C during a long split: skip the remaining patches (the bucket loop then reports it).
         if (cancel && cancel->load(std::memory_order_relaxed)) return;
         SplitCounters c;
-        const float rate = shadingRateOverride > 0.f ? shadingRateOverride : scene.attributes[i].shadingRate;
-        const float side = std::sqrt(std::max(rate, 1e-4f));
-        splitSurface(view, scene.attributes[i], uint32_t(i), side, perPatch[i], c);
+        splitSurface(withSides, scene.attributes[i], uint32_t(i), sides[i], perPatch[i], c);
         splits += c.splits;
         pieceCulls += c.culled;
         if (c.patchCulled) ++patchesCulled;

@@ -61,7 +61,7 @@ void setEdgeLattice(PieceEdge& edge, float pixels, float side) {
 // Edge lengths of surfaces that are not displaced: as measured.
 struct NoDisplacement {
     template <class PointAt>
-    float operator()(float pixels, int, Vec2, Vec2, float, float, PointAt&&) const {
+    float operator()(float pixels, int, Vec2, Vec2, float, float, PointAt&&, float) const {
         return pixels;
     }
 };
@@ -78,7 +78,6 @@ struct NoDisplacement {
 struct EdgeDisplacement {
     const ReyesView& view;
     uint32_t patch;
-    float side;
 
     // Variation (camera-space units) of patch q's displacement over its (u,v) segment p0 -> p1, and the
     // segment's largest extent in texels.
@@ -109,7 +108,8 @@ struct EdgeDisplacement {
     // Segments part [s0, s1] of a source edge (patch boundary `boundary`, or -1: an interior line of this
     // patch) from (u,v) a (s = 0) to b needs; pointAt(s) its camera-space point.
     template <class PointAt>
-    int segments(int boundary, Vec2 a, Vec2 b, float s0, float s1, PointAt&& pointAt, int depth) const {
+    int segments(int boundary, Vec2 a, Vec2 b, float s0, float s1, PointAt&& pointAt, int depth,
+                 float side) const {
         const DisplacementFrame& f = *view.displacement;
         auto uvAt = [](Vec2 p, Vec2 q, float s) {
             return Vec2{p.x * (1.f - s) + q.x * s, p.y * (1.f - s) + q.y * s};
@@ -142,16 +142,18 @@ struct EdgeDisplacement {
             texels <= 1.f)
             return 1;
         const float sm = 0.5f * (s0 + s1);
-        return segments(boundary, a, b, s0, sm, pointAt, depth + 1) +
-               segments(boundary, a, b, sm, s1, pointAt, depth + 1);
+        return segments(boundary, a, b, s0, sm, pointAt, depth + 1, side) +
+               segments(boundary, a, b, sm, s1, pointAt, depth + 1, side);
     }
 
     // The length of part [s0, s1] (pixels, as measured) raised to the segments its displacement needs.
+    // `edgeSide`: the micropolygon side the edge is measured with (PieceEdge::side, else the patch's).
     template <class PointAt>
-    float operator()(float pixels, int boundary, Vec2 a, Vec2 b, float s0, float s1,
-                     PointAt&& pointAt) const {
+    float operator()(float pixels, int boundary, Vec2 a, Vec2 b, float s0, float s1, PointAt&& pointAt,
+                     float edgeSide) const {
         if (pixels < kCollapsedPixels) return pixels;  // one point: nothing to split
-        const int n = segments(boundary, a, b, s0, s1, pointAt, 0);
+        const float side = edgeSide;
+        const int n = segments(boundary, a, b, s0, s1, pointAt, 0, side);
         // ceil(0.999 n) = n: the lattice then has at least n segments.
         return n > 1 ? std::max(pixels, 0.999f * float(n) * side) : pixels;
     }
@@ -165,7 +167,9 @@ PieceEdge boundaryEdge(const ReyesView& view, const BezierPatch& patch, int e, f
     canonicalBoundary(patch, e, cp, edge.a, edge.b);
     edge.boundary = int8_t(e);
     auto curveAt = [&](float t) { return evalCurve(cp, t); };
-    setEdgeLattice(edge, displaced(measureLength(view, curveAt), e, edge.a, edge.b, 0.f, 1.f, curveAt), side);
+    edge.side = side;
+    setEdgeLattice(edge, displaced(measureLength(view, curveAt), e, edge.a, edge.b, 0.f, 1.f, curveAt, side),
+                   side);
     // The piece walks every edge in increasing parameter; reversed if the canonical start is the far end.
     static const Vec2 kStart[4] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
     edge.reversed = !(edge.a.x == kStart[e].x && edge.a.y == kStart[e].y);
@@ -217,7 +221,8 @@ PieceEdge interiorEdge(const ReyesView& view, PointAt&& surfaceAt, Vec2 p, Vec2 
     auto lineAt = [&](float t) {
         return surfaceAt(Vec2{edge.a.x * (1.f - t) + edge.b.x * t, edge.a.y * (1.f - t) + edge.b.y * t});
     };
-    setEdgeLattice(edge, displaced(measureLength(view, lineAt), -1, edge.a, edge.b, 0.f, 1.f, lineAt), side);
+    setEdgeLattice(edge, displaced(measureLength(view, lineAt), -1, edge.a, edge.b, 0.f, 1.f, lineAt, side),
+                   side);
     return edge;
 }
 
@@ -228,7 +233,7 @@ void measureInterior(const ReyesView& view, PointAt&& surfaceAt, Piece& piece, f
     auto lerp = [](Vec2 p, Vec2 q, float t) { return Vec2{p.x + (q.x - p.x) * t, p.y + (q.y - p.y) * t}; };
     auto isoline = [&](Vec2 p, Vec2 q) {
         auto lineAt = [&](float t) { return surfaceAt(lerp(p, q, t)); };
-        return rateFromLength(displaced(measureLength(view, lineAt), -1, p, q, 0.f, 1.f, lineAt), side);
+        return rateFromLength(displaced(measureLength(view, lineAt), -1, p, q, 0.f, 1.f, lineAt, side), side);
     };
     const Vec2* c = piece.uv;
     piece.interiorU = isoline(lerp(c[0], c[3], 0.5f), lerp(c[1], c[2], 0.5f));
@@ -420,8 +425,9 @@ Vec2 cutPieceEdge(const ReyesView& view, const PieceEdge& e, bool roundUp, float
         const float sm = 0.5f * (e.s0 + e.s1);
         PieceEdge lower = e, upper = e;
         lower.s1 = sm, upper.s0 = sm;
-        setEdgeLattice(lower, measure(e, e.s0, sm), side);
-        setEdgeLattice(upper, measure(e, sm, e.s1), side);
+        const float edgeSide = e.side > 0.f ? e.side : side;
+        setEdgeLattice(lower, measure(e, e.s0, sm), edgeSide);
+        setEdgeLattice(upper, measure(e, sm, e.s1), edgeSide);
         first = e.reversed ? upper : lower;
         second = e.reversed ? lower : upper;
         return latticeUV(lower, lower.total);  // = param sm exactly
@@ -510,7 +516,17 @@ void splitPatchWith(const ReyesView& view, uint32_t patchIndex, float side, cons
                     std::vector<Piece>& out, SplitCounters& counters) {
     const BezierPatch& patch = view.patches[patchIndex];
     Piece root = rootPiece(patchIndex);
-    for (int e = 0; e < 4; ++e) root.edge[e] = boundaryEdge(view, patch, e, side, displaced);
+    for (int e = 0; e < 4; ++e) {
+        // A boundary shared with another displaced patch: the smaller of the two sides, which both compute
+        // alike (unless a motion or focus factor coarsened this patch's side: then its own).
+        float edgeSide = side;
+        const DisplacementFrame* f = view.displacement;
+        if (f && f->any() && view.patchSide && side == view.patchSide[patchIndex]) {
+            const int32_t nb = f->edgeNeighbour[size_t(patchIndex) * 4 + size_t(e)];
+            if (nb >= 0) edgeSide = std::min(side, view.patchSide[uint32_t(nb) / 4]);
+        }
+        root.edge[e] = boundaryEdge(view, patch, e, edgeSide, displaced);
+    }
     const PieceHull hull{view, &patch, nullptr};
     auto surfaceAt = [&](Vec2 uv) { return evalPatch(patch, uv.x, uv.y); };
     // Part of an edge's source curve: a boundary through its canonical control points (as boundaryEdge
@@ -522,11 +538,11 @@ void splitPatchWith(const ReyesView& view, uint32_t patchIndex, float side, cons
             canonicalBoundary(patch, e.boundary, cp, a, b);
             auto curveAt = [&](float s) { return evalCurve(cp, s); };
             return displaced(measureLength(view, [&](float t) { return curveAt(s0 + (s1 - s0) * t); }),
-                             e.boundary, e.a, e.b, s0, s1, curveAt);
+                             e.boundary, e.a, e.b, s0, s1, curveAt, e.side > 0.f ? e.side : side);
         }
         auto lineAt = [&](float s) { return surfaceAt(lerpUV(e, s)); };
         return displaced(measureLength(view, [&](float t) { return lineAt(s0 + (s1 - s0) * t); }), -1, e.a,
-                         e.b, s0, s1, lineAt);
+                         e.b, s0, s1, lineAt, side);
     };
     splitPieces(view, root, hull, surfaceAt, measure, displaced, side, out, counters);
 }
@@ -546,7 +562,7 @@ void splitPatch(const ReyesView& view, uint32_t patchIndex, float side, std::vec
     const bool displaced =
         view.displacementSplit > 0.f && view.displacement && view.displacement->displaced(patchIndex);
     if (displaced) {
-        splitPatchWith(view, patchIndex, side, EdgeDisplacement{view, patchIndex, side}, out, counters);
+        splitPatchWith(view, patchIndex, side, EdgeDisplacement{view, patchIndex}, out, counters);
     } else {
         splitPatchWith(view, patchIndex, side, NoDisplacement{}, out, counters);
     }

@@ -36,6 +36,10 @@ struct PieceEdge {
     // The source edge is one point (a sphere's pole, a collapsed patch edge): its lattice is fine
     // (kCollapsedLattice) so that splits can cut it anywhere, and it asks for no micropolygons.
     bool collapsed = false;
+    // The micropolygon side its lattice is measured with (0: the piece's). A boundary shared by displaced
+    // patches with different ShadingRate takes the smaller of their sides, so that both patches make the
+    // same lattice (their texture may jump across the edge: different vertices would open a crack).
+    float side = 0.f;
     int segments() const { return k1 - k0; }
     // Micropolygons this edge asks of a grid or a split.
     int rate() const { return collapsed ? std::min(segments(), 1) : segments(); }
@@ -101,6 +105,10 @@ struct ReyesView {
     float lengthNearZ = 0.f;
     // Displaced patches (nullptr or empty: none): bounds grow by each patch's radius, dicing displaces.
     const DisplacementFrame* displacement = nullptr;
+    // Per patch, the micropolygon side its split is given (splitPatches: sqrt of its shading rate); with
+    // it, an edge shared by two displaced patches is measured with the smaller of their sides (PieceEdge::
+    // side). nullptr: each patch measures with its own.
+    const float* patchSide = nullptr;
     // Displacement-aware splitting (paper 001 sec. 3.1; 0: off): a displaced patch's edge gets at least
     // the segments that keep each one's projected displacement variation, max - min of Km * texture read
     // from the texture's min/max mip map, within this many micropolygon sides (split.cpp,
