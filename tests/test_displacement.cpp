@@ -19,6 +19,7 @@
 #include "rib_test_util.h"
 #include "shading/minmax_mip.h"
 #include "shading/texture.h"
+#include "test_util.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -80,31 +81,6 @@ std::string orthoRib(int res, const std::string& body, float window = 1.f) {
     return "Format " + std::to_string(res) + " " + std::to_string(res) +
            " 1\nProjection \"orthographic\"\nScreenWindow -" + w + " " + w + " -" + w + " " + w +
            "\nWorldBegin\nLightSource \"ambientlight\" 1\nTranslate 0 0 5\n" + body + "\nWorldEnd\n";
-}
-
-// The distance from P to the patch's surface: fine sampling, then Newton-free refinement by bisection of
-// the parameter step around the nearest sample.
-float distanceToPatch(const BezierPatch& p, Vec3 P) {
-    float best = 1e30f, bu = 0, bv = 0;
-    const int n = 64;
-    for (int j = 0; j <= n; ++j)
-        for (int i = 0; i <= n; ++i) {
-            const float d = length(evalPatch(p, float(i) / n, float(j) / n) - P);
-            if (d < best) best = d, bu = float(i) / n, bv = float(j) / n;
-        }
-    for (float h = 1.f / n; h > 1e-7f; h *= 0.5f) {
-        bool moved = true;
-        while (moved) {
-            moved = false;
-            for (int k = 0; k < 4; ++k) {
-                const float u = std::clamp(bu + (k == 0 ? h : k == 1 ? -h : 0.f), 0.f, 1.f);
-                const float v = std::clamp(bv + (k == 2 ? h : k == 3 ? -h : 0.f), 0.f, 1.f);
-                const float d = length(evalPatch(p, u, v) - P);
-                if (d < best) best = d, bu = u, bv = v, moved = true;
-            }
-        }
-    }
-    return best;
 }
 
 }  // namespace

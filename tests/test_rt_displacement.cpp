@@ -48,30 +48,6 @@ Loaded offsetScene(const std::string& patch, float km, int res = 200) {
                 std::to_string(km) + "\n" + patch + "\nWorldEnd\n");
 }
 
-// The distance from P to a patch's surface: fine sampling, then a shrinking pattern search.
-float distanceToPatch(const BezierPatch& p, Vec3 P) {
-    float best = 1e30f, bu = 0, bv = 0;
-    const int n = 48;
-    for (int j = 0; j <= n; ++j)
-        for (int i = 0; i <= n; ++i) {
-            const float d = length(evalPatch(p, float(i) / n, float(j) / n) - P);
-            if (d < best) best = d, bu = float(i) / n, bv = float(j) / n;
-        }
-    for (float h = 1.f / n; h > 1e-7f; h *= 0.5f) {
-        bool moved = true;
-        while (moved) {
-            moved = false;
-            for (int k = 0; k < 4; ++k) {
-                const float u = std::clamp(bu + (k == 0 ? h : k == 1 ? -h : 0.f), 0.f, 1.f);
-                const float v = std::clamp(bv + (k == 2 ? h : k == 3 ? -h : 0.f), 0.f, 1.f);
-                const float d = length(evalPatch(p, u, v) - P);
-                if (d < best) best = d, bu = u, bv = v, moved = true;
-            }
-        }
-    }
-    return best;
-}
-
 Vec3 orientedPatchNormal(const RtAccel& acc, uint32_t patch, float u, float v) {
     const SurfacePoint sp = evalPatchDeriv(acc.patches[patch], u, v);
     const Vec3 n = normalize(cross(sp.dpdu, sp.dpdv));

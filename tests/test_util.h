@@ -1,5 +1,6 @@
 // Helpers shared by the tests: small hand-made scenes with known answers.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <string>
@@ -103,6 +104,30 @@ inline std::vector<BezierPatch> octantSphere(float radius, Vec3 centre) {
             out.push_back(p);
         }
     return out;
+}
+
+// The distance from P to a patch's surface: fine sampling, then a shrinking pattern search around the
+// nearest sample (an independent closest-point check of offset surfaces).
+inline float distanceToPatch(const BezierPatch& p, Vec3 P, int n = 64) {
+    float best = 1e30f, bu = 0, bv = 0;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i) {
+            const float d = length(evalPatch(p, float(i) / n, float(j) / n) - P);
+            if (d < best) best = d, bu = float(i) / n, bv = float(j) / n;
+        }
+    for (float h = 1.f / n; h > 1e-7f; h *= 0.5f) {
+        bool moved = true;
+        while (moved) {
+            moved = false;
+            for (int k = 0; k < 4; ++k) {
+                const float u = std::clamp(bu + (k == 0 ? h : k == 1 ? -h : 0.f), 0.f, 1.f);
+                const float v = std::clamp(bv + (k == 2 ? h : k == 3 ? -h : 0.f), 0.f, 1.f);
+                const float d = length(evalPatch(p, u, v) - P);
+                if (d < best) best = d, bu = u, bv = v, moved = true;
+            }
+        }
+    }
+    return best;
 }
 
 inline float alphaAt(const Image& img, int x, int y) {

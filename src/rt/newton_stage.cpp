@@ -195,18 +195,20 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                         continue;
                     }
                 }
+                // Hits of the closed-form and triangle paths (quadrics, displaced micro-grids): not the
+                // origin's own surface too close, not the back face of a one-sided surface.
+                auto accept = [&](const PatchHit& ph) {
+                    if (c.patch == s.opt.ignorePatch && ph.t < s.opt.ignoreT) return false;
+                    if (s.opt.respectSides && !acc.twoSided[c.patch] &&
+                        dot(orientedGeometricNormal(acc, c.patch, ph), s.ray.d) > 0.f)
+                        return false;  // back face of a one-sided surface
+                    return true;
+                };
                 if (const PlacedQuadric* pq = acc.quadric(c.patch)) {
                     // A quadric: the analytic hits inside this leaf's (u,v) rectangle, no Newton start.
                     float u0, u1, v0, v1;
                     subpatchLeafRect(acc.forest.depth, c.leaf, u0, u1, v0, v1);
                     PatchHit h;
-                    auto accept = [&](const PatchHit& ph) {
-                        if (c.patch == s.opt.ignorePatch && ph.t < s.opt.ignoreT) return false;
-                        if (s.opt.respectSides && !acc.twoSided[c.patch] &&
-                            dot(orientedGeometricNormal(acc, c.patch, ph), s.ray.d) > 0.f)
-                            return false;  // back face of a one-sided surface
-                        return true;
-                    };
                     if (intersectQuadricSurface(*pq, s.ray, u0, u1, v0, v1, accept, h)) {
                         s.bestPatch = c.patch, s.bestU = h.u, s.bestV = h.v;
                         s.bestHasDeriv = true;
@@ -224,13 +226,6 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     if (s.meshPatch != c.patch) s.mesh = acc.displaced.mesh(c.patch), s.meshPatch = c.patch;
                     const DisplacedMesh* dm = s.mesh.get();
                     PatchHit h;
-                    auto accept = [&](const PatchHit& ph) {
-                        if (c.patch == s.opt.ignorePatch && ph.t < s.opt.ignoreT) return false;
-                        if (s.opt.respectSides && !acc.twoSided[c.patch] &&
-                            dot(orientedGeometricNormal(acc, c.patch, ph), s.ray.d) > 0.f)
-                            return false;  // back face of a one-sided surface
-                        return true;
-                    };
                     if (intersectDisplacedLeaf(*dm, c.leaf, s.ray, makeWatertightRay(s.ray), accept, h)) {
                         s.bestPatch = c.patch, s.bestU = h.u, s.bestV = h.v;
                         s.bestHasDeriv = true;
