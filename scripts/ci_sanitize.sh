@@ -41,12 +41,14 @@ heavy+='|ReyesWatertight\.TeapotBodyHasNoPinholesAtManyRates|RtRayBinning\.SameC
 # Sweeps over several scenes or many renders (12-23 s each here) whose code paths the smaller tests of the
 # same features run: displaced teapot and Big Guy pinholes at two rate settings (RtDisplacement's offset,
 # wavefront and lazy-grid tests stay), the displaced teapot cross-engine image, convert-and-render, the
-# hand-written subdivision converter on Big Guy, an analytic shadow-map study, progressive passes' statistics;
-# and the nvcc compile check (nothing of it runs under the sanitizers).
+# hand-written subdivision converter on Big Guy, an analytic shadow-map study, progressive passes' statistics,
+# a third framing test and the gloss image sweep (the GlossKernel and GlossFurnace tests stay); and the nvcc
+# compile check (nothing of it runs under the sanitizers).
 heavy+='|RtDisplacement\.(DisplacedTeapotAndCatmullClarkHaveNoPinholes|DisplacedTeapotAgreesWithReyes)'
 heavy+='|Cli\.ConvertWritesARibThatRendersTheSameImage|Subdivision\.BigGuyObjIsWatertightAndClose'
 heavy+='|ShadowMaps\.ASpheresShadowOnTheFloorMatchesTheAnalyticProjectionWithinTheFilterWidth'
 heavy+='|Progressive\.PassesAverageToAnEstimateAsGoodAsOneRenderOfAllTheirSamples|DeviceKernelsCompileWithNvcc'
+heavy+='|DefaultFraming\.LongModelIsNeverCutOff|GlossImages\.SpreadZeroIsTheMirrorAndTheReflectedEdgeWidensWithTheSpread'
 heavy+=')( |$)'
 exclude=(-E "$heavy")
 [ "${TESSERA_ASAN_ALL:-0}" = 1 ] && exclude=()
