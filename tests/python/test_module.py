@@ -209,6 +209,19 @@ def test_adaptive_sampling_reports_its_refined_subpixels():
         tessera.render(rib=PLANES, adaptive=True)
     with pytest.raises(ValueError, match="give no spp"):
         tessera.render(rib=PLANES, engine="rt", adaptive=True, spp=4)
+    # The paper's other thresholds by name, the focus list and the interpolation, as on the command line:
+    # the seam is between objects 0 and 1 with the same colour, so only the object id can refine it, and
+    # only where the focus names one of them.
+    ids = dict(engine="rt", adaptive=True, adaptive_thresholds="col=1,poid=0,psn=1,psc=1,pte=1")
+    assert tessera.render(rib=PLANES, adaptive_focus=[1], **ids).refined.any()
+    assert not tessera.render(rib=PLANES, adaptive_focus="7", **ids).refined.any()
+    r = tessera.render(rib=PLANES, adaptive_interpolate=True, **ids)
+    assert r.stats["adaptive"]["interpolate"] is True
+    assert r.stats["adaptive"]["thresholds"]["object_id"] == 0
+    with pytest.raises(ValueError, match="not NAME=VALUE"):
+        tessera.render(rib=PLANES, engine="rt", adaptive=True, adaptive_thresholds="zz=1")
+    with pytest.raises(ValueError, match="need adaptive sampling"):
+        tessera.render(rib=PLANES, engine="rt", adaptive_interpolate=True)
 
 
 def test_frames_of_a_multi_frame_rib(tmp_path):
