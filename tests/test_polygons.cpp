@@ -38,6 +38,14 @@ std::string polygonRib(const std::vector<P2>& poly, double z) {
     return rib.str();
 }
 
+// `s` rendered by `engine` ("reyes" or "rt") on 2 threads.
+Image renderIn(const Scene& s, const char* engine) {
+    RenderSettings rs;
+    rs.engine = engine;
+    rs.threads = 2;
+    return render(s, rs).image;
+}
+
 // Renders `s` in both engines and checks every pixel whose 3x3 neighbourhood the exact coverage `truth`
 // says is fully inside (outside) is covered (empty), and the covered area against the exact one.
 void expectCoverage(const Scene& s, const std::vector<double>& truth, int res, double areaTolerance = 0.01) {
@@ -45,10 +53,7 @@ void expectCoverage(const Scene& s, const std::vector<double>& truth, int res, d
     for (double t : truth) truthSum += t;
     for (const char* engine : {"reyes", "rt"}) {
         SCOPED_TRACE(engine);
-        RenderSettings rs;
-        rs.engine = engine;
-        rs.threads = 2;
-        const Image img = render(s, rs).image;
+        const Image img = renderIn(s, engine);
         double sum = 0;
         int wrong = 0;
         for (int y = 0; y < res; ++y)
@@ -120,10 +125,7 @@ TEST(Polygons, PointsPolygonsMeshHasNoPinholes) {
                       .scene;
         for (const char* engine : {"reyes", "rt"}) {
             SCOPED_TRACE(std::string(engine) + " rate " + std::to_string(rate));
-            RenderSettings rs;
-            rs.engine = engine;
-            rs.threads = 2;
-            const Image img = render(s, rs).image;
+            const Image img = renderIn(s, engine);
             EXPECT_EQ(countPinholes(img), 0);
             int uncovered = 0;
             for (int y = 8; y < 88; ++y)  // [-1.25, 1.25]^2: inside the mesh's outline
@@ -193,12 +195,8 @@ TEST(Polygons, PointsGeneralPolygonsMeshHasNoPinholesAndHolesStayOpen) {
                (in(x, y, 0.4, 0.4, 1.3, 1.3) && !in(x, y, 0.7, 0.7, 1.0, 1.0));
     });
     expectCoverage(l.scene, truth, res);
-    for (const char* engine : {"reyes", "rt"}) {
-        RenderSettings rs;
-        rs.engine = engine;
-        rs.threads = 2;
-        EXPECT_EQ(countPinholes(render(l.scene, rs).image), 0) << engine;
-    }
+    for (const char* engine : {"reyes", "rt"})
+        EXPECT_EQ(countPinholes(renderIn(l.scene, engine)), 0) << engine;
 }
 
 // Polygons of one mesh that share an edge (walked in opposite directions) get bit-identical boundary
@@ -310,10 +308,7 @@ TEST(Polygons, UniformAndConstantColours) {
         EXPECT_TRUE(l.warnings.empty()) << l.warnings.front();
         for (const char* engine : {"reyes", "rt"}) {
             SCOPED_TRACE(engine);
-            RenderSettings rs;
-            rs.engine = engine;
-            rs.threads = 2;
-            const Image img = render(l.scene, rs).image;
+            const Image img = renderIn(l.scene, engine);
             for (int k = 0; k < 3; ++k) {
                 EXPECT_NEAR(img.pixel(8, 16)[k], (&c.left.x)[k], 1e-3);
                 EXPECT_NEAR(img.pixel(24, 16)[k], (&c.right.x)[k], 1e-3);
@@ -374,10 +369,7 @@ TEST(Polygons, VertexColoursInterpolateLinearly) {
             EXPECT_TRUE(l.warnings.empty());
             for (const char* engine : {"reyes", "rt"}) {
                 SCOPED_TRACE(engine);
-                RenderSettings rs;
-                rs.engine = engine;
-                rs.threads = 2;
-                const Image img = render(l.scene, rs).image;
+                const Image img = renderIn(l.scene, engine);
                 int checked = 0;
                 double worst = 0;
                 for (int y = 1; y + 1 < res; ++y)
@@ -444,16 +436,13 @@ TEST(Polygons, VertexNormalsShadeTheSmoothSurface) {
     };
     for (const char* engine : {"reyes", "rt"}) {
         SCOPED_TRACE(engine);
-        RenderSettings rs;
-        rs.engine = engine;
-        rs.threads = 2;
         double err[2] = {0, 0};
         int n = 0;
         Image smooth, faceted;
         for (int withN = 0; withN < 2; ++withN) {
             Loaded l = scene(withN, false);
             EXPECT_TRUE(l.warnings.empty());
-            (withN ? smooth : faceted) = render(l.scene, rs).image;
+            (withN ? smooth : faceted) = renderIn(l.scene, engine);
         }
         const Loaded ref = scene(true, false);
         for (int y = 0; y < res; ++y)
@@ -472,7 +461,7 @@ TEST(Polygons, VertexNormalsShadeTheSmoothSurface) {
         EXPECT_LT(err[1], 0.3 * err[0]) << "with N " << err[1] << ", without " << err[0];
 
         // Shadows on: where the true sphere faces the light, nothing changes.
-        const Image shadowed = render(scene(true, true).scene, rs).image;
+        const Image shadowed = renderIn(scene(true, true).scene, engine);
         int darkened = 0, lit = 0;
         for (int y = 0; y < res; ++y)
             for (int x = 0; x < res; ++x) {

@@ -127,7 +127,8 @@ TESSERA_HD bool subpixelActive(const AdaptiveThresholds& t, const PresampleAttri
 // interpolation of the presample colours at the subpixel's centre, a quarter pixel from the pixel centre
 // towards its corner: 9/16 of the pixel, 3/16 of the horizontal and of the vertical neighbour towards the
 // corner and 1/16 of the diagonal one (n[0..2] in subpixelNeighbour's order).
-TESSERA_HD Color interpolatedSubpixel(Color c, Color horizontal, Color diagonal, Color vertical) {
+template <class T>
+TESSERA_HD T interpolatedSubpixel(T c, T horizontal, T diagonal, T vertical) {
     return c * (9.f / 16.f) + (horizontal + vertical) * (3.f / 16.f) + diagonal * (1.f / 16.f);
 }
 

@@ -68,9 +68,6 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     const bool vertexColoured = vv && vv->hasCs;
     if (textured) Ct.resize(count);
     if (vertexColoured) Cv.resize(count);
-    const bool userNormals =
-        vv && vv->hasN && !(view.displacement && view.displacement->displaced(piece.patch));
-    if (userNormals) shadowP.resize(count);
     Ps.resize(count);
     Ns.resize(count);
     Is.resize(count);
@@ -82,6 +79,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     // Displacement (reyes/displace.h): each vertex moves along the exact normal; a moving patch keeps the
     // offsets of shutter open at its other knots.
     const bool displaced = view.displacement && view.displacement->displaced(piece.patch);
+    // User normals shade undisplaced surfaces only (displacement moves along the exact normal).
+    const bool userNormals = vv && vv->hasN && !displaced;
+    if (userNormals) shadowP.resize(count);
     thread_local std::vector<Vec3> offsets;
     if (displaced && moves) offsets.resize(count);
     thread_local std::vector<Vec2> UVs;

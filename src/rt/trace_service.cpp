@@ -118,38 +118,30 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
             PatchHit h;
             const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(patch) : nullptr;
             auto accept = [&](const PatchHit& ph) { return acceptHit(acc, r, opt, patch, ph); };
+            // The nearest hit so far: the ray ends there (true: an any-hit query is answered).
+            auto record = [&](const PatchHit& found) {
+                out.hit = true;
+                out.patch = patch;
+                out.h = found;
+                r.tmax = found.t;
+                return opt.anyHit;
+            };
             if (const PlacedQuadric* pq = acc.quadric(patch)) {
-                if (intersectQuadricSurface(*pq, r, 0.f, 1.f, 0.f, 1.f, accept, h)) {
-                    out.hit = true;
-                    out.patch = patch;
-                    out.h = h;
-                    r.tmax = h.t;
-                    if (opt.anyHit) return true;
-                }
+                if (intersectQuadricSurface(*pq, r, 0.f, 1.f, 0.f, 1.f, accept, h) && record(h)) return true;
                 continue;
             }
             if (const std::shared_ptr<const DisplacedMesh> dm = acc.displaced.mesh(patch)) {  // leaf by leaf
                 const WatertightRay wr = makeWatertightRay(r);
                 for (uint32_t leaf = 0; leaf < uint32_t(dm->leafRoot.size()); ++leaf)
-                    if (intersectDisplacedLeaf(*dm, leaf, r, wr, accept, h)) {
-                        out.hit = true;
-                        out.patch = patch;
-                        out.h = h;
-                        r.tmax = h.t;
-                        if (opt.anyHit) return true;
-                    }
+                    if (intersectDisplacedLeaf(*dm, leaf, r, wr, accept, h) && record(h)) return true;
                 continue;
             }
             BezierPatch moved;
             if (acc.moving(patch)) patchAtTime(acc, patch, opt.time, moved);  // at the ray's time
             if (intersectPatch<float>(acc.moving(patch) ? moved : acc.patches[patch], acc.forest, patch, r, h,
-                                      back, nullptr, nullptr, accept)) {
-                out.hit = true;
-                out.patch = patch;
-                out.h = h;
-                r.tmax = h.t;
-                if (opt.anyHit) return true;
-            }
+                                      back, nullptr, nullptr, accept) &&
+                record(h))
+                return true;
         }
     }
     return out.hit;
