@@ -144,7 +144,8 @@ SurfacePoints hitBatch(const Frame& fr, Workspace& ws) {
         ws.hitN[k] = hitNormal(acc, rh.patch, rh.h, rays.time[r]);
         // User normals: shadow and secondary rays leave from the smooth surface they describe (scene.h,
         // terminatorSafePoint); the P AOV keeps the hit.
-        if (const PatchVertexValues* vv = acc.vertexValuesAt(rh.patch); vv && vv->hasN)
+        if (const PatchVertexValues* vv = acc.vertexValuesAt(rh.patch);
+            vv && vv->hasN && !acc.displaced.displaced(rh.patch))
             ws.hitP[k] = terminatorSafePoint(*vv, acc.patches[rh.patch], rh.h.u, rh.h.v, rh.h.p,
                                              orientedGeometricNormal(acc, rh.patch, rh.h));
         ws.hitI[k] = normalize(rays.d[r]);
@@ -899,9 +900,7 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
                                              Color{pre.r[nbr[1]], pre.g[nbr[1]], pre.b[nbr[1]]},
                                              Color{pre.r[nbr[2]], pre.g[nbr[2]], pre.b[nbr[2]]});
                     const float alpha =
-                        interpolatedSubpixel(Color{pre.a[c], 0, 0}, Color{pre.a[nbr[0]], 0, 0},
-                                             Color{pre.a[nbr[1]], 0, 0}, Color{pre.a[nbr[2]], 0, 0})
-                            .x;
+                        interpolatedSubpixel(pre.a[c], pre.a[nbr[0]], pre.a[nbr[1]], pre.a[nbr[2]]);
                     rgba[0] += rgb.x / 4.f, rgba[1] += rgb.y / 4.f, rgba[2] += rgb.z / 4.f,
                         rgba[3] += alpha / 4.f;
                 }
