@@ -22,8 +22,10 @@ AdaptiveThresholds allThresholds(float t) {
 }
 
 RenderResult renderAdaptive(const Scene& s, const AdaptiveThresholds& t, int threads = 2,
-                            std::vector<uint32_t> focus = {}, bool interpolate = false) {
+                            std::vector<uint32_t> focus = {}, bool interpolate = false,
+                            Integrator integrator = Integrator::Direct) {
     RenderSettings rs;
+    rs.integrator = integrator;
     rs.engine = "rt";
     rs.threads = threads;
     rs.adaptive.enabled = true;
@@ -98,6 +100,29 @@ TEST(Adaptive, AnObjectIdEdgeRefinesExactlyAlongTheEdge) {
     t = AdaptiveThresholds{};
     t.objectId = 1.f;
     EXPECT_EQ(refinedCount(renderAdaptive(s, t)), 0u);
+}
+
+TEST(Adaptive, AnEdgeInsideTheOutermostPixelsIsRefined) {
+    // A square covering the view but for the last 0.3 of the rightmost pixel column (its edge at raster
+    // x = 23.7, right of that column's centre): every presample sees the square, and only the neighbour
+    // beyond the image's edge shows the background. The presample reaches that far, so the right subpixels
+    // of column 23 (and nothing else) refine and its alpha falls towards the true coverage 0.7.
+    const int w = 24, h = 16;
+    Scene s = cameraSpaceScene(w, h, 40.f);
+    // RI: the field of view spans the shorter side of the frame.
+    const float pixel = 2.f * 10.f * std::tan(20.f * float(M_PI) / 180.f) / float(h);  // at z = 10
+    const float edge = (23.7f - 12.f) * pixel;                                         // raster 12: x = 0
+    addPatch(s, planarPatch({-50, -50, 10}, {50 + edge, 0, 0}, {0, 100, 0}));
+    const RenderResult r = renderAdaptive(s, AdaptiveThresholds{});
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x)
+            for (int q = 0; q < 4; ++q)
+                EXPECT_EQ(refined(r, x, y, q), x == w - 1 && (q & 1)) << x << "," << y << " q" << q;
+        EXPECT_FLOAT_EQ(r.image.pixel(w - 2, y)[3], 1.f);
+        // Left half from the centre (0.5), right half from 8 jittered samples of coverage 0.4 each.
+        EXPECT_GT(r.image.pixel(w - 1, y)[3], 0.55f) << y;
+        EXPECT_LT(r.image.pixel(w - 1, y)[3], 0.85f) << y;
+    }
 }
 
 TEST(Adaptive, AShadowBoundaryRefinesEvenWhereTheColoursMatch) {
@@ -232,20 +257,23 @@ TEST(Adaptive, SecondaryHitAttributesRefineAnEdgeSeenOnlyInAMirror) {
     addPatch(s, planarPatch({-200, -200, -5}, {200, 0, 0}, {0, 400, 0}), 1);
     addPatch(s, planarPatch({0, -200, -5}, {200, 0, 0}, {0, 400, 0}), 2);
     s.attributes[1].material = s.attributes[2].material = 1;
-    AdaptiveThresholds t = allThresholds(1.f);
-    t.secondaryObjectId = 0.f;
-    const RenderResult r = renderAdaptive(s, t);
-    for (int x : {5, 18}) EXPECT_NEAR(r.image.pixel(x, 8)[0], 0.5f, 1e-5f);  // the squares' reflections
-    for (int y = 0; y < 16; ++y)
-        for (int x = 0; x < 24; ++x)
-            for (int q = 0; q < 4; ++q) {
-                const bool expect = (x == 11 && (q & 1)) || (x == 12 && !(q & 1));
-                EXPECT_EQ(refined(r, x, y, q), expect) << x << "," << y << " q" << q;
-            }
-    // The primary object id sees one object: nothing refines.
-    t = allThresholds(1.f);
-    t.objectId = 0.f;
-    EXPECT_EQ(refinedCount(renderAdaptive(s, t)), 0u);
+    // The path tracer records the hit of its mirror (delta) bounce as the direct integrator does.
+    for (Integrator integrator : {Integrator::Direct, Integrator::Path}) {
+        AdaptiveThresholds t = allThresholds(1.f);
+        t.secondaryObjectId = 0.f;
+        const RenderResult r = renderAdaptive(s, t, 2, {}, false, integrator);
+        for (int x : {5, 18}) EXPECT_NEAR(r.image.pixel(x, 8)[0], 0.5f, 1e-5f);  // the squares' reflections
+        for (int y = 0; y < 16; ++y)
+            for (int x = 0; x < 24; ++x)
+                for (int q = 0; q < 4; ++q) {
+                    const bool expect = (x == 11 && (q & 1)) || (x == 12 && !(q & 1));
+                    EXPECT_EQ(refined(r, x, y, q), expect) << x << "," << y << " q" << q;
+                }
+        // The primary object id sees one object: nothing refines.
+        t = allThresholds(1.f);
+        t.objectId = 0.f;
+        EXPECT_EQ(refinedCount(renderAdaptive(s, t, 2, {}, false, integrator)), 0u);
+    }
 }
 
 // The "fairy focused" mode (paper 004, L209): three strips of objects 0, 1, 2 with the same colour meet at
@@ -280,8 +308,9 @@ TEST(Adaptive, TheFocusListLimitsTheAttributesToItsObjects) {
 }
 
 // The paper's bilinear option (L215): with nothing refined, each subpixel is the presample interpolated at
-// its centre, so the pixel is the presample filtered by (1, 6, 1) / 8 in x and in y (edges clamped); with
-// everything refined it changes nothing.
+// its centre, so the pixel is the presample filtered by (1, 6, 1) / 8 in x and in y; with everything
+// refined it changes nothing. Checked inside the image: on its edge the filter reads the presample beyond
+// it, which the 32x24 render does not have.
 TEST(Adaptive, InterpolatedInactiveSubpixelsFilterThePresample) {
     const Scene s = twoSpheres(32, 24);
     const RenderResult pre = renderAdaptive(s, allThresholds(10.f));
@@ -290,14 +319,13 @@ TEST(Adaptive, InterpolatedInactiveSubpixelsFilterThePresample) {
     const int w = 32, h = 24;
     const float k[3] = {1.f / 8, 6.f / 8, 1.f / 8};
     double maxDiff = 0, changed = 0;
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
+    for (int y = 1; y < h - 1; ++y)
+        for (int x = 1; x < w - 1; ++x)
             for (int c = 0; c < 4; ++c) {
                 double want = 0;
                 for (int j = -1; j <= 1; ++j)
                     for (int i = -1; i <= 1; ++i)
-                        want += k[i + 1] * k[j + 1] *
-                                pre.image.pixel(std::clamp(x + i, 0, w - 1), std::clamp(y + j, 0, h - 1))[c];
+                        want += k[i + 1] * k[j + 1] * pre.image.pixel(x + i, y + j)[c];
                 maxDiff = std::max(maxDiff, std::fabs(interp.image.pixel(x, y)[c] - want));
                 changed = std::max(changed,
                                    double(std::fabs(interp.image.pixel(x, y)[c] - pre.image.pixel(x, y)[c])));

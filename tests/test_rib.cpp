@@ -195,10 +195,26 @@ TEST(RibAttributes, ShadingRateSidesAndObjectIds) {
     EXPECT_EQ(l.scene.attributes[1].shadingRate, 0.25f);
     EXPECT_TRUE(l.scene.attributes[0].twoSided);
     EXPECT_FALSE(l.scene.attributes[1].twoSided);
-    // One object id per primitive request.
+    // One object id per attribute block: both squares are in the world block.
     EXPECT_EQ(l.scene.attributes[0].object, 0u);
-    EXPECT_EQ(l.scene.attributes[1].object, 1u);
-    EXPECT_EQ(l.scene.objectCount, 2u);
+    EXPECT_EQ(l.scene.attributes[1].object, 0u);
+    EXPECT_EQ(l.scene.objectCount, 1u);
+}
+
+TEST(RibAttributes, ObjectIdsFollowAttributeBlocksAndIdentifierNames) {
+    // Object ids (paper 004's attribute test and the id AOV need one per object, not per patch): each
+    // attribute block is one object, its nested blocks others; a name given by Attribute "identifier"
+    // joins every primitive declared under it, wherever it is; the block after a named one is new again.
+    const std::string square = kUnitSquare;
+    Loaded l = load(scene("", square + square + "AttributeBegin\n" + square + "AttributeBegin\n" + square +
+                                  "AttributeEnd\n" + square + "AttributeEnd\n" +
+                                  "AttributeBegin\nAttribute \"identifier\" \"name\" \"lid\"\n" + square +
+                                  "AttributeEnd\nAttributeBegin\nAttribute \"identifier\" \"name\" \"lid\"\n" +
+                                  square + "AttributeEnd\n" + square));
+    std::vector<uint32_t> ids;
+    for (const PatchAttributes& a : l.scene.attributes) ids.push_back(a.object);
+    EXPECT_EQ(ids, (std::vector<uint32_t>{0, 0, 1, 2, 1, 3, 3, 0, 0}));  // scene() adds a last square
+    EXPECT_EQ(l.scene.objectCount, 4u);
 }
 
 TEST(RibAttributes, OrientationAndHandedness) {
@@ -431,9 +447,9 @@ TEST(RibGeometry, PeriodicTestFromAqsis) {
     // Two bilinear meshes (4 periodic x 2 and 2 x 4 periodic: 4 patches each) and two bicubic
     // Bezier meshes (12 periodic x 4 and 4 x 12 periodic, step 3: 4 patches each).
     EXPECT_EQ(s.patches.size(), 16u);
-    EXPECT_EQ(s.objectCount, 4u);
+    EXPECT_EQ(s.objectCount, 3u);  // the bilinear meshes in the world block, each bicubic in its own block
     int bicubicPatches = 0;
-    for (const PatchAttributes& a : s.attributes) bicubicPatches += a.object >= 2;
+    for (const PatchAttributes& a : s.attributes) bicubicPatches += a.object >= 1;
     EXPECT_EQ(bicubicPatches, 8);
     EXPECT_EQ(s.camera.width, 200);
     EXPECT_EQ(s.lights.size(), 3u);
@@ -780,15 +796,16 @@ TEST(RibShaderTables, ShaderNamesAndRowsAreUnique) {
 }
 
 // The shipped scenes parse to the same content as before the reader was split into files
-// (counts from scenes/README.md; lights and materials as loaded by the original reader).
+// (counts from scenes/README.md; lights and materials as loaded by the original reader; objects one per
+// attribute block).
 TEST(RibFiles, ShippedScenesKeepTheirContent) {
     struct Expect {
         const char* name;
         size_t patches, objects, lights, materials;
     };
     const Expect cases[] = {
-        {"teapot", 32, 32, 4, 1},  {"killeroo", 11532, 89, 3, 1},    {"killeroo2", 23064, 178, 3, 2},
-        {"bigguy", 23200, 1, 3, 1}, {"bigguy_box", 3575, 3575, 2, 4},  // bigguy: OpenSubdiv, level 2
+        {"teapot", 32, 7, 4, 1},   {"killeroo", 11532, 1, 3, 1},  {"killeroo2", 23064, 2, 3, 2},
+        {"bigguy", 23200, 1, 3, 1}, {"bigguy_box", 3575, 6, 2, 4},  // bigguy: OpenSubdiv, level 2
     };
     for (const Expect& c : cases) {
         SCOPED_TRACE(c.name);

@@ -292,3 +292,41 @@ TEST(Textures, BothEnginesAgreeOnTheTexturedTeapot) {
     EXPECT_GE(d.psnrColor, 35.0);
     EXPECT_LT(d.alphaMismatch, 0.01);
 }
+
+// --adaptive's texture path (paper 004, tau_pte): a checker of 0.5 and 0.55 has a contrast (0.048) below the
+// colour threshold's (1.02 x 0.3 in green), so only the texture flag can refine it: with tau_pte = 0.02 the
+// subpixels along the checker's edges refine, with tau_pte = 1 nothing does (the paper's rule takes a
+// disagreeing attribute's threshold even where it is laxer than tau_col).
+TEST(Textures, AdaptiveTextureThresholdRefinesATexturedSurfaceAlongItsEdges) {
+    const int squares = 8, texels = 8, n = squares * texels;
+    std::vector<float> px(size_t(n) * n);
+    for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) px[size_t(y) * n + x] = ((x / texels) + (y / texels)) & 1 ? 0.55f : 0.5f;
+    writeImage("low_contrast_checker.exr", n, n, 1, px);
+    const int res = 32;  // the view [-1,1]^2 of the checker over [-2,2]^2: a square every 8 pixels
+    Loaded l = load(viewRib(
+        res, "Surface \"paintedplastic\" \"texturename\" \"low_contrast_checker.exr\" " + kPaint, kSquare));
+    auto refine = [&](float texture) {
+        RenderSettings rs;
+        rs.engine = "rt";
+        rs.threads = 2;
+        rs.adaptive.enabled = true;
+        rs.adaptive.thresholds.texture = texture;
+        return render(l.scene, rs);
+    };
+    const RenderResult lax = refine(1.f);
+    EXPECT_EQ(std::count(lax.refinedSubpixels.begin(), lax.refinedSubpixels.end(), 1), 0);
+    const RenderResult strict = refine(0.02f);
+    int refined = 0, nearEdge = 0;
+    for (int y = 0; y < 2 * res; ++y)
+        for (int x = 0; x < 2 * res; ++x) {
+            if (!strict.refinedSubpixels[size_t(y) * 2 * res + x]) continue;
+            ++refined;
+            // Subpixel (x, y) covers raster [x/2, x/2 + 1/2); its test reaches the next pixel centre.
+            auto nearLine = [](int sub) { return std::abs(((sub + 1) / 2 + 4) % 8 - 4) <= 1; };
+            nearEdge += nearLine(x) || nearLine(y);
+        }
+    EXPECT_GT(refined, 2 * 3 * 2 * res);  // two subpixel columns along each of the 3 inner edges, each way
+    EXPECT_EQ(nearEdge, refined);
+    EXPECT_EQ(strict.stats["adaptive"]["active_subpixels"].get<int>(), refined);
+}

@@ -45,6 +45,10 @@ struct HitAttributes {
 struct PresampleAttributes : HitAttributes {
     Color color;  // premultiplied, the colour reference
     HitAttributes secondary;
+    // Motion blur and depth of field (our extension; the paper has neither): the presample hit a surface
+    // that moves over the shutter or lies out of focus (circle of confusion over half a pixel). Its pixel
+    // integrates over time or the lens, of which the one presample is a single point: not a reference.
+    uint8_t blurred = 0;
 };
 
 // Which attributes disagree between a pixel's hit `c` and its neighbours' n[0..2].
@@ -117,6 +121,9 @@ TESSERA_HD float subpixelThreshold(const AdaptiveThresholds& t, const PresampleA
 // of the three neighbours ("at least one colour disparity" marks it active).
 TESSERA_HD bool subpixelActive(const AdaptiveThresholds& t, const PresampleAttributes& c,
                                const PresampleAttributes* const n[3], bool attributesCount = true) {
+    // A blurred presample on either side: the colours compared would be single points of integrals, so
+    // the subpixel refines, unless the colour threshold is at its maximum (nothing refines).
+    if ((c.blurred || n[0]->blurred || n[1]->blurred || n[2]->blurred) && t.color < 1.f) return true;
     const float tau = subpixelThreshold(t, c, n, attributesCount);
     for (int k = 0; k < 3; ++k)
         if (contrastExceeds(c.color, n[k]->color, tau)) return true;

@@ -1301,13 +1301,14 @@ bool isQuadricRequest(const std::string& name) {
 
 namespace {
 
-// The primitive's attributes from the graphics state (one object id per call); the orientation rule of
-// RI spec 4.2.4 at shutter open.
+// The primitive's attributes from the graphics state (the object id of its attribute block or name); the
+// orientation rule of RI spec 4.2.4 at shutter open.
 PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& ctm) {
     Scene& scene = c.scene;
     PatchAttributes a;
     a.material = materialIndex(scene, c.state.attributes().surface);
-    a.object = scene.objectCount++;
+    a.object = c.state.attributes().object.value_or(scene.objectCount);
+    scene.objectCount = std::max(scene.objectCount, a.object + 1);
     a.shadingRate = c.state.attributes().shadingRate;
     a.twoSided = c.state.attributes().twoSided;
     a.motionFactor = c.state.attributes().motionFactor;

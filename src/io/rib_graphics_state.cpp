@@ -127,6 +127,20 @@ const char* blockName(Block b) {
 
 void GraphicsState::begin(Block b, const std::string& file, int line) {
     stack_.push_back({b, file, line, transform_, attributes_});
+    if (b != Block::Transform) attributes_.object.reset();  // a new attribute block: a new object
+}
+
+uint32_t GraphicsState::primitiveObject(uint32_t& objectCount) {
+    if (!attributes_.object) {
+        if (attributes_.identifier.empty())
+            attributes_.object = objectCount++;
+        else {
+            auto [it, added] = namedObjects_.try_emplace(attributes_.identifier, objectCount);
+            objectCount += added;
+            attributes_.object = it->second;
+        }
+    }
+    return *attributes_.object;
 }
 
 void GraphicsState::end(Block b, const Request& r, const Diagnostics& diag) {

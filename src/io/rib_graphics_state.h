@@ -72,6 +72,10 @@ struct Attributes {
     bool rightHanded = false;  // Orientation "rh"/"inside"; the initial "outside" counts as "lh"
     Basis uBasis = bezierBasis(), vBasis = bezierBasis();
     std::string identifier;
+    // The object id of the primitives declared here (scene.h PatchAttributes::object): one per attribute
+    // block (each AttributeBegin, each ObjectInstance), or per Attribute "identifier" "name", whose
+    // primitives share an id wherever they are; assigned by the block's first primitive.
+    std::optional<uint32_t> object;
     // GeometricApproximation "motionfactor" / "focusfactor" (PRMan, Aqsis; scene.h PatchAttributes).
     float motionFactor = 0.f, focusFactor = 0.f;
     // Attribute "light" "shadows" "on"|"off" (BMRT, Aqsis): whether the lights declared from here on cast
@@ -125,11 +129,16 @@ class GraphicsState {
     // The innermost open block, nullptr if none (for the end-of-file error).
     const Saved* innermostBlock() const { return stack_.empty() ? nullptr : &stack_.back(); }
 
+    // The object id of a primitive declared now (Attributes::object), assigned from `objectCount` (the
+    // scene's counter) on the block's first primitive.
+    uint32_t primitiveObject(uint32_t& objectCount);
+
     // CoordinateSystem / CoordSysTransform (RI spec 3.2, sec. 4.3.2): named copies of the CTM.
     void defineCoordinateSystem(const std::string& name) { coordinateSystems_[name] = transform_; }
     const Transform* coordinateSystem(const std::string& name) const;
 
   private:
+    std::map<std::string, uint32_t> namedObjects_;  // Attribute "identifier" "name" -> object id
     Attributes attributes_;
     Transform transform_;
     std::vector<Saved> stack_;

@@ -688,8 +688,10 @@ class RibReader {
         auto ps = parseParams(r, 1, decls_, diag_);
         if (name == "identifier") {
             for (const Param& p : ps) {
-                if (p.name == "name")
+                if (p.name == "name") {
                     state_.attributes().identifier = paramString(r, p, diag_);
+                    state_.attributes().object.reset();  // the primitives that follow: that name's object
+                }
                 else
                     warnIgnoredParam(p, "Attribute \"identifier\"", diag_);
             }
@@ -1117,7 +1119,10 @@ class RibReader {
     }
 
     // ---- geometry (RI spec 3.2, sec. 5; rib_geometry.h) ----------------------------------------
-    PrimitiveContext primitiveContext() { return {scene_, state_, decls_, diag_}; }
+    PrimitiveContext primitiveContext() {
+        state_.primitiveObject(scene_.objectCount);
+        return {scene_, state_, decls_, diag_};
+    }
     void primitive(const Request& r, const Arguments&) {
         std::vector<PrimitiveShape> shape;
         shape.push_back(readPrimitiveShape(r, primitiveContext()));

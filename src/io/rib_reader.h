@@ -12,7 +12,8 @@ namespace tessera {
 
 // Reads the RIB file at `path` (plain or gzipped) into `scene`. Throws InputError for malformed input
 // or a file without patches; unsupported requests and parameters are reported once each to `warn`.
-// Object ids: each Patch / PatchMesh request is one object (scene.objectCount counts them).
+// Object ids (PatchAttributes::object): one per attribute block (AttributeBegin ... AttributeEnd, each
+// ObjectInstance), or per Attribute "identifier" "name" (scene.objectCount counts them).
 void readRib(const std::string& path, Scene& scene, const WarningSink& warn);
 
 // Multi-frame RIB (RI spec 3.2, sec. 4.1.1): as readRib, loading the frame opened by the

@@ -54,6 +54,7 @@ struct Workspace {
     // pixel) and, per sample of the 16-sample tile, whether it is traced.
     SampleTile presample;
     std::vector<uint8_t> activeSubpixels, tracedSamples;
+    std::vector<PresampleAttributes> presampleAttributes;
     uint64_t adaptivePixels = 0, adaptiveActive = 0;
     // Area lights (direct integrator): per hit its samples [hit * areaSlots + slot], each slot's shadow
     // ray (kNone: none) and whether it was blocked.
@@ -320,6 +321,19 @@ void addGlossRays(const Frame& fr, const SurfacePoints& pts, size_t k, uint32_t 
     }
 }
 
+// --adaptive's presample: the attributes of a sample's first secondary hit (paper 004, L141: the hit of
+// the reflection or refraction ray of the camera ray's surface), once per sample; the ray of hit k must be
+// a traced lobe (a mirror or glass bounce of the direct integrator, a delta bounce of the path tracer).
+void recordSecondaryHit(const Frame& fr, const SurfacePoints& pts, size_t k, Workspace& ws) {
+    const uint32_t r = ws.hitRay[k], s = ws.rays.owner[r];
+    if (ws.secondary.empty() || ws.rays.depth[r] != 1 || ws.secondary[s].object != kNoObject) return;
+    if (ws.rays.kind[r] != kReflection && ws.rays.kind[r] != kRefraction) return;
+    const uint32_t patch = ws.hits[r].patch;
+    ws.secondary[s] = HitAttributes{fr.scene.attributes[patch].object, faceForward(pts.N[k], pts.I[k]),
+                                    uint8_t(std::min<int>(ws.shadowedLights[k], 255)),
+                                    uint8_t(hitTextured(fr, pts, k, patch))};
+}
+
 // Accumulates the hits' radiance into the tile in ray order (deterministic), writes the film's attributes
 // of camera-ray hits and the next generation (the traced lobes) to `ws.next`.
 void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
@@ -338,14 +352,9 @@ void accumulate(const Frame& fr, const SurfacePoints& pts, Workspace& ws) {
                                    hitTextured(fr, pts, k, rh.patch));
                 setSurfaceAovs(fr, pts, k, s, tile, ws);
             }
-        } else if (!ws.secondary.empty() && rays.depth[r] == 1 &&
-                   (rays.kind[r] == kReflection || rays.kind[r] == kRefraction) &&
-                   ws.secondary[s].object == kNoObject) {
-            // --adaptive's presample: the first secondary hit's attributes (paper 004, L141); of a glass
-            // surface's two rays the one traced first (reflection), the same in every run.
-            ws.secondary[s] = HitAttributes{fr.scene.attributes[rh.patch].object, Nf,
-                                            uint8_t(std::min<int>(ws.shadowedLights[k], 255)),
-                                            uint8_t(hitTextured(fr, pts, k, rh.patch))};
+        } else {
+            // Of a glass surface's two rays the one traced first (reflection), the same in every run.
+            recordSecondaryHit(fr, pts, k, ws);
         }
         const Color w = rays.weight[r];
         const Color c = w * ws.radiance[k];
@@ -536,7 +545,12 @@ void shadePathGeneration(const Frame& fr, Workspace& ws) {
     if (tile.channels)
         for (size_t k = 0; k < pts.count; ++k) {
             const uint32_t r = ws.hitRay[k];
-            if (rays.kind[r] != kPrimary) continue;
+            if (rays.kind[r] != kPrimary) {
+                // A sampled diffuse or glossy bounce is noise, not the paper's secondary hit: only a delta
+                // (mirror, glass) bounce's hit is recorded; of glass, the lobe the path sampled.
+                if (ws.rayPdf[r] == 0.f) recordSecondaryHit(fr, pts, k, ws);
+                continue;
+            }
             const RayHit& rh = ws.hits[r];
             tile.setAttributes(rays.owner[r], fr.scene.attributes[rh.patch].object,
                                faceForward(pts.N[k], pts.I[k]), ws.shadowedLights[k],
@@ -778,17 +792,23 @@ void traceTile(const Frame& fr, const RenderSettings& settings, const Projector&
 constexpr uint32_t kAdaptiveChannels =
     kChannelObjectId | kChannelNormal | kChannelShadowCount | kChannelHasTexture;
 
+// --adaptive in a blurred frame: the samples' times and lens points, and which objects move.
+struct AdaptiveBlur {
+    const BlurPattern* pattern = nullptr;  // nullptr: a sharp frame
+    std::vector<uint8_t> movingObjects;    // by object id
+};
+
 // --adaptive, one tile (paper 004, sec. 4): `presamplePixels` is `target` grown by the neighbours the test
 // reads (and the filter radius where attribute planes are filtered from the presample).
 //  1. Presample: one ray through each pixel centre (the paper's start), colour and attributes.
-//  2. Subpixel test (film/adaptive.h) for the target's 4 subpixels per pixel; neighbours outside the image
-//     are clamped to the edge (the paper reads its maps as clamped textures).
+//  2. Subpixel test (film/adaptive.h) for the target's 4 subpixels per pixel; the neighbours of a pixel on
+//     the image's edge are presampled one pixel beyond it (the paper clamps, reading its maps as textures).
 //  3. Extra samples: a 4x4-stratified tile of the shared sampler over the target; an active subpixel owns
 //     the 2x2 strata in its quadrant (4 stratified jittered rays), only those samples are traced, as one
 //     compacted ray list per generation through the trace service.
 //  4. pixel = centre x (4 - n) / 4 + sum of the extra samples / 16 (colour and alpha).
 void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const Projector& proj,
-                        const SceneRect& sr, const PixelFilter& filter, Rect whole, Rect target,
+                        const SceneRect& sr, const PixelFilter& filter, const AdaptiveBlur& blur, Rect target,
                         Rect presamplePixels, Workspace& ws, RenderResult& result) {
     // 1. Presample at the pixel centres (sample index 0 of each pixel for the other dimensions).
     ws.tile.reset(presamplePixels, 1, 1, settings.seed, std::numeric_limits<float>::infinity(),
@@ -798,6 +818,7 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
             ws.tile.sx[size_t(i)] = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
             ws.tile.sy[size_t(i)] = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
         }
+    ws.tile.setBlur(blur.pattern);  // a blurred frame: each presample at its own time and lens point
     ws.secondary.assign(ws.tile.sampleCount(), HitAttributes{kNoObject, Vec3{}, 0, 0});
     traceTile(fr, settings, proj, sr, ws);
     std::vector<HitAttributes> secondary;
@@ -809,20 +830,25 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
     }
     std::swap(ws.tile, ws.presample);
 
-    // 2. The subpixel test.
+    // 2. The subpixel test, over the presample's attributes gathered once per pixel.
     const SampleTile& pre = ws.presample;
     const int pw = presamplePixels.width();
-    auto attributes = [&](int px, int py) {
-        px = std::clamp(px, whole.x0, whole.x1 - 1), py = std::clamp(py, whole.y0, whole.y1 - 1);
-        const size_t i = size_t(py - presamplePixels.y0) * size_t(pw) + size_t(px - presamplePixels.x0);
-        PresampleAttributes a;
+    ws.presampleAttributes.resize(pre.sampleCount());
+    for (size_t i = 0; i < pre.sampleCount(); ++i) {
+        PresampleAttributes& a = ws.presampleAttributes[i];
         a.color = Color{pre.r[i], pre.g[i], pre.b[i]};
         a.object = pre.objectId[i];
         a.normal = Vec3{pre.normalX[i], pre.normalY[i], pre.normalZ[i]};
         a.shadowCount = pre.shadowCount[i];
         a.textured = pre.hasTexture[i];
         a.secondary = secondary[i];
-        return a;
+        a.blurred = blur.pattern && pre.a[i] > 0.f &&
+                    ((a.object < blur.movingObjects.size() && blur.movingObjects[a.object]) ||
+                     proj.circleOfConfusion(pre.z[i]) > 0.5f);
+    }
+    auto attributes = [&](int px, int py) -> const PresampleAttributes& {
+        return ws.presampleAttributes[size_t(py - presamplePixels.y0) * size_t(pw) +
+                                      size_t(px - presamplePixels.x0)];
     };
     const std::vector<uint32_t>& focus = settings.adaptive.focusObjects;
     auto focused = [&](const PresampleAttributes& a) {
@@ -836,22 +862,25 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
     uint64_t active = 0;
     for (int py = target.y0; py < target.y1; ++py)
         for (int px = target.x0; px < target.x1; ++px) {
-            const PresampleAttributes c = attributes(px, py);
+            const PresampleAttributes& c = attributes(px, py);
             for (int q = 0; q < 4; ++q) {
-                PresampleAttributes nb[3];
                 const PresampleAttributes* n[3];
                 for (int k = 0; k < 3; ++k) {
                     int dx, dy;
                     subpixelNeighbour(q, k, dx, dy);
-                    nb[k] = attributes(px + dx, py + dy);
-                    n[k] = &nb[k];
+                    n[k] = &attributes(px + dx, py + dy);
                 }
                 const bool count =
-                    focus.empty() || focused(c) || focused(nb[0]) || focused(nb[1]) || focused(nb[2]);
-                const bool on = subpixelActive(thr, c, n, count);
-                ws.activeSubpixels[(size_t(py - target.y0) * tw + (px - target.x0)) * 4 + size_t(q)] = on;
-                active += on;
+                    focus.empty() || focused(c) || focused(*n[0]) || focused(*n[1]) || focused(*n[2]);
+                ws.activeSubpixels[(size_t(py - target.y0) * tw + (px - target.x0)) * 4 + size_t(q)] =
+                    subpixelActive(thr, c, n, count);
             }
+            uint8_t* quads = &ws.activeSubpixels[(size_t(py - target.y0) * tw + (px - target.x0)) * 4];
+            // A blurred frame refines the whole pixel or none of it: the centre presample is one instant
+            // and lens point, no estimate of the quadrants it would stand in for.
+            if (blur.pattern && (quads[0] | quads[1] | quads[2] | quads[3]))
+                quads[0] = quads[1] = quads[2] = quads[3] = 1;
+            active += quads[0] + quads[1] + quads[2] + quads[3];
         }
     ws.adaptivePixels += uint64_t(tw) * uint64_t(th);
     ws.adaptiveActive += active;
@@ -860,6 +889,7 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
     // ((s % 4) / 2, (s / 4) / 2) of its pixel.
     ws.tile.reset(target, 4, 4, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler, 0,
                   {});
+    ws.tile.setBlur(blur.pattern);
     ws.tracedSamples.assign(ws.tile.sampleCount(), 0);
     for (size_t p = 0; p < size_t(tw) * th; ++p)
         for (int slot = 0; slot < 16; ++slot) {
@@ -882,7 +912,6 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
             if (settings.adaptive.interpolate && n < 4) {
                 // Inactive subpixels: the presample interpolated at their centres (colour and alpha).
                 auto at = [&](int x, int y) {
-                    x = std::clamp(x, whole.x0, whole.x1 - 1), y = std::clamp(y, whole.y0, whole.y1 - 1);
                     return size_t(y - presamplePixels.y0) * size_t(pw) + size_t(x - presamplePixels.x0);
                 };
                 for (float& v : rgba) v = 0.f;
@@ -998,9 +1027,27 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     tbb::enumerable_thread_specific<Workspace> workspaces(std::cref(acc), traceOpt);
     if (adaptive) {
         result.refinedSubpixels.assign(size_t(result.image.width) * result.image.height * 4, 0);
-        if (frame.blurred())
-            result.warnings.push_back(
-                "--adaptive renders without motion blur and depth of field (at shutter open, pinhole)");
+    }
+    // --adaptive in a blurred frame: every sample (presample and extra) takes its time and lens point from
+    // a bounding-box pattern of 16 samples per pixel, whatever the frame's scheme: the extra samples are
+    // the 4x4 tile's, and the presample's are per pixel too. A blurred region's presamples differ between
+    // neighbours (each saw another instant or lens point), so the colour test refines it.
+    // The objects with a moving patch (camera motion moves them all) mark their presamples blurred.
+    const BlurPattern adaptivePattern =
+        adaptive && frame.blurred()
+            ? makeBlurPattern(BlurSampling::BoundingBox, frame.blur.motion, frame.blur.lens, 16, cam.width,
+                              settings.blur.tileSize, settings.blur.permutations, settings.seed)
+            : BlurPattern{};
+    AdaptiveBlur adaptiveBlur;
+    if (adaptivePattern.active()) {
+        adaptiveBlur.pattern = &adaptivePattern;
+        for (size_t i = 0; i < scene.patches.size(); ++i)
+            if (frame.motion.moving(i)) {
+                const uint32_t object = scene.attributes[i].object;
+                if (object >= adaptiveBlur.movingObjects.size())
+                    adaptiveBlur.movingObjects.resize(object + 1, 0);
+                adaptiveBlur.movingObjects[object] = 1;
+            }
     }
     // The presample's margin: the neighbours of the subpixel test, and the filter's reach where the
     // attribute planes are reconstructed from it.
@@ -1008,8 +1055,15 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     auto renderTile = [&](int b, Workspace& ws) {
         const Rect target = layout.target(b);
         if (adaptive) {
-            renderAdaptiveTile(fr, settings, proj, sr, frame.filter, Rect{0, 0, cam.width, cam.height},
-                               target, layout.samples(b, margin, margin, cam.width, cam.height), ws, result);
+            // The presample reaches one pixel beyond the image, so that a subpixel on the image's edge is
+            // compared with what lies across it (clamping to the edge, as the paper's texture maps do,
+            // left every edge within the outermost pixels unrefined: bigguy_box 41.3 dB -> 54.5 dB).
+            const Rect t = layout.target(b);
+            const Rect presample{std::max(-1, t.x0 - margin), std::max(-1, t.y0 - margin),
+                                 std::min(cam.width + 1, t.x1 + margin),
+                                 std::min(cam.height + 1, t.y1 + margin)};
+            renderAdaptiveTile(fr, settings, proj, sr, frame.filter, adaptiveBlur, target, presample, ws,
+                               result);
             return;
         }
         frame.resetTile(ws.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
