@@ -103,6 +103,9 @@ struct SubdivResult {
     std::vector<uint32_t> patchBaseFace;
     std::vector<int> patchSubFace;
     std::vector<std::array<Vec2, 4>> patchUV;
+    // OpenSubdiv converter with smooth texture coordinates (io/subdiv_osd.h SubdivSmoothTexCoords): the
+    // limit s, t at each patch's four corners, in (0,0) (1,0) (1,1) (0,1) order; empty otherwise.
+    std::vector<std::array<Vec2, 4>> patchST;
     int level = 0;  // refinement steps applied
     size_t exactCount = 0, approxCount = 0;
     std::vector<std::string> warnings;  // e.g. semi-sharp creases treated as sharp

@@ -55,7 +55,9 @@ class PrimitiveReader {
           decls_(c.decls),
           diag_(c.diag),
           camera_(c.scene.camera),
-          subdivLevel_(c.subdivLevel) {
+          subdivLevel_(c.subdivLevel),
+          rasterWidth_(c.rasterWidth),
+          rasterHeight_(c.rasterHeight) {
         shape_.request = r.name;
         shape_.line = r.line;
     }
@@ -1060,14 +1062,75 @@ class PrimitiveReader {
         }
     }
 
+    // The s, t of a SubdivisionMesh ("st" or "s" and "t"): RI "varying" (one per vertex) and "facevarying"
+    // (one per face corner) are interpolated linearly over each control face (RI spec 3.2, sec. 5.6);
+    // "vertex" (one per vertex) and PRMan's "facevertex" (one per face corner) smoothly, refined with the
+    // surface (subdiv_osd.h SubdivSmoothTexCoords). nullopt: none given.
+    struct SubdivTexCoordValues {
+        std::vector<Vec2> values;
+        bool perCorner = false, smooth = false;
+    };
+    std::optional<SubdivTexCoordValues> readSubdivTexCoords(const Request& r, const std::vector<Param>& ps,
+                                                            size_t npoints, size_t ncorners) {
+        const std::string what = "SubdivisionMesh";
+        const Param *st = nullptr, *s = nullptr, *t = nullptr;
+        std::string cls;
+        for (const Param& p : ps) {
+            if (!isTexCoordParam(p.name)) continue;
+            const std::string c = p.decl ? p.decl->cls : "";
+            const int per = p.name == "st" ? 2 : 1;
+            if ((c != "varying" && c != "facevarying" && c != "vertex" && c != "facevertex") || !p.decl ||
+                p.decl->type != "float" || p.decl->arraySize != per || !p.value->numeric()) {
+                diag_.warnOnce("stclass:" + p.name, p.line,
+                               what + ": \"" + p.name +
+                                   "\" is used as a varying, facevarying, vertex or facevertex \"float" +
+                                   (per == 2 ? "[2]" : "") + "\" only; ignored");
+                continue;
+            }
+            const size_t n = c == "facevarying" || c == "facevertex" ? ncorners : npoints;
+            if (p.value->nums.size() != n * size_t(per))
+                diag_.fail(p.line, what + ": \"" + p.name + "\" needs " + std::to_string(n * size_t(per)) +
+                                       " numbers (" + std::to_string(n) + " " + c + " values), got " +
+                                       std::to_string(p.value->nums.size()));
+            if ((st || s || t) && c != cls)
+                diag_.fail(p.line, what + ": \"s\" and \"t\" must have the same storage class");
+            cls = c;
+            (p.name == "st" ? st : p.name == "s" ? s : t) = &p;
+        }
+        if (!st && !s && !t) return std::nullopt;
+        if (st && (s || t))
+            diag_.warnOnce("stboth", r.line, what + ": both \"st\" and \"s\"/\"t\" given; \"st\" is used");
+        SubdivTexCoordValues out;
+        out.perCorner = cls == "facevarying" || cls == "facevertex";
+        out.smooth = cls == "vertex" || cls == "facevertex";
+        const size_t n = out.perCorner ? ncorners : npoints;
+        out.values.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            Vec2& v = out.values[i];
+            if (st)
+                v = {float(st->value->nums[2 * i]), float(st->value->nums[2 * i + 1])};
+            else
+                v = {s ? float(s->value->nums[i]) : 0.f, t ? float(t->value->nums[i]) : 0.f};
+            if (!std::isfinite(v.x) || !std::isfinite(v.y) || std::fabs(v.x) > 1e30f ||
+                std::fabs(v.y) > 1e30f)
+                diag_.fail(r.line, what + ": texture coordinates must be finite numbers");
+        }
+        return out;
+    }
+
     // Extent in raster pixels of the projection of points (object space, the CTM at shutter open), 0 if
-    // some point is at or behind the eye: what subdivLevelFor() chooses a level from.
+    // some point is at or behind the eye: what subdivLevelFor() chooses a level from. In the image that
+    // will be rendered: the caller's resolution where it overrides the Format (the projection of the
+    // whole frame; a crop window does not change it).
     float rasterSize(const std::vector<Vec3>& points) const {
         const Mat4 toCamera = camera_.cameraFromWorld * state_.transform().at(camera_.shutterOpen);
         Bounds3 b;
         for (const Vec3& p : points) b.extend(toCamera.point(p));
+        Camera rendered = camera_;
+        if (rasterWidth_ > 0 && rasterHeight_ > 0)
+            rendered.width = rasterWidth_, rendered.height = rasterHeight_;
         float x0, x1, y0, y1;
-        if (points.empty() || !Projector(camera_).rasterBounds(b, x0, x1, y0, y1)) return 0.f;
+        if (points.empty() || !Projector(rendered).rasterBounds(b, x0, x1, y0, y1)) return 0.f;
         const float size = std::max(x1 - x0, y1 - y0);
         return std::isfinite(size) ? size : 0.f;
     }
@@ -1183,12 +1246,8 @@ class PrimitiveReader {
         }
         auto pts = positions(r, ps, npoints, "SubdivisionMesh");
         if (!pts) return skip();
-        // s, t: "varying" (one per vertex) or "facevarying" (one per face corner); RenderMan interpolates
-        // both linearly over each face ("facevertex" and "vertex" would be smooth: not supported, warned).
-        bool stPerCorner = false;
-        for (const Param& p : ps)
-            if (isTexCoordParam(p.name) && p.decl) stPerCorner |= p.decl->cls == "facevarying";
-        const auto st = varyingTexCoords(r, ps, stPerCorner ? verts.size() : npoints, "SubdivisionMesh");
+        const auto st = readSubdivTexCoords(r, ps, npoints, verts.size());
+        SubdivSmoothTexCoords smoothST;
         mesh.points = std::move(*pts);
         mesh.faceSizes = std::move(nverts);
         mesh.faceVerts = std::move(verts);
@@ -1230,6 +1289,16 @@ class PrimitiveReader {
                                    "SubdivisionMesh: \"creasemethod\" needs the string \"normal\" or "
                                    "\"chaikin\", got \"" +
                                        method + "\"; the normal (uniform) rule is used");
+            } else if (t.name == "facevaryinginterpolateboundary") {
+                // PRMan: 0 linear, 1 sharp corners (the default), 2 smooth, 3 linear boundaries
+                // (FaceVaryingBoundary in subdiv_osd.h); only smooth ("facevertex") s, t use it.
+                const int mode = t.ints.empty() ? 1 : t.ints[0];
+                if (mode < 0 || mode > 3)
+                    diag_.fail(t.line,
+                               "SubdivisionMesh: \"facevaryinginterpolateboundary\" needs 0, 1, 2 or 3, "
+                               "got " +
+                                   std::to_string(mode));
+                smoothST.boundary = FaceVaryingBoundary(mode);
             } else if (t.name == "hole") {
                 for (int f : t.ints) {
                     if (f < 0 || size_t(f) >= mesh.faceSizes.size())
@@ -1247,13 +1316,27 @@ class PrimitiveReader {
             OsdSubdivOptions options;
             options.level = subdivLevel_;
             if (options.level < 0) options.rasterSize = rasterSize(mesh.points);
+            if (st && st->smooth) {
+                smoothST.perCorner = st->perCorner;
+                smoothST.values = st->values;
+                options.texCoords = &smoothST;
+            }
             res = subdivideOsd(mesh, options);
         } catch (const SubdivError& e) {
             diag_.fail(r.line, std::string("SubdivisionMesh: ") + e.what());
         }
         for (const std::string& w : res.warnings)
             diag_.warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
-        if (st) subdivTexCoords(mesh, *st, stPerCorner, res);
+        if (st && st->smooth) {
+            // The limit s, t at the patch corners, bilinear in between (PatchTexCoords holds 4 values).
+            for (const std::array<Vec2, 4>& c : res.patchST) {
+                PatchTexCoords tc;
+                tc.st[0] = c[0], tc.st[1] = c[1], tc.st[2] = c[3], tc.st[3] = c[2];
+                shape_.texCoords.push_back(tc);
+            }
+        } else if (st) {
+            subdivTexCoords(mesh, st->values, st->perCorner, res);
+        }
         shape_.subdivLevel = res.level;
         shape_.patches = std::move(res.patches);
     }
@@ -1264,6 +1347,7 @@ class PrimitiveReader {
     Diagnostics& diag_;
     const Camera& camera_;
     int subdivLevel_;
+    int rasterWidth_, rasterHeight_;
     PrimitiveShape shape_;
 };
 
