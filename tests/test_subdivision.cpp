@@ -1214,3 +1214,138 @@ TEST(SubdivisionRib, TexturedMeshRendersAlikeInBothEngines) {
     ASSERT_GT(n, 1000.0);
     EXPECT_GT(std::sqrt(std::max(0.0, sum2 / n - (sum / n) * (sum / n))), 0.05);
 }
+
+// ---- Cs and N on subdivision meshes ----------------------------------------------------------------
+
+namespace {
+
+Vec3 linearColor(Vec3 p) {
+    return {0.5f + 0.2f * p.x, 0.5f + 0.15f * p.y - 0.1f * p.z, 0.6f + 0.3f * p.z};
+}
+
+// The cube with "Cs" of `cls` (and "N" = the control point itself, class vertex, when `normals`).
+std::string cubeWithColors(const std::string& cls, bool normals) {
+    const SubdivMesh c = cube();
+    std::string cs = "\"";
+    cs += cls;
+    cs += " color Cs\" [";
+    auto add = [](std::string& to, Vec3 v) {  // (not " " + to_string(): a g++ 12 -Wrestrict false alarm)
+        for (float x : {v.x, v.y, v.z}) {
+            to += ' ';
+            to += std::to_string(x);
+        }
+    };
+    if (cls == "uniform")
+        for (size_t f = 0; f < c.faceSizes.size(); ++f) add(cs, {0.1f * float(f), 0.5f, 1 - 0.1f * float(f)});
+    else if (cls == "constant")
+        add(cs, {0.2f, 0.4f, 0.6f});
+    else if (cls == "facevarying" || cls == "facevertex")
+        for (int v : c.faceVerts) add(cs, linearColor(c.points[size_t(v)]));
+    else
+        for (const Vec3& p : c.points) add(cs, linearColor(p));
+    cs += "]";
+    std::string n;
+    if (normals) {
+        n = " \"vertex normal N\" [";
+        for (const Vec3& p : c.points) add(n, p);
+        n += "]";
+    }
+    return std::string("SubdivisionMesh \"catmull-clark\" ") + kCubeMesh + " " + kCubeP + " " + cs + n;
+}
+
+Scene loadCube(const std::string& mesh, std::vector<std::string>* warnings = nullptr) {
+    return loadScene(writeRibFile("WorldBegin\nLightSource \"ambientlight\" 1\n" + mesh + "\nWorldEnd\n"),
+                     [&](const std::string& w) {
+                         if (warnings) warnings->push_back(w);
+                     });
+}
+
+}  // namespace
+
+// Vertex "Cs" and "N" are refined with the surface: a colour that is a linear function of the control
+// points is that function of every patch corner's limit position, and normals equal to the control points
+// are the corner's limit position (affine invariance). Varying and facevarying colours are linear over each
+// control face (the same values either way); uniform and constant ones colour whole patches.
+TEST(SubdivisionRib, ColorsAndNormalsFollowTheirClasses) {
+    const int cpIndex[4] = {0, 3, 12, 15};  // PatchVertexValues order: (0,0) (1,0) (0,1) (1,1)
+    {
+        std::vector<std::string> warnings;
+        const Scene s = loadCube(cubeWithColors("vertex", true), &warnings);
+        EXPECT_TRUE(warnings.empty()) << warnings.front();
+        ASSERT_EQ(s.patches.size(), 6u * 16);
+        float worstColor = 0, worstNormal = 0;
+        for (size_t i = 0; i < s.patches.size(); ++i) {
+            ASSERT_GE(s.attributes[i].vertexValues, 0);
+            const PatchVertexValues& vv = s.vertexValues[size_t(s.attributes[i].vertexValues)];
+            ASSERT_TRUE(vv.hasCs && vv.hasN);
+            EXPECT_EQ(s.materials[s.attributes[i].material].Cs, (Color{1, 1, 1}));  // multiplied by vv.Cs
+            for (int k = 0; k < 4; ++k) {
+                const Vec3 p = s.patches[i].cp[cpIndex[k]], want = linearColor(p);
+                worstColor = std::max({worstColor, std::fabs(vv.Cs[k].x - want.x),
+                                       std::fabs(vv.Cs[k].y - want.y), std::fabs(vv.Cs[k].z - want.z)});
+                worstNormal = std::max(worstNormal, length(vv.N[k] - p));
+            }
+        }
+        EXPECT_LT(worstColor, 1e-5f);
+        EXPECT_LT(worstNormal, 1e-5f);
+    }
+    {
+        const Scene varying = loadCube(cubeWithColors("varying", false)),
+                    facevarying = loadCube(cubeWithColors("facevarying", false)),
+                    smooth = loadCube(cubeWithColors("vertex", false));
+        float worst = 0, smoothVsLinear = 0;
+        for (size_t i = 0; i < varying.patches.size(); ++i) {
+            const PatchVertexValues &a = varying.vertexValues[size_t(varying.attributes[i].vertexValues)],
+                                    &b = facevarying
+                                             .vertexValues[size_t(facevarying.attributes[i].vertexValues)],
+                                    &c = smooth.vertexValues[size_t(smooth.attributes[i].vertexValues)];
+            EXPECT_FALSE(a.hasN);
+            for (int k = 0; k < 4; ++k) {
+                worst = std::max(worst, length(a.Cs[k] - b.Cs[k]));
+                smoothVsLinear = std::max(smoothVsLinear, length(a.Cs[k] - c.Cs[k]));
+            }
+        }
+        EXPECT_LT(worst, 1e-6f);
+        EXPECT_GT(smoothVsLinear, 1e-2f) << "linear over each face is not the smooth surface";
+    }
+    {
+        const Scene s = loadCube(cubeWithColors("uniform", false));
+        ASSERT_EQ(s.patches.size(), 6u * 16);
+        for (size_t i = 0; i < s.patches.size(); ++i) {
+            const float f = float(i / 16);  // level 2: the 16 patches of control face f, in order
+            EXPECT_EQ(s.attributes[i].vertexValues, -1);
+            const Color c = s.materials[s.attributes[i].material].Cs;
+            EXPECT_NEAR(c.x, 0.1f * f, 1e-6f);
+            EXPECT_NEAR(c.z, 1 - 0.1f * f, 1e-6f);
+        }
+        const Scene k = loadCube(cubeWithColors("constant", false));
+        for (size_t i = 0; i < k.patches.size(); ++i)
+            EXPECT_EQ(k.materials[k.attributes[i].material].Cs, (Color{0.2f, 0.4f, 0.6f}));
+    }
+    std::vector<std::string> warnings;
+    loadCube(cubeWithColors("facevertex", false), &warnings);
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("facevertex is interpolated linearly"), std::string::npos) << warnings[0];
+}
+
+// A subdivision mesh with vertex colours renders alike in both engines.
+TEST(SubdivisionRib, VertexColorsRenderAlikeInBothEngines) {
+    Scene s =
+        loadScene(writeRibFile("Format 160 160 1\nPixelSamples 3 3\nProjection \"perspective\" \"fov\" 35\n"
+                               "Translate 0 0 6\nRotate -30 1 0 0\nRotate 35 0 1 0\nWorldBegin\n"
+                               "LightSource \"ambientlight\" 1 \"intensity\" 0.3\n"
+                               "LightSource \"distantlight\" 2 \"from\" [1 2 -3] \"to\" [0 0 0]\n"
+                               "Surface \"matte\"\n" +
+                               cubeWithColors("vertex", false) + "\nWorldEnd\n"),
+                  {});
+    RenderSettings rs;
+    rs.threads = 2;
+    rs.engine = "reyes";
+    const Image reyes = render(s, rs).image;
+    rs.engine = "rt";
+    const Image rt = render(s, rs).image;
+    const ImageDiff d = compareImages(reyes, rt);
+    std::printf("vertex-coloured subdivision cube 160x160 9 spp, Reyes vs rt: PSNR %.2f dB\n", d.psnrColor);
+    EXPECT_GE(d.psnrColor, 35.0);
+    EXPECT_LT(d.alphaMismatch, 0.01);
+}

@@ -337,6 +337,14 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
             for (const Vec2& v : smoothST->values) st.push_back({v.x, v.y});
         }
     }
+    std::vector<std::vector<P3>> values3;  // options.vertexValues at the current level
+    for (const std::vector<Vec3>* v : options.vertexValues) {
+        if (!v || v->size() != mesh.points.size())
+            throw SubdivError(std::to_string(v ? v->size() : 0) + " vertex values for " +
+                              std::to_string(mesh.points.size()) + " vertices");
+        values3.emplace_back();
+        for (const Vec3& x : *v) values3.back().push_back({x.x, x.y, x.z});
+    }
     std::unique_ptr<Refiner> A =
         makeRefiner(int(mesh.points.size()), topo, mesh.boundary, mesh.chaikinCreases);
     const std::vector<char> rendered0 = renderedFaces(mesh, *A);
@@ -365,6 +373,11 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
         std::vector<P3> next(size_t(A->GetLevel(l).GetNumVertices()));
         primvar.Interpolate(l, pts, next);
         pts.swap(next);
+        for (std::vector<P3>& v : values3) {
+            std::vector<P3> nextValues(pts.size());
+            primvar.Interpolate(l, v, nextValues);
+            v.swap(nextValues);
+        }
         if (smoothST) {
             std::vector<P2> nextST;
             if (smoothST->perCorner) {
@@ -434,6 +447,13 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
         else
             primvar.Limit(st, limitST);
     }
+
+    std::vector<std::vector<P3>> limitValues3;
+    for (const std::vector<P3>& v : values3) {
+        limitValues3.emplace_back(v.size());
+        primvar.Limit(v, limitValues3.back());
+    }
+    out.patchVertexValues.resize(values3.size());
 
     // 2. The refined level as the base of a second refiner, with the sharpness left at that level.
     const Far::TopologyLevel& L = A->GetLevel(level);
@@ -613,6 +633,15 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
                 corners[size_t(c)] = {float(v.x), float(v.y)};
             }
             out.patchST.push_back(corners);
+        }
+        for (size_t k = 0; k < limitValues3.size(); ++k) {
+            std::array<Vec3, 4> corners;
+            const auto fv = L.GetFaceVertices(f);
+            for (int c = 0; c < 4; ++c) {
+                const P3& v = limitValues3[k][size_t(fv[c])];
+                corners[size_t(c)] = {float(v.x), float(v.y), float(v.z)};
+            }
+            out.patchVertexValues[k].push_back(corners);
         }
     }
 

@@ -57,6 +57,10 @@ struct OsdSubdivOptions {
     // Smooth texture coordinates to carry to SubdivResult::patchST (the limit values at every patch
     // corner); nullptr: none. Validated: a wrong count is a SubdivError.
     const SubdivSmoothTexCoords* texCoords = nullptr;
+    // Values per control point refined with the vertex rules, as P is (RI "vertex" Cs and N): their limit
+    // values at every patch corner go to SubdivResult::patchVertexValues, in this order. Each needs one
+    // value per point (else SubdivError).
+    std::vector<const std::vector<Vec3>*> vertexValues;
 };
 
 // The automatic level: from the screen size, about 8 pixels or less per refined face edge, level 2..4
