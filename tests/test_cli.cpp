@@ -202,6 +202,34 @@ TEST(Cli, ConvertWritesARibThatRendersTheSameImage) {
     fs::remove_all(dir);
 }
 
+// --res is known before the scene is read: a SubdivisionMesh is refined for the size it has in the image
+// rendered (docs/subdivision.md). The cube is level 2 (6 x 16 patches) in the file's 200 x 200 and level 3
+// (6 x 64) at 1600 x 1600; `info --res` reports what `render --res` renders, and a crop window does not
+// change it.
+TEST(Cli, ResChoosesTheSubdivisionLevel) {
+    fs::path dir = tempDir() / "subdivres";
+    fs::create_directories(dir);
+    const std::string rib = (dir / "cube.rib").string();
+    std::ofstream(rib) << "Format 200 200 1\nProjection \"perspective\" \"fov\" 40\nTranslate 0 0 30\n"
+                          "WorldBegin\nLightSource \"ambientlight\" 1\nSubdivisionMesh \"catmull-clark\" "
+                          "[4 4 4 4 4 4] [0 3 2 1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7] \"P\" "
+                          "[-1 -1 -1 1 -1 -1 1 1 -1 -1 1 -1 -1 -1 1 1 -1 1 1 1 1 -1 1 1]\nWorldEnd\n";
+    CommandResult info = run("info " + rib);
+    EXPECT_NE(info.output.find("patches:  96\n"), std::string::npos) << info.output;
+    info = run("info " + rib + " --res 1600x1600");
+    EXPECT_NE(info.output.find("patches:  384\n"), std::string::npos) << info.output;
+    EXPECT_NE(info.output.find("camera:   1600x1600"), std::string::npos) << info.output;
+    EXPECT_EQ(run("info " + rib + " --res 0x5").exitCode, 2);
+    const std::string out = (dir / "c.png").string(), stats = (dir / "c.json").string();
+    ASSERT_EQ(run("render " + rib + " --res 1600x1600 --crop 0.45,0.55,0.45,0.55 -q -o " + out + " --stats " +
+                  stats)
+                  .exitCode,
+              0);
+    const nlohmann::json s = nlohmann::json::parse(std::ifstream(stats));
+    EXPECT_EQ(s.value("patches_in", 0), 384) << s.dump();
+    fs::remove_all(dir);
+}
+
 // ---- first run: version, help, mistakes caught before the render, progress ------------------------
 
 TEST(Cli, VersionNamesTheVersionAndBuildType) {

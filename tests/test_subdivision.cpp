@@ -15,6 +15,7 @@
 #include <string>
 
 #include "core/subdivision.h"
+#include "film/image_compare.h"
 #include "io/obj_reader.h"
 #include "io/rib_lexer.h"
 #include "io/scene_loader.h"
@@ -828,8 +829,9 @@ TEST(SubdivisionOsd, BigGuyAndCreasedCubeHaveNoPinholesInBothEngines) {
 }
 
 // "st" on a SubdivisionMesh: "facevarying" (per face corner) and "varying" (per vertex) are interpolated
-// linearly over each face, as RenderMan does. On a flat, evenly spaced grid the limit surface is the
-// bilinear map of each face, so s, t at every patch corner must be the corner's own x / 4, y / 4.
+// linearly over each face, as RenderMan does; "facevertex" and "vertex" smoothly. On a flat, evenly spaced
+// grid the limit surface is the bilinear map of each face, so s, t at every patch corner must be the
+// corner's own x / 4, y / 4 for all four classes.
 TEST(SubdivisionRib, FaceVaryingAndVaryingStFollowEachFace) {
     auto append = [](std::string& to, auto x) {  // (not " " + to_string(): a g++ 12 -Wrestrict false alarm)
         to += ' ';
@@ -858,7 +860,11 @@ TEST(SubdivisionRib, FaceVaryingAndVaryingStFollowEachFace) {
     std::string facevarying = "\"facevarying float[2] st\" [", varying = "\"varying float[2] st\" [";
     facevarying += stCorner + "]";
     varying += stVertex + "]";
-    for (const std::string& st : {facevarying, varying}) {
+    // The smooth classes too: the limit of a linear function on a regular planar grid (with the boundary
+    // and its corners interpolated) is the same linear function.
+    const std::string facevertex = "\"facevertex float[2] st\" [" + stCorner + "]",
+                      vertex = "\"vertex float[2] st\" [" + stVertex + "]";
+    for (const std::string& st : {facevarying, varying, facevertex, vertex}) {
         SCOPED_TRACE(st.substr(0, 22));
         Scene s = loadScene(
             writeRibFile("WorldBegin\nSubdivisionMesh \"catmull-clark\" [" + nverts + "] [" + verts +
@@ -906,4 +912,440 @@ TEST(SubdivisionOsd, CreaseOffTheMeshIsWarnedAndIgnored) {
     ASSERT_EQ(r.patches.size(), smooth.patches.size());
     for (size_t i = 0; i < r.patches.size(); ++i)
         EXPECT_EQ(std::memcmp(r.patches[i].cp, smooth.patches[i].cp, sizeof r.patches[i].cp), 0);
+}
+
+// ---- the level follows the rendered resolution (issue 16) -------------------------------------------
+
+namespace {
+
+// The larger side, in raster pixels of a width x height render, of the projected bounding box of the cube
+// of kCubeP seen by `camera` (an independent recomputation of what the reader chooses a level from).
+float cubeRasterSize(Camera camera, int width, int height) {
+    camera.width = width, camera.height = height;
+    Bounds3 b;
+    for (int v = 0; v < 8; ++v)
+        b.extend(camera.cameraFromWorld.point({v & 1 ? 1.f : -1.f, v & 2 ? 1.f : -1.f, v & 4 ? 1.f : -1.f}));
+    float x0, x1, y0, y1;
+    EXPECT_TRUE(Projector(camera).rasterBounds(b, x0, x1, y0, y1));
+    return std::max(x1 - x0, y1 - y0);
+}
+
+int levelOfCubePatches(size_t patches) {
+    int level = 0;
+    for (size_t n = 6; n < patches; n *= 4) ++level;
+    EXPECT_EQ(size_t(6) << (2 * level), patches) << "not 6 * 4^level patches";
+    return level;
+}
+
+}  // namespace
+
+// A RIB loaded for the resolution it will be rendered at (the CLI's --res, RasterOverride) refines its
+// SubdivisionMesh for that size: the cube is 18 pixels wide in the file's 200 x 200 Format (level 2) and
+// 147 wide at 1600 x 1600 (level 3). A crop window does not change the level (the full frame counts).
+TEST(SubdivisionRib, LevelFollowsTheRenderedResolution) {
+    const std::string mesh = std::string("SubdivisionMesh \"catmull-clark\" ") + kCubeMesh + " " + kCubeP;
+    for (const std::string crop : {"", "CropWindow 0.4 0.6 0.4 0.6\n"}) {
+        SCOPED_TRACE(crop);
+        const std::string file = writeRibFile(
+            "Format 200 200 1\n" + crop +
+            "Projection \"perspective\" \"fov\" 40\nTranslate 0 0 30\nWorldBegin\n" + mesh + "\nWorldEnd\n");
+        const Scene fileFormat = loadScene(file, {});
+        const Scene at200 = loadScene(file, {}, SceneFormat::Auto, std::nullopt, RasterOverride{200, 200});
+        const Scene at1600 = loadScene(file, {}, SceneFormat::Auto, std::nullopt, RasterOverride{1600, 1600});
+        EXPECT_EQ(at1600.camera.width, 200)
+            << "the camera keeps the file's Format (the caller applies --res)";
+        const int level200 = levelOfCubePatches(at200.patches.size());
+        const int level1600 = levelOfCubePatches(at1600.patches.size());
+        EXPECT_EQ(fileFormat.patches.size(), at200.patches.size());
+        EXPECT_EQ(level200, subdivLevelFor(cube(), cubeRasterSize(fileFormat.camera, 200, 200)));
+        EXPECT_EQ(level1600, subdivLevelFor(cube(), cubeRasterSize(fileFormat.camera, 1600, 1600)));
+        EXPECT_EQ(level200, 2);
+        EXPECT_EQ(level1600, 3);
+        // Another aspect ratio: the default screen window follows it, as the render's does.
+        const Scene wide = loadScene(file, {}, SceneFormat::Auto, std::nullopt, RasterOverride{3200, 800});
+        EXPECT_EQ(levelOfCubePatches(wide.patches.size()),
+                  subdivLevelFor(cube(), cubeRasterSize(fileFormat.camera, 3200, 800)));
+    }
+}
+
+// ---- smooth texture coordinates (vertex and facevertex s, t) -----------------------------------------
+
+namespace {
+
+// A linear function of position: subdivision is affine invariant, so vertex s, t that are this function
+// of the control points are this function of the limit surface everywhere, in particular at every patch
+// corner (whose control point is the limit position there).
+Vec2 linearST(Vec3 p) {
+    return {0.5f * p.x - 0.25f * p.y + 0.1f, 0.3f * p.z + 0.2f * p.x};
+}
+
+// Largest difference between each patch corner's s, t and linearST of the corner's position.
+float worstLinearST(const SubdivResult& r) {
+    float worst = 0;
+    for (size_t i = 0; i < r.patches.size(); ++i)
+        for (int c = 0; c < 4; ++c) {
+            const Vec3 p = r.patches[i].at(c == 1 || c == 2 ? 3 : 0, c >= 2 ? 3 : 0);
+            const Vec2 want = linearST(p), got = r.patchST[i][size_t(c)];
+            worst = std::max({worst, std::fabs(got.x - want.x), std::fabs(got.y - want.y)});
+        }
+    return worst;
+}
+
+SubdivSmoothTexCoords linearTexCoords(const SubdivMesh& m, bool perCorner) {
+    SubdivSmoothTexCoords t;
+    t.perCorner = perCorner;
+    if (perCorner)
+        for (int v : m.faceVerts) t.values.push_back(linearST(m.points[size_t(v)]));
+    else
+        for (const Vec3& p : m.points) t.values.push_back(linearST(p));
+    return t;
+}
+
+}  // namespace
+
+// Vertex s, t are the limit of the control values: on a cube (extraordinary vertices), the mixed mesh (a
+// pentagon and triangles) and an open bumpy grid, a linear function of the control points gives the same
+// function of the limit position at every patch corner. Face-vertex s, t without seams on a closed mesh
+// are the same surface values (no face-varying boundary anywhere) for every boundary rule.
+TEST(SubdivisionOsd, VertexTexCoordsAreTheLimitOfTheControlValues) {
+    for (const auto& [name, mesh] : std::vector<std::pair<std::string, SubdivMesh>>{
+             {"cube", cube()}, {"mixed", mixedMesh()}, {"grid", openGrid(4)}}) {
+        SCOPED_TRACE(name);
+        for (int level : {1, 2, 3}) {
+            OsdSubdivOptions o;
+            o.level = level;
+            const SubdivSmoothTexCoords st = linearTexCoords(mesh, false);
+            o.texCoords = &st;
+            const SubdivResult r = subdivideOsd(mesh, o);
+            ASSERT_EQ(r.patchST.size(), r.patches.size());
+            EXPECT_LT(worstLinearST(r), 2e-5f) << "level " << level;
+        }
+    }
+    const SubdivMesh c = cube();
+    const SubdivSmoothTexCoords vertex = linearTexCoords(c, false);
+    OsdSubdivOptions o;
+    o.texCoords = &vertex;
+    const SubdivResult byVertex = subdivideOsd(c, o);
+    for (FaceVaryingBoundary b : {FaceVaryingBoundary::LinearAll, FaceVaryingBoundary::CornersPlus1,
+                                  FaceVaryingBoundary::Smooth, FaceVaryingBoundary::LinearBoundaries}) {
+        SubdivSmoothTexCoords corner = linearTexCoords(c, true);
+        corner.boundary = b;
+        o.texCoords = &corner;
+        const SubdivResult byCorner = subdivideOsd(c, o);
+        ASSERT_EQ(byCorner.patchST.size(), byVertex.patchST.size());
+        float worst = 0;
+        for (size_t i = 0; i < byCorner.patchST.size(); ++i)
+            for (int k = 0; k < 4; ++k)
+                worst = std::max({worst, std::fabs(byCorner.patchST[i][k].x - byVertex.patchST[i][k].x),
+                                  std::fabs(byCorner.patchST[i][k].y - byVertex.patchST[i][k].y)});
+        if (b == FaceVaryingBoundary::LinearAll)
+            EXPECT_GT(worst, 1e-2f) << "linear everywhere is bilinear per face, not the smooth surface";
+        else
+            EXPECT_LT(worst, 1e-5f) << "boundary rule " << int(b);
+    }
+    SubdivSmoothTexCoords wrong = linearTexCoords(c, false);
+    wrong.values.pop_back();
+    o.texCoords = &wrong;
+    EXPECT_THROW(subdivideOsd(c, o), SubdivError);
+}
+
+// Face-vertex s, t with a seam: around a torus s runs 0 .. 1 and the faces of the last column give their
+// far corners s = 1 where the first column's start at 0 (and t likewise around the tube). The seam keeps
+// both values (the patches on either side meet at the same points with s = 0 on one side and 1 on the
+// other) and t stays continuous across it; away from the seam s is strictly between 0 and 1.
+TEST(SubdivisionOsd, FaceVertexTexCoordsKeepTheirSeams) {
+    const int nu = 8, nv = 6;
+    const SubdivMesh m = torus(nu, nv);
+    for (FaceVaryingBoundary b : {FaceVaryingBoundary::CornersPlus1, FaceVaryingBoundary::Smooth,
+                                  FaceVaryingBoundary::LinearBoundaries}) {
+        SCOPED_TRACE(int(b));
+        SubdivSmoothTexCoords st;
+        st.perCorner = true;
+        st.boundary = b;
+        for (size_t f = 0; f < m.faceSizes.size(); ++f) {
+            const int i = int(f) % nu, j = int(f) / nu;
+            const int ci[4] = {i, i + 1, i + 1, i}, cj[4] = {j, j, j + 1, j + 1};
+            for (int k = 0; k < 4; ++k) st.values.push_back({float(ci[k]) / nu, float(cj[k]) / nv});
+        }
+        OsdSubdivOptions o;
+        o.texCoords = &st;
+        const SubdivResult r = subdivideOsd(m, o);
+        // s at the seam: the corners whose control point lies on the seam's limit curve (angle 0: y = 0,
+        // x > 0; the torus is symmetric about the xz plane only approximately, so select by s itself).
+        std::map<std::pair<float, float>, std::vector<Vec2>> atPoint;  // (x, z) of seam corners -> s, t
+        size_t seamCorners = 0, inner = 0;
+        for (size_t i = 0; i < r.patches.size(); ++i)
+            for (int c = 0; c < 4; ++c) {
+                const Vec2 v = r.patchST[i][size_t(c)];
+                const Vec3 p = r.patches[i].at(c == 1 || c == 2 ? 3 : 0, c >= 2 ? 3 : 0);
+                if (v.x < 1e-6f || v.x > 1 - 1e-6f) {
+                    ++seamCorners;
+                    EXPECT_LT(std::fabs(v.x - std::round(v.x)), 1e-6f);
+                    atPoint[{p.x, p.z}].push_back(v);
+                } else {
+                    ++inner;
+                    EXPECT_GT(v.x, 0.f);
+                    EXPECT_LT(v.x, 1.f);
+                }
+            }
+        EXPECT_GT(seamCorners, 0u);
+        EXPECT_GT(inner, seamCorners);
+        for (const auto& [point, values] : atPoint) {
+            bool zero = false, one = false;
+            for (const Vec2& v : values) {
+                (v.x < 0.5f ? zero : one) = true;
+                // t is continuous across the s seam (up to its own seam, t = 0 | 1, where they cross)
+                const float dt = std::fabs(v.y - values.front().y);
+                EXPECT_LT(std::min(dt, std::fabs(1 - dt)), 1e-5f) << "t continuous across the seam";
+            }
+            EXPECT_TRUE(zero && one) << "both sides of the seam at (" << point.first << ", " << point.second
+                                     << ")";
+        }
+    }
+}
+
+namespace {
+
+// The cube with face-corner s, t = linearST of each corner's point, of `cls`, and `tags` ("" or a tag block).
+std::string cubeWithST(const std::string& cls, const std::string& tags) {
+    std::string st = "\"";
+    st += cls;
+    st += " float[2] st\" [";
+    const SubdivMesh c = cube();
+    const bool perCorner = cls == "facevarying" || cls == "facevertex";
+    const size_t n = perCorner ? c.faceVerts.size() : c.points.size();
+    for (size_t k = 0; k < n; ++k) {
+        const Vec2 v = linearST(c.points[size_t(perCorner ? c.faceVerts[k] : int(k))]);
+        for (float x : {v.x, v.y}) {  // (not " " + to_string(): a g++ 12 -Wrestrict false alarm)
+            st += ' ';
+            st += std::to_string(x);
+        }
+    }
+    return std::string("SubdivisionMesh \"catmull-clark\" ") + kCubeMesh + " " + tags + " " + kCubeP + " " +
+           st + "]";
+}
+
+float worstSTDifference(const Scene& a, const Scene& b) {
+    EXPECT_EQ(a.texCoords.size(), b.texCoords.size());
+    float worst = 0;
+    for (size_t i = 0; i < std::min(a.texCoords.size(), b.texCoords.size()); ++i)
+        for (int k = 0; k < 4; ++k)
+            worst = std::max({worst, std::fabs(a.texCoords[i].st[k].x - b.texCoords[i].st[k].x),
+                              std::fabs(a.texCoords[i].st[k].y - b.texCoords[i].st[k].y)});
+    return worst;
+}
+
+}  // namespace
+
+// The RIB classes and the "facevaryinginterpolateboundary" tag: "facevertex" s, t with the tag's 0
+// (linear everywhere) are the "facevarying" (bilinear) ones; 2 (smooth) are the "vertex" ones, which are
+// linearST of the patch corners; a value outside 0..3 is an error naming the line.
+TEST(SubdivisionRib, FaceVaryingInterpolateBoundaryTag) {
+    auto loadMesh = [](const std::string& mesh) {
+        std::vector<std::string> warnings;
+        Scene s = loadScene(writeRibFile("WorldBegin\n" + mesh + "\nWorldEnd\n"),
+                            [&](const std::string& w) { warnings.push_back(w); });
+        for (const std::string& w : warnings)
+            EXPECT_EQ(w.find("\"st\""), std::string::npos) << "no warning about st: " << w;
+        EXPECT_EQ(s.texCoords.size(), s.patches.size());
+        return s;
+    };
+    const std::string tag = "[\"facevaryinginterpolateboundary\"] [1 0] ";
+    const Scene bilinear = loadMesh(cubeWithST("facevarying", ""));
+    const Scene linearAll = loadMesh(cubeWithST("facevertex", tag + "[0] []"));
+    const Scene smooth = loadMesh(cubeWithST("facevertex", tag + "[2] []"));
+    const Scene byDefault = loadMesh(cubeWithST("facevertex", ""));
+    const Scene vertex = loadMesh(cubeWithST("vertex", ""));
+    EXPECT_LT(worstSTDifference(linearAll, bilinear), 1e-5f);
+    EXPECT_LT(worstSTDifference(smooth, vertex), 1e-5f);
+    EXPECT_LT(worstSTDifference(byDefault, vertex), 1e-5f);  // no seams, no corners: the smooth surface
+    EXPECT_GT(worstSTDifference(smooth, bilinear), 1e-2f);
+    float worst = 0;  // vertex s, t: linearST of each patch corner's (limit) point
+    const int cpIndex[4] = {0, 3, 12, 15};
+    for (size_t i = 0; i < vertex.patches.size(); ++i)
+        for (int k = 0; k < 4; ++k) {
+            const Vec2 want = linearST(vertex.patches[i].cp[cpIndex[k]]), got = vertex.texCoords[i].st[k];
+            worst = std::max({worst, std::fabs(got.x - want.x), std::fabs(got.y - want.y)});
+        }
+    EXPECT_LT(worst, 2e-5f);
+    const std::string bad =
+        writeRibFile("WorldBegin\n" + cubeWithST("facevertex", tag + "[7] []") + "\nWorldEnd\n");
+    try {
+        loadScene(bad, {});
+        ADD_FAILURE() << "facevaryinginterpolateboundary 7 loaded";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find(bad + ":2: error:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("facevaryinginterpolateboundary"), std::string::npos);
+    }
+}
+
+// A textured subdivision mesh (smooth "vertex" s, t) renders alike in both engines: the texture's tiles
+// follow the converted s, t the same way (the textured teapot's bar, 35 dB), and the texture shows.
+TEST(SubdivisionRib, TexturedMeshRendersAlikeInBothEngines) {
+    const std::string texture = std::string(TESSERA_SOURCE_DIR) + "/scenes/textures/tiles.png";
+    Scene s =
+        loadScene(writeRibFile("Format 160 160 1\nPixelSamples 3 3\nProjection \"perspective\" \"fov\" 35\n"
+                               "Translate 0 0 6\nRotate -30 1 0 0\nRotate 35 0 1 0\nWorldBegin\n"
+                               "LightSource \"ambientlight\" 1 \"intensity\" 0.3\n"
+                               "LightSource \"distantlight\" 2 \"from\" [1 2 -3] \"to\" [0 0 0]\n"
+                               "Surface \"paintedplastic\" \"texturename\" \"" +
+                               texture + "\" \"Ka\" 1 \"Kd\" 0.8 \"Ks\" 0\n" + cubeWithST("vertex", "") +
+                               "\nWorldEnd\n"),
+                  {});
+    RenderSettings rs;
+    rs.threads = 2;
+    rs.engine = "reyes";
+    const Image reyes = render(s, rs).image;
+    rs.engine = "rt";
+    const Image rt = render(s, rs).image;
+    const ImageDiff d = compareImages(reyes, rt);
+    std::printf("textured subdivision cube 160x160 9 spp, Reyes vs rt: PSNR %.2f dB, alpha mismatch %.4f\n",
+                d.psnrColor, d.alphaMismatch);
+    EXPECT_GE(d.psnrColor, 35.0);
+    EXPECT_LT(d.alphaMismatch, 0.01);
+    // The texture shows: the covered pixels' red channel varies (tiles and grout), not one shade per face.
+    double sum = 0, sum2 = 0, n = 0;
+    for (int y = 0; y < rt.height; ++y)
+        for (int x = 0; x < rt.width; ++x)
+            if (rt.pixel(x, y)[3] > 0.99f) {
+                const double r = rt.pixel(x, y)[0];
+                sum += r, sum2 += r * r, n += 1;
+            }
+    ASSERT_GT(n, 1000.0);
+    EXPECT_GT(std::sqrt(std::max(0.0, sum2 / n - (sum / n) * (sum / n))), 0.05);
+}
+
+// ---- Cs and N on subdivision meshes ----------------------------------------------------------------
+
+namespace {
+
+Vec3 linearColor(Vec3 p) {
+    return {0.5f + 0.2f * p.x, 0.5f + 0.15f * p.y - 0.1f * p.z, 0.6f + 0.3f * p.z};
+}
+
+// The cube with "Cs" of `cls` (and "N" = the control point itself, class vertex, when `normals`).
+std::string cubeWithColors(const std::string& cls, bool normals) {
+    const SubdivMesh c = cube();
+    std::string cs = "\"";
+    cs += cls;
+    cs += " color Cs\" [";
+    auto add = [](std::string& to, Vec3 v) {  // (not " " + to_string(): a g++ 12 -Wrestrict false alarm)
+        for (float x : {v.x, v.y, v.z}) {
+            to += ' ';
+            to += std::to_string(x);
+        }
+    };
+    if (cls == "uniform")
+        for (size_t f = 0; f < c.faceSizes.size(); ++f) add(cs, {0.1f * float(f), 0.5f, 1 - 0.1f * float(f)});
+    else if (cls == "constant")
+        add(cs, {0.2f, 0.4f, 0.6f});
+    else if (cls == "facevarying" || cls == "facevertex")
+        for (int v : c.faceVerts) add(cs, linearColor(c.points[size_t(v)]));
+    else
+        for (const Vec3& p : c.points) add(cs, linearColor(p));
+    cs += "]";
+    std::string n;
+    if (normals) {
+        n = " \"vertex normal N\" [";
+        for (const Vec3& p : c.points) add(n, p);
+        n += "]";
+    }
+    return std::string("SubdivisionMesh \"catmull-clark\" ") + kCubeMesh + " " + kCubeP + " " + cs + n;
+}
+
+Scene loadCube(const std::string& mesh, std::vector<std::string>* warnings = nullptr) {
+    return loadScene(writeRibFile("WorldBegin\nLightSource \"ambientlight\" 1\n" + mesh + "\nWorldEnd\n"),
+                     [&](const std::string& w) {
+                         if (warnings) warnings->push_back(w);
+                     });
+}
+
+}  // namespace
+
+// Vertex "Cs" and "N" are refined with the surface: a colour that is a linear function of the control
+// points is that function of every patch corner's limit position, and normals equal to the control points
+// are the corner's limit position (affine invariance). Varying and facevarying colours are linear over each
+// control face (the same values either way); uniform and constant ones colour whole patches.
+TEST(SubdivisionRib, ColorsAndNormalsFollowTheirClasses) {
+    const int cpIndex[4] = {0, 3, 12, 15};  // PatchVertexValues order: (0,0) (1,0) (0,1) (1,1)
+    {
+        std::vector<std::string> warnings;
+        const Scene s = loadCube(cubeWithColors("vertex", true), &warnings);
+        EXPECT_TRUE(warnings.empty()) << warnings.front();
+        ASSERT_EQ(s.patches.size(), 6u * 16);
+        float worstColor = 0, worstNormal = 0;
+        for (size_t i = 0; i < s.patches.size(); ++i) {
+            ASSERT_GE(s.attributes[i].vertexValues, 0);
+            const PatchVertexValues& vv = s.vertexValues[size_t(s.attributes[i].vertexValues)];
+            ASSERT_TRUE(vv.hasCs && vv.hasN);
+            EXPECT_EQ(s.materials[s.attributes[i].material].Cs, (Color{1, 1, 1}));  // multiplied by vv.Cs
+            for (int k = 0; k < 4; ++k) {
+                const Vec3 p = s.patches[i].cp[cpIndex[k]], want = linearColor(p);
+                worstColor = std::max({worstColor, std::fabs(vv.Cs[k].x - want.x),
+                                       std::fabs(vv.Cs[k].y - want.y), std::fabs(vv.Cs[k].z - want.z)});
+                worstNormal = std::max(worstNormal, length(vv.N[k] - p));
+            }
+        }
+        EXPECT_LT(worstColor, 1e-5f);
+        EXPECT_LT(worstNormal, 1e-5f);
+    }
+    {
+        const Scene varying = loadCube(cubeWithColors("varying", false)),
+                    facevarying = loadCube(cubeWithColors("facevarying", false)),
+                    smooth = loadCube(cubeWithColors("vertex", false));
+        float worst = 0, smoothVsLinear = 0;
+        for (size_t i = 0; i < varying.patches.size(); ++i) {
+            const PatchVertexValues &a = varying.vertexValues[size_t(varying.attributes[i].vertexValues)],
+                                    &b = facevarying
+                                             .vertexValues[size_t(facevarying.attributes[i].vertexValues)],
+                                    &c = smooth.vertexValues[size_t(smooth.attributes[i].vertexValues)];
+            EXPECT_FALSE(a.hasN);
+            for (int k = 0; k < 4; ++k) {
+                worst = std::max(worst, length(a.Cs[k] - b.Cs[k]));
+                smoothVsLinear = std::max(smoothVsLinear, length(a.Cs[k] - c.Cs[k]));
+            }
+        }
+        EXPECT_LT(worst, 1e-6f);
+        EXPECT_GT(smoothVsLinear, 1e-2f) << "linear over each face is not the smooth surface";
+    }
+    {
+        const Scene s = loadCube(cubeWithColors("uniform", false));
+        ASSERT_EQ(s.patches.size(), 6u * 16);
+        for (size_t i = 0; i < s.patches.size(); ++i) {
+            const float f = float(i / 16);  // level 2: the 16 patches of control face f, in order
+            EXPECT_EQ(s.attributes[i].vertexValues, -1);
+            const Color c = s.materials[s.attributes[i].material].Cs;
+            EXPECT_NEAR(c.x, 0.1f * f, 1e-6f);
+            EXPECT_NEAR(c.z, 1 - 0.1f * f, 1e-6f);
+        }
+        const Scene k = loadCube(cubeWithColors("constant", false));
+        for (size_t i = 0; i < k.patches.size(); ++i)
+            EXPECT_EQ(k.materials[k.attributes[i].material].Cs, (Color{0.2f, 0.4f, 0.6f}));
+    }
+    std::vector<std::string> warnings;
+    loadCube(cubeWithColors("facevertex", false), &warnings);
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("facevertex is interpolated linearly"), std::string::npos) << warnings[0];
+}
+
+// A subdivision mesh with vertex colours renders alike in both engines.
+TEST(SubdivisionRib, VertexColorsRenderAlikeInBothEngines) {
+    Scene s =
+        loadScene(writeRibFile("Format 160 160 1\nPixelSamples 3 3\nProjection \"perspective\" \"fov\" 35\n"
+                               "Translate 0 0 6\nRotate -30 1 0 0\nRotate 35 0 1 0\nWorldBegin\n"
+                               "LightSource \"ambientlight\" 1 \"intensity\" 0.3\n"
+                               "LightSource \"distantlight\" 2 \"from\" [1 2 -3] \"to\" [0 0 0]\n"
+                               "Surface \"matte\"\n" +
+                               cubeWithColors("vertex", false) + "\nWorldEnd\n"),
+                  {});
+    RenderSettings rs;
+    rs.threads = 2;
+    rs.engine = "reyes";
+    const Image reyes = render(s, rs).image;
+    rs.engine = "rt";
+    const Image rt = render(s, rs).image;
+    const ImageDiff d = compareImages(reyes, rt);
+    std::printf("vertex-coloured subdivision cube 160x160 9 spp, Reyes vs rt: PSNR %.2f dB\n", d.psnrColor);
+    EXPECT_GE(d.psnrColor, 35.0);
+    EXPECT_LT(d.alphaMismatch, 0.01);
 }

@@ -66,8 +66,38 @@ py::array_t<T> toArray(const std::vector<T>& values, int rows, int cols, int com
     return a;
 }
 
+template <typename T>
+T cast(const char* name, py::handle value) {
+    try {
+        return value.cast<T>();
+    } catch (const py::cast_error&) {
+        throw py::type_error(std::string("option ") + name + ": wrong type (" +
+                             std::string(py::str(py::type::of(value).attr("__name__"))) + ")");
+    }
+}
+
+// res=(w, h) or 'WxH' (None: not given).
+RasterOverride resolutionArg(py::handle v) {
+    RasterOverride r;
+    if (v.is_none()) return r;
+    if (py::isinstance<py::str>(v)) {
+        const std::string s = v.cast<std::string>();
+        const std::optional<std::pair<int, int>> wh = parseResolution(s);
+        if (!wh) throw std::invalid_argument("res '" + s + "' is not WIDTHxHEIGHT");
+        std::tie(r.width, r.height) = *wh;
+    } else {
+        const auto wh = cast<std::vector<int>>("res", v);
+        if (wh.size() != 2) throw std::invalid_argument("res needs (width, height)");
+        r.width = wh[0], r.height = wh[1];
+    }
+    if (r.width < 1 || r.height < 1) throw std::invalid_argument("res: width and height must be >= 1");
+    return r;
+}
+
+// raster: the resolution to load for (res=): subdivision meshes are refined for their size in that image
+// and the scene renders at it (docs/subdivision.md).
 PyScene loadScenePy(const std::filesystem::path& file, const std::string& format, const std::string& up,
-                    std::optional<int> frame = std::nullopt) {
+                    std::optional<int> frame = std::nullopt, RasterOverride raster = {}) {
     const std::string path = file.string();
     const std::optional<SceneFormat> f = parseSceneFormat(format);
     if (!f) throw std::invalid_argument("unknown format '" + format + "' (auto, rib, bpt, obj, micropolis)");
@@ -95,35 +125,28 @@ PyScene loadScenePy(const std::filesystem::path& file, const std::string& format
             if (it == frames.end())
                 throw std::invalid_argument(path + ": no FrameBegin " + std::to_string(*frame) +
                                             " in the file");
-            readRibFrame(path, int(it - frames.begin()), *scene, warn);
+            readRibFrame(path, int(it - frames.begin()), *scene, warn, raster);
         } else {
-            *scene = loadScene(path, warn, *f, axis);
+            *scene = loadScene(path, warn, *f, axis, raster);
         }
     }
+    if (raster.given()) scene->camera.width = raster.width, scene->camera.height = raster.height;
     s.scene = std::move(scene);
     return s;
 }
 
-PyScene ribTextScene(const std::string& text, const std::string& path) {
+PyScene ribTextScene(const std::string& text, const std::string& path, RasterOverride raster = {}) {
     PyScene s;
     s.path = path;
     auto scene = std::make_shared<Scene>();
     {
         py::gil_scoped_release release;
-        readRibText(text, path, *scene, [&s](const std::string& w) { s.warnings.push_back(w); });
+        readRibText(
+            text, path, *scene, [&s](const std::string& w) { s.warnings.push_back(w); }, raster);
     }
+    if (raster.given()) scene->camera.width = raster.width, scene->camera.height = raster.height;
     s.scene = std::move(scene);
     return s;
-}
-
-template <typename T>
-T cast(const char* name, py::handle value) {
-    try {
-        return value.cast<T>();
-    } catch (const py::cast_error&) {
-        throw py::type_error(std::string("option ") + name + ": wrong type (" +
-                             std::string(py::str(py::type::of(value).attr("__name__"))) + ")");
-    }
 }
 
 // `n` numbers from a sequence (a tuple, a list) or a comma-separated string.
@@ -160,18 +183,8 @@ Request parseOptions(const py::kwargs& kw) {
         else if (key == "spp")
             o.spp = cast<int>(k, v);
         else if (key == "res") {
-            if (py::isinstance<py::str>(v)) {
-                const std::string s = v.cast<std::string>();
-                const std::optional<std::pair<int, int>> wh = parseResolution(s);
-                if (!wh) throw std::invalid_argument("res '" + s + "' is not WIDTHxHEIGHT");
-                std::tie(o.width, o.height) = *wh;
-            } else {
-                const auto wh = cast<std::vector<int>>(k, v);
-                if (wh.size() != 2) throw std::invalid_argument("res needs (width, height)");
-                o.width = wh[0], o.height = wh[1];
-            }
-            if (o.width < 1 || o.height < 1)
-                throw std::invalid_argument("res: width and height must be >= 1");
+            const RasterOverride r = resolutionArg(v);
+            o.width = r.width, o.height = r.height;
         } else if (key == "shading_rate")
             o.shadingRate = cast<double>(k, v);
         else if (key == "threads")
@@ -519,10 +532,16 @@ PYBIND11_MODULE(tessera, m) {
         "The RGBA of an image file as H x W x 4 float32: an EXR's stored (linear, premultiplied) values, a "
         "PNG's "
         "in [0, 1]");
-    m.def("load", &loadScenePy, py::arg("path"), py::arg("format") = "auto", py::arg("up") = "",
-          py::arg("frame") = py::none(),
-          "Load a scene file (RIB, .bpt, OBJ, Micropolis; format='auto' detects it); frame=n: the RIB frame "
-          "of FrameBegin n (default: the first)");
+    m.def(
+        "load",
+        [](const std::filesystem::path& file, const std::string& format, const std::string& up,
+           std::optional<int> frame,
+           py::object res) { return loadScenePy(file, format, up, frame, resolutionArg(res)); },
+        py::arg("path"), py::arg("format") = "auto", py::arg("up") = "", py::arg("frame") = py::none(),
+        py::arg("res") = py::none(),
+        "Load a scene file (RIB, .bpt, OBJ, Micropolis; format='auto' detects it); frame=n: the RIB frame "
+        "of FrameBegin n (default: the first); res=(w, h) or 'WxH': the resolution to render at, which "
+        "subdivision meshes are refined for (a later render(res=) does not refine them again)");
     m.def(
         "frames",
         [](const std::filesystem::path& file) {
@@ -531,19 +550,27 @@ PYBIND11_MODULE(tessera, m) {
             return numbers;
         },
         py::arg("path"), "The frame numbers of a RIB file's FrameBegin blocks, in file order");
-    m.def("load_rib", &ribTextScene, py::arg("text"), py::arg("path") = "<rib>",
-          "Load a scene from RIB text; `path` names it in messages and is the base of relative file names");
+    m.def(
+        "load_rib",
+        [](const std::string& text, const std::string& path, py::object res) {
+            return ribTextScene(text, path, resolutionArg(res));
+        },
+        py::arg("text"), py::arg("path") = "<rib>", py::arg("res") = py::none(),
+        "Load a scene from RIB text; `path` names it in messages and is the base of relative file names; "
+        "res=: as load()");
     m.def(
         "render",
         [](py::object scene, std::optional<std::string> rib, const py::kwargs& kw) {
+            // A path or RIB text is loaded for res= (subdivision meshes refined for that size).
+            const RasterOverride raster = kw.contains("res") ? resolutionArg(kw["res"]) : RasterOverride{};
             if (rib) {
                 if (!scene.is_none()) throw py::type_error("render(): give a scene or rib=, not both");
-                return renderPy(ribTextScene(*rib, "<rib>"), kw);
+                return renderPy(ribTextScene(*rib, "<rib>", raster), kw);
             }
             if (py::isinstance<PyScene>(scene)) return renderPy(scene.cast<const PyScene&>(), kw);
             if (py::isinstance<py::str>(scene) || py::hasattr(scene, "__fspath__"))
-                return renderPy(loadScenePy(scene.cast<std::filesystem::path>(), "auto", "", std::nullopt),
-                                kw);
+                return renderPy(
+                    loadScenePy(scene.cast<std::filesystem::path>(), "auto", "", std::nullopt, raster), kw);
             throw py::type_error("render(): scene must be a path, a tessera.Scene, or give rib=\"...\"");
         },
         py::arg("scene") = py::none(), py::arg("rib") = py::none(), kRenderDoc);

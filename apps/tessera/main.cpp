@@ -137,16 +137,20 @@ std::string writeTemporary(const std::string& path, const std::string& text) {
 }
 
 Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatName = "auto",
-                 std::optional<UpAxis> up = std::nullopt, std::optional<int> ribFrameOrdinal = std::nullopt) {
+                 std::optional<UpAxis> up = std::nullopt, std::optional<int> ribFrameOrdinal = std::nullopt,
+                 RasterOverride raster = {}) {
     std::optional<SceneFormat> format = parseSceneFormat(formatName);
     if (!format)
         fail(fmt::format("error: unknown --format '{}' (auto, rib, bpt, obj, micropolis)", formatName));
     try {
         if (ribFrameOrdinal) {
             Scene scene;
-            readRibFrame(path, *ribFrameOrdinal, scene, [quiet](const std::string& w) {
-                if (!quiet) fmt::print(stderr, "{}\n", w);
-            });
+            readRibFrame(
+                path, *ribFrameOrdinal, scene,
+                [quiet](const std::string& w) {
+                    if (!quiet) fmt::print(stderr, "{}\n", w);
+                },
+                raster);
             return scene;
         }
         return loadScene(
@@ -154,7 +158,7 @@ Scene loadOrFail(const std::string& path, bool quiet, const std::string& formatN
             [quiet](const std::string& w) {
                 if (!quiet) fmt::print(stderr, "{}\n", w);
             },
-            *format, up);
+            *format, up, raster);
     } catch (const InputError& e) {
         fail(e.what());
     } catch (const std::exception& e) {
@@ -431,7 +435,10 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
 
     // Ctrl-C from here on: stop cleanly (no output written) and exit 130.
     std::signal(SIGINT, onSigint);
-    Scene scene = loadOrFail(a.scene, a.quiet, a.format, parseUp(a.up), ribFrameOrdinal);
+    // --res is known before the scene is read: subdivision meshes are refined for the size they will have
+    // in this image (docs/subdivision.md), the whole frame's (--crop and --tile do not change it).
+    Scene scene =
+        loadOrFail(a.scene, a.quiet, a.format, parseUp(a.up), ribFrameOrdinal, RasterOverride{resW, resH});
     if (gCancel.load()) {
         fmt::print(stderr, "interrupted while loading {}: no image written\n", a.scene);
         return 130;
@@ -829,9 +836,22 @@ int runAssemble(const std::vector<std::string>& tiles, const std::string& out) {
     return 0;
 }
 
-int runInfo(const std::string& path, const std::string& formatName, const std::string& up) {
+int runInfo(const std::string& path, const std::string& formatName, const std::string& up,
+            const std::string& res) {
     checkUpApplies(path, formatName, up);
-    Scene scene = loadOrFail(path, false, formatName, parseUp(up));
+    RasterOverride raster;
+    if (!res.empty()) {
+        const std::optional<std::pair<int, int>> wh = parseResolution(res);
+        if (!wh) fail(fmt::format("error: --res '{}' is not WIDTHxHEIGHT", res));
+        std::tie(raster.width, raster.height) = *wh;
+        if (raster.width < 1 || raster.height < 1 || raster.width > kMaxResolution ||
+            raster.height > kMaxResolution)
+            fail(fmt::format("{}: error: resolution {}x{} outside 1..{} per axis", path, raster.width,
+                             raster.height, kMaxResolution));
+    }
+    // Loaded for that resolution: subdivision meshes have the patches `render --res` would render.
+    Scene scene = loadOrFail(path, false, formatName, parseUp(up), std::nullopt, raster);
+    if (raster.given()) scene.camera.width = raster.width, scene.camera.height = raster.height;
     Bounds3 b = scene.worldBounds();
     const Camera& c = scene.camera;
     fmt::print("scene:    {}\n", path);
@@ -1128,12 +1148,15 @@ int main(int argc, char** argv) {
     render->add_flag("--progress", ra.progressLines,
                      "Print 'progress N%' on stderr, one line per whole percent (for logs and render farms)");
     render->add_flag("-q,--quiet", ra.quiet, "No progress bar, warnings or summary");
-    std::string infoPath, infoFormat = "auto", infoUp;
+    std::string infoPath, infoFormat = "auto", infoUp, infoRes;
     CLI::App* info = app.add_subcommand("info", "Print patch count, objects, bounds and camera of a scene");
     info->add_option("scene", infoPath, sceneHelp)->required();
     info->add_option("--format", infoFormat, formatHelp)
         ->check(CLI::IsMember({"auto", "rib", "bpt", "obj", "micropolis"}, CLI::ignore_case));
     info->add_option("--up", infoUp, upHelp)->check(CLI::IsMember({"x", "y", "z"}));
+    info->add_option("--res", infoRes,
+                     "WIDTHxHEIGHT: the resolution to load for, as render --res (subdivision meshes are "
+                     "refined for it, so the patch count is the render's)");
     std::vector<std::string> assembleTiles;
     std::string assembleOut;
     CLI::App* assemble = app.add_subcommand(
@@ -1161,7 +1184,7 @@ int main(int argc, char** argv) {
             checkUpApplies(ra.scene, ra.format, ra.up);
             return runRender(ra);
         }
-        if (*info) return runInfo(infoPath, infoFormat, infoUp);
+        if (*info) return runInfo(infoPath, infoFormat, infoUp, infoRes);
         if (*convert) return runConvert(convertIn, convertOut, convertFormat, convertUp);
         if (*assemble) return runAssemble(assembleTiles, assembleOut);
     } catch (const InputError& e) {

@@ -103,6 +103,12 @@ struct SubdivResult {
     std::vector<uint32_t> patchBaseFace;
     std::vector<int> patchSubFace;
     std::vector<std::array<Vec2, 4>> patchUV;
+    // OpenSubdiv converter with smooth texture coordinates (io/subdiv_osd.h SubdivSmoothTexCoords): the
+    // limit s, t at each patch's four corners, in (0,0) (1,0) (1,1) (0,1) order; empty otherwise.
+    std::vector<std::array<Vec2, 4>> patchST;
+    // Its smooth per-vertex values (io/subdiv_osd.h OsdSubdivOptions::vertexValues, e.g. RI "vertex" Cs, N):
+    // for each, the limit values at every patch's corners, in the same order.
+    std::vector<std::vector<std::array<Vec3, 4>>> patchVertexValues;
     int level = 0;  // refinement steps applied
     size_t exactCount = 0, approxCount = 0;
     std::vector<std::string> warnings;  // e.g. semi-sharp creases treated as sharp

@@ -55,7 +55,9 @@ class PrimitiveReader {
           decls_(c.decls),
           diag_(c.diag),
           camera_(c.scene.camera),
-          subdivLevel_(c.subdivLevel) {
+          subdivLevel_(c.subdivLevel),
+          rasterWidth_(c.rasterWidth),
+          rasterHeight_(c.rasterHeight) {
         shape_.request = r.name;
         shape_.line = r.line;
     }
@@ -1026,48 +1028,157 @@ class PrimitiveReader {
             }
     }
 
-    // Per-patch s, t of a converted SubdivisionMesh: the face's corner values interpolated bilinearly over
-    // the face (a face other than a quad: over each sub-face quad, with edge midpoints and the centroid),
-    // at the patch's place on the control face (SubdivResult::patchUV).
-    void subdivTexCoords(const SubdivMesh& mesh, const std::vector<Vec2>& st, bool perCorner,
-                         const SubdivResult& res) {
+    static Vec2 lerpValues(Vec2 a, Vec2 b, float w) { return {a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w}; }
+    static Vec3 lerpValues(Vec3 a, Vec3 b, float w) { return a + (b - a) * w; }
+
+    // Values given per face corner or per vertex of a converted SubdivisionMesh, interpolated linearly over
+    // each control face (bilinearly; a face other than a quad: over each sub-face quad, with edge midpoints
+    // and the centroid), at each patch's four corners ((0,0) (1,0) (0,1) (1,1), as PatchTexCoords and
+    // PatchVertexValues hold them) from its place on the control face (SubdivResult::patchUV).
+    template <class T>
+    static std::vector<std::array<T, 4>> faceLinearCorners(const SubdivMesh& mesh,
+                                                           const std::vector<T>& values, bool perCorner,
+                                                           const SubdivResult& res) {
         std::vector<size_t> offset(mesh.faceSizes.size() + 1, 0);
         for (size_t f = 0; f < mesh.faceSizes.size(); ++f)
             offset[f + 1] = offset[f] + size_t(mesh.faceSizes[f]);
-        auto corner = [&](size_t k) { return perCorner ? st[k] : st[size_t(mesh.faceVerts[k])]; };
-        auto mix = [](Vec2 a, Vec2 b, float w) { return Vec2{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w}; };
+        auto corner = [&](size_t k) { return perCorner ? values[k] : values[size_t(mesh.faceVerts[k])]; };
+        auto mix = [](const T& a, const T& b, float w) { return lerpValues(a, b, w); };
+        std::vector<std::array<T, 4>> out;
         for (size_t i = 0; i < res.patches.size(); ++i) {
             const size_t f = res.patchBaseFace[i], o = offset[f];
             const int n = mesh.faceSizes[f];
-            Vec2 q[4];
+            T q[4];
             if (res.patchSubFace[i] < 0) {
                 for (int k = 0; k < 4; ++k) q[k] = corner(o + size_t(k));
             } else {
                 const int c = res.patchSubFace[i];
-                Vec2 centre{0, 0};
-                for (int k = 0; k < n; ++k)
-                    centre = {centre.x + corner(o + size_t(k)).x / float(n),
-                              centre.y + corner(o + size_t(k)).y / float(n)};
-                const Vec2 a = corner(o + size_t(c)), next = corner(o + size_t((c + 1) % n)),
-                           prev = corner(o + size_t((c + n - 1) % n));
+                T centre = corner(o);
+                for (int k = 1; k < n; ++k) centre = mix(centre, corner(o + size_t(k)), 1.f / float(k + 1));
+                const T a = corner(o + size_t(c)), next = corner(o + size_t((c + 1) % n)),
+                        prev = corner(o + size_t((c + n - 1) % n));
                 q[0] = a, q[1] = mix(a, next, 0.5f), q[2] = centre, q[3] = mix(a, prev, 0.5f);
             }
             auto at = [&](Vec2 uv) { return mix(mix(q[0], q[1], uv.x), mix(q[3], q[2], uv.x), uv.y); };
             const auto& uv = res.patchUV[i];
-            PatchTexCoords tc;
-            tc.st[0] = at(uv[0]), tc.st[1] = at(uv[1]), tc.st[2] = at(uv[3]), tc.st[3] = at(uv[2]);
-            shape_.texCoords.push_back(tc);
+            out.push_back({at(uv[0]), at(uv[1]), at(uv[3]), at(uv[2])});
+        }
+        return out;
+    }
+
+    // The s, t of a SubdivisionMesh ("st" or "s" and "t"): RI "varying" (one per vertex) and "facevarying"
+    // (one per face corner) are interpolated linearly over each control face (RI spec 3.2, sec. 5.6);
+    // "vertex" (one per vertex) and PRMan's "facevertex" (one per face corner) smoothly, refined with the
+    // surface (subdiv_osd.h SubdivSmoothTexCoords). nullopt: none given.
+    struct SubdivTexCoordValues {
+        std::vector<Vec2> values;
+        bool perCorner = false, smooth = false;
+    };
+    std::optional<SubdivTexCoordValues> readSubdivTexCoords(const Request& r, const std::vector<Param>& ps,
+                                                            size_t npoints, size_t ncorners) {
+        const std::string what = "SubdivisionMesh";
+        const Param *st = nullptr, *s = nullptr, *t = nullptr;
+        std::string cls;
+        for (const Param& p : ps) {
+            if (!isTexCoordParam(p.name)) continue;
+            const std::string c = p.decl ? p.decl->cls : "";
+            const int per = p.name == "st" ? 2 : 1;
+            if ((c != "varying" && c != "facevarying" && c != "vertex" && c != "facevertex") || !p.decl ||
+                p.decl->type != "float" || p.decl->arraySize != per || !p.value->numeric()) {
+                diag_.warnOnce("stclass:" + p.name, p.line,
+                               what + ": \"" + p.name +
+                                   "\" is used as a varying, facevarying, vertex or facevertex \"float" +
+                                   (per == 2 ? "[2]" : "") + "\" only; ignored");
+                continue;
+            }
+            const size_t n = c == "facevarying" || c == "facevertex" ? ncorners : npoints;
+            if (p.value->nums.size() != n * size_t(per))
+                diag_.fail(p.line, what + ": \"" + p.name + "\" needs " + std::to_string(n * size_t(per)) +
+                                       " numbers (" + std::to_string(n) + " " + c + " values), got " +
+                                       std::to_string(p.value->nums.size()));
+            if ((st || s || t) && c != cls)
+                diag_.fail(p.line, what + ": \"s\" and \"t\" must have the same storage class");
+            cls = c;
+            (p.name == "st" ? st : p.name == "s" ? s : t) = &p;
+        }
+        if (!st && !s && !t) return std::nullopt;
+        if (st && (s || t))
+            diag_.warnOnce("stboth", r.line, what + ": both \"st\" and \"s\"/\"t\" given; \"st\" is used");
+        SubdivTexCoordValues out;
+        out.perCorner = cls == "facevarying" || cls == "facevertex";
+        out.smooth = cls == "vertex" || cls == "facevertex";
+        const size_t n = out.perCorner ? ncorners : npoints;
+        out.values.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            Vec2& v = out.values[i];
+            if (st)
+                v = {float(st->value->nums[2 * i]), float(st->value->nums[2 * i + 1])};
+            else
+                v = {s ? float(s->value->nums[i]) : 0.f, t ? float(t->value->nums[i]) : 0.f};
+            if (!std::isfinite(v.x) || !std::isfinite(v.y) || std::fabs(v.x) > 1e30f ||
+                std::fabs(v.y) > 1e30f)
+                diag_.fail(r.line, what + ": texture coordinates must be finite numbers");
+        }
+        return out;
+    }
+
+    // The "Cs" and "N" of a converted SubdivisionMesh (polygonColors_, polygonNormals_) on its patches: a
+    // colour for all or per control face becomes the patch's colour (a material per colour, addPrimitive);
+    // per-vertex ones the patches' PatchVertexValues: smooth ("vertex": the limit values at the patch
+    // corners, SubdivResult::patchVertexValues, colours first) or linear over each control face.
+    void subdivColorsAndNormals(const SubdivMesh& mesh, const SubdivResult& res, bool smoothCs,
+                                bool smoothN) {
+        using C = PolygonValues::Class;
+        const PolygonValues &cs = polygonColors_, &nv = polygonNormals_;
+        const size_t n = res.patches.size();
+        if (cs.given() && !cs.perCorner())
+            for (size_t i = 0; i < n; ++i)
+                shape_.colors.push_back(cs.v[cs.cls == C::Constant ? 0 : size_t(res.patchBaseFace[i])]);
+        if (!nv.given() && !cs.perCorner()) return;
+        // Corners (0,0) (1,0) (0,1) (1,1) of each patch.
+        auto corners = [&](const PolygonValues& values, bool smooth, size_t smoothIndex) {
+            std::vector<std::array<Vec3, 4>> out;
+            if (smooth) {
+                for (const std::array<Vec3, 4>& c : res.patchVertexValues[smoothIndex])
+                    out.push_back({c[0], c[1], c[3], c[2]});
+            } else if (values.perCorner()) {
+                out = faceLinearCorners(mesh, values.v, values.cls == C::FaceVarying, res);
+            } else {
+                for (size_t i = 0; i < n; ++i) {
+                    const Vec3 v = values.v[values.cls == C::Constant ? 0 : size_t(res.patchBaseFace[i])];
+                    out.push_back({v, v, v, v});
+                }
+            }
+            return out;
+        };
+        std::vector<std::array<Vec3, 4>> colorCorners, normalCorners;
+        if (cs.perCorner()) colorCorners = corners(cs, smoothCs, 0);
+        if (nv.given()) normalCorners = corners(nv, smoothN, smoothCs ? 1 : 0);
+        for (size_t i = 0; i < n; ++i) {
+            PatchVertexValues vv;
+            vv.hasCs = cs.perCorner();
+            vv.hasN = nv.given();
+            for (int k = 0; k < 4; ++k) {
+                if (vv.hasCs) vv.Cs[k] = colorCorners[i][size_t(k)];
+                if (vv.hasN) vv.N[k] = normalCorners[i][size_t(k)];
+            }
+            shape_.vertexValues.push_back(vv);
         }
     }
 
     // Extent in raster pixels of the projection of points (object space, the CTM at shutter open), 0 if
-    // some point is at or behind the eye: what subdivLevelFor() chooses a level from.
+    // some point is at or behind the eye: what subdivLevelFor() chooses a level from. In the image that
+    // will be rendered: the caller's resolution where it overrides the Format (the projection of the
+    // whole frame; a crop window does not change it).
     float rasterSize(const std::vector<Vec3>& points) const {
         const Mat4 toCamera = camera_.cameraFromWorld * state_.transform().at(camera_.shutterOpen);
         Bounds3 b;
         for (const Vec3& p : points) b.extend(toCamera.point(p));
+        Camera rendered = camera_;
+        if (rasterWidth_ > 0 && rasterHeight_ > 0)
+            rendered.width = rasterWidth_, rendered.height = rasterHeight_;
         float x0, x1, y0, y1;
-        if (points.empty() || !Projector(camera_).rasterBounds(b, x0, x1, y0, y1)) return 0.f;
+        if (points.empty() || !Projector(rendered).rasterBounds(b, x0, x1, y0, y1)) return 0.f;
         const float size = std::max(x1 - x0, y1 - y0);
         return std::isfinite(size) ? size : 0.f;
     }
@@ -1181,14 +1292,29 @@ class PrimitiveReader {
             for (const Tag& t : tags) words += " \"" + t.name + "\"";
             setTopology(words, topo);
         }
+        // "Cs" and "N" (RI spec 3.2, sec. 5): constant, uniform (one per control face), vertex (smooth:
+        // refined as P is), varying and facevarying (linear over each control face). PRMan's smooth
+        // "facevertex" is interpolated linearly too (warned). Read before positions(), which then does not
+        // warn about them.
+        readPolygonValues(ps, nverts.size(), npoints, verts.size(), "SubdivisionMesh");
+        auto classOf = [&](const std::string& name) {
+            std::string cls;
+            for (const Param& p : ps)
+                if (p.name == name && p.decl) cls = p.decl->cls;
+            return cls;
+        };
+        const bool smoothCs = polygonColors_.cls == PolygonValues::Class::Vertex && classOf("Cs") == "vertex";
+        const bool smoothN = polygonNormals_.cls == PolygonValues::Class::Vertex && classOf("N") == "vertex";
+        for (const char* name : {"Cs", "N"})
+            if (classOf(name) == "facevertex")
+                diag_.warnOnce(std::string("subdivfacevertex:") + name, r.line,
+                               std::string("SubdivisionMesh: \"") + name +
+                                   "\" of class facevertex is interpolated linearly over each face (as "
+                                   "facevarying)");
         auto pts = positions(r, ps, npoints, "SubdivisionMesh");
         if (!pts) return skip();
-        // s, t: "varying" (one per vertex) or "facevarying" (one per face corner); RenderMan interpolates
-        // both linearly over each face ("facevertex" and "vertex" would be smooth: not supported, warned).
-        bool stPerCorner = false;
-        for (const Param& p : ps)
-            if (isTexCoordParam(p.name) && p.decl) stPerCorner |= p.decl->cls == "facevarying";
-        const auto st = varyingTexCoords(r, ps, stPerCorner ? verts.size() : npoints, "SubdivisionMesh");
+        const auto st = readSubdivTexCoords(r, ps, npoints, verts.size());
+        SubdivSmoothTexCoords smoothST;
         mesh.points = std::move(*pts);
         mesh.faceSizes = std::move(nverts);
         mesh.faceVerts = std::move(verts);
@@ -1230,6 +1356,16 @@ class PrimitiveReader {
                                    "SubdivisionMesh: \"creasemethod\" needs the string \"normal\" or "
                                    "\"chaikin\", got \"" +
                                        method + "\"; the normal (uniform) rule is used");
+            } else if (t.name == "facevaryinginterpolateboundary") {
+                // PRMan: 0 linear, 1 sharp corners (the default), 2 smooth, 3 linear boundaries
+                // (FaceVaryingBoundary in subdiv_osd.h); only smooth ("facevertex") s, t use it.
+                const int mode = t.ints.empty() ? 1 : t.ints[0];
+                if (mode < 0 || mode > 3)
+                    diag_.fail(t.line,
+                               "SubdivisionMesh: \"facevaryinginterpolateboundary\" needs 0, 1, 2 or 3, "
+                               "got " +
+                                   std::to_string(mode));
+                smoothST.boundary = FaceVaryingBoundary(mode);
             } else if (t.name == "hole") {
                 for (int f : t.ints) {
                     if (f < 0 || size_t(f) >= mesh.faceSizes.size())
@@ -1247,13 +1383,34 @@ class PrimitiveReader {
             OsdSubdivOptions options;
             options.level = subdivLevel_;
             if (options.level < 0) options.rasterSize = rasterSize(mesh.points);
+            if (st && st->smooth) {
+                smoothST.perCorner = st->perCorner;
+                smoothST.values = st->values;
+                options.texCoords = &smoothST;
+            }
+            if (smoothCs) options.vertexValues.push_back(&polygonColors_.v);
+            if (smoothN) options.vertexValues.push_back(&polygonNormals_.v);
             res = subdivideOsd(mesh, options);
         } catch (const SubdivError& e) {
             diag_.fail(r.line, std::string("SubdivisionMesh: ") + e.what());
         }
         for (const std::string& w : res.warnings)
             diag_.warnOnce("subdivwarn:" + w, r.line, "SubdivisionMesh: " + w);
-        if (st) subdivTexCoords(mesh, *st, stPerCorner, res);
+        if (st && st->smooth) {
+            // The limit s, t at the patch corners, bilinear in between (PatchTexCoords holds 4 values).
+            for (const std::array<Vec2, 4>& c : res.patchST) {
+                PatchTexCoords tc;
+                tc.st[0] = c[0], tc.st[1] = c[1], tc.st[2] = c[3], tc.st[3] = c[2];
+                shape_.texCoords.push_back(tc);
+            }
+        } else if (st) {
+            for (const std::array<Vec2, 4>& c : faceLinearCorners(mesh, st->values, st->perCorner, res)) {
+                PatchTexCoords tc;
+                for (int k = 0; k < 4; ++k) tc.st[k] = c[size_t(k)];
+                shape_.texCoords.push_back(tc);
+            }
+        }
+        subdivColorsAndNormals(mesh, res, smoothCs, smoothN);
         shape_.subdivLevel = res.level;
         shape_.patches = std::move(res.patches);
     }
@@ -1264,6 +1421,7 @@ class PrimitiveReader {
     Diagnostics& diag_;
     const Camera& camera_;
     int subdivLevel_;
+    int rasterWidth_, rasterHeight_;
     PrimitiveShape shape_;
 };
 

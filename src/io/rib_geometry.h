@@ -22,6 +22,9 @@ struct PrimitiveContext {
     // SubdivisionMesh: the refinement level to use (deformation keys after the first take the first's, so
     // all keys have the same patches); -1: from the mesh's size on screen.
     int subdivLevel = -1;
+    // The raster size the image will be rendered at when the caller overrides the Format (RasterOverride in
+    // rib_reader.h); 0: the camera's own. What the automatic subdivision level is chosen for.
+    int rasterWidth = 0, rasterHeight = 0;
 };
 
 // The object-space Bezier patches of one primitive request, before the CTM is applied: what a motion

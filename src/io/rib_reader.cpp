@@ -42,8 +42,9 @@ class RibReader {
   public:
     // frameOrdinal: which FrameBegin block to load (0 = the first); nullopt: the first, warning that
     // later frames are ignored.
-    RibReader(Scene& scene, const WarningSink& warn, std::optional<int> frameOrdinal = std::nullopt)
-        : scene_(scene), diag_(warn), frameOrdinal_(frameOrdinal) {
+    RibReader(Scene& scene, const WarningSink& warn, std::optional<int> frameOrdinal = std::nullopt,
+              RasterOverride raster = {})
+        : scene_(scene), diag_(warn), frameOrdinal_(frameOrdinal), raster_(raster) {
         declareShaderParams(decls_);
     }
 
@@ -1121,7 +1122,13 @@ class RibReader {
     // ---- geometry (RI spec 3.2, sec. 5; rib_geometry.h) ----------------------------------------
     PrimitiveContext primitiveContext() {
         state_.primitiveObject(scene_.objectCount);
-        return {scene_, state_, decls_, diag_};
+        return {scene_,
+                state_,
+                decls_,
+                diag_,
+                -1,
+                raster_.given() ? raster_.width : 0,
+                raster_.given() ? raster_.height : 0};
     }
     void primitive(const Request& r, const Arguments&) {
         std::vector<PrimitiveShape> shape;
@@ -1612,8 +1619,9 @@ class RibReader {
     std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;
     std::optional<int> frameOrdinal_;
-    int archiveDepth_ = 0;                // ReadArchive nesting of the file being read
-    std::optional<Definition> defining_;  // the open ObjectBegin
+    RasterOverride raster_;  // the resolution the caller will render at (subdivision levels), if given
+    int archiveDepth_ = 0;   // ReadArchive nesting of the file being read
+    std::optional<Definition> defining_;                                    // the open ObjectBegin
     std::map<std::string, std::shared_ptr<const RetainedObject>> objects_;  // by handle
     int instanceDepth_ = 0;
     // Option "searchpath" "texture" and "archive" (empty: the directory of the file that names the texture
@@ -1623,15 +1631,16 @@ class RibReader {
 
 }  // namespace
 
-void readRib(const std::string& path, Scene& scene, const WarningSink& warn) {
+void readRib(const std::string& path, Scene& scene, const WarningSink& warn, RasterOverride raster) {
     scene.sourcePath = path;
-    RibReader reader(scene, warn);
+    RibReader reader(scene, warn, std::nullopt, raster);
     reader.run(path);
 }
 
-void readRibFrame(const std::string& path, int frameOrdinal, Scene& scene, const WarningSink& warn) {
+void readRibFrame(const std::string& path, int frameOrdinal, Scene& scene, const WarningSink& warn,
+                  RasterOverride raster) {
     scene.sourcePath = path;
-    RibReader reader(scene, warn, frameOrdinal);
+    RibReader reader(scene, warn, frameOrdinal, raster);
     reader.run(path);
 }
 
@@ -1647,9 +1656,10 @@ std::vector<RibFrame> ribFrames(const std::string& path) {
     return frames;
 }
 
-void readRibText(std::string text, const std::string& path, Scene& scene, const WarningSink& warn) {
+void readRibText(std::string text, const std::string& path, Scene& scene, const WarningSink& warn,
+                 RasterOverride raster) {
     scene.sourcePath = path;
-    RibReader reader(scene, warn);
+    RibReader reader(scene, warn, std::nullopt, raster);
     reader.runText(std::move(text), path);
 }
 

@@ -107,9 +107,9 @@ SceneFormat detectSceneFormat(const std::string& path) {
     return SceneFormat::Rib;
 }
 
-Scene loadRib(const std::string& path, const WarningSink& warn) {
+Scene loadRib(const std::string& path, const WarningSink& warn, RasterOverride raster) {
     Scene scene;
-    readRib(path, scene, warn);
+    readRib(path, scene, warn, raster);
     return scene;
 }
 
@@ -132,7 +132,7 @@ Scene loadMicropolis(const std::string& path, const WarningSink& /*warn*/, std::
 }
 
 Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format,
-                std::optional<UpAxis> up) {
+                std::optional<UpAxis> up, RasterOverride raster) {
     if (format == SceneFormat::Auto) format = detectSceneFormat(path);
     switch (format) {
         case SceneFormat::Bpt:
@@ -143,7 +143,7 @@ Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat fo
             return loadMicropolis(path, warn, up);
         default:
             // The RIB reader itself inflates gzip input by its magic bytes.
-            return loadRib(path, warn);
+            return loadRib(path, warn, raster);
     }
 }
 

@@ -6,6 +6,7 @@
 #include <string_view>
 
 #include "io/diagnostics.h"
+#include "io/rib_reader.h"
 #include "scene/scene.h"
 
 namespace tessera {
@@ -27,10 +28,12 @@ UpAxis defaultUpAxis(SceneFormat format, const std::vector<BezierPatch>& patches
 // Load a scene. Throws InputError (diagnostics.h) with "file:line: error: what" for malformed input;
 // warnings go to `warn`. Inputs without a camera (.bpt, OBJ, Micropolis) are framed automatically
 // (frameSceneDefault with `up`, else defaultUpAxis) and get default lights and a plastic material; `up` is
-// ignored for RIB, which has its own camera. `format` overrides the detection.
+// ignored for RIB, which has its own camera. `format` overrides the detection. `raster`: the resolution the
+// caller will render at where it overrides the RIB Format (what subdivision meshes are refined for,
+// RasterOverride in rib_reader.h); the other formats convert without a camera and ignore it.
 Scene loadScene(const std::string& path, const WarningSink& warn, SceneFormat format = SceneFormat::Auto,
-                std::optional<UpAxis> up = std::nullopt);
-Scene loadRib(const std::string& path, const WarningSink& warn);
+                std::optional<UpAxis> up = std::nullopt, RasterOverride raster = {});
+Scene loadRib(const std::string& path, const WarningSink& warn, RasterOverride raster = {});
 Scene loadBpt(const std::string& path, const WarningSink& warn, std::optional<UpAxis> up = std::nullopt);
 Scene loadObj(const std::string& path, const WarningSink& warn, std::optional<UpAxis> up = std::nullopt);
 Scene loadMicropolis(const std::string& path, const WarningSink& warn,

@@ -8,7 +8,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <string>
+#include <tuple>
 #include <unordered_set>
 #include <vector>
 
@@ -32,11 +34,36 @@ struct P3 {
     }
 };
 
+// Texture coordinates for Far::PrimvarRefinerReal<double>.
+struct P2 {
+    double x = 0, y = 0;
+    void Clear() { x = y = 0; }
+    void AddWithWeight(const P2& p, double w) {
+        x += w * p.x;
+        y += w * p.y;
+    }
+};
+
+Sdc::Options::FVarLinearInterpolation fvarInterpolation(FaceVaryingBoundary b) {
+    switch (b) {
+        case FaceVaryingBoundary::LinearAll:
+            return Sdc::Options::FVAR_LINEAR_ALL;
+        case FaceVaryingBoundary::Smooth:
+            return Sdc::Options::FVAR_LINEAR_NONE;
+        case FaceVaryingBoundary::LinearBoundaries:
+            return Sdc::Options::FVAR_LINEAR_BOUNDARIES;
+        default:
+            return Sdc::Options::FVAR_LINEAR_CORNERS_PLUS1;
+    }
+}
+
 // RenderMan's rules in OpenSubdiv's terms. Crease method: uniform (OpenSubdiv's default, which is PRMan's
 // default "normal" creasing) or Chaikin (PRMan's opt-in tag "creasemethod" "chaikin"). Triangles:
 // Catmull-Clark's own rule (TRI_SUB_CATMARK), as PRMan does.
-Sdc::Options sdcOptions(BoundaryMode mode, bool chaikin) {
+Sdc::Options sdcOptions(BoundaryMode mode, bool chaikin,
+                        FaceVaryingBoundary fvar = FaceVaryingBoundary::CornersPlus1) {
     Sdc::Options o;
+    o.SetFVarLinearInterpolation(fvarInterpolation(fvar));
     o.SetVtxBoundaryInterpolation(mode == BoundaryMode::None
                                       ? Sdc::Options::VTX_BOUNDARY_NONE
                                       : (mode == BoundaryMode::EdgesOnly
@@ -57,6 +84,10 @@ float osdSharpness(float s) {
 struct Topology {
     std::vector<int> faceSizes, faceVerts, creasePairs, cornerVerts, holes;
     std::vector<float> creaseWeights, cornerWeights;
+    // One face-varying channel (smooth "facevertex" texture coordinates): a value index per face corner.
+    std::vector<int> fvarIndices;
+    int fvarValues = 0;
+    FaceVaryingBoundary fvarBoundary = FaceVaryingBoundary::CornersPlus1;
 };
 
 std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, BoundaryMode mode, bool chaikin) {
@@ -73,8 +104,15 @@ std::unique_ptr<Refiner> makeRefiner(int numVertices, const Topology& t, Boundar
     d.cornerWeights = t.cornerWeights.data();
     d.numHoles = int(t.holes.size());
     d.holeIndices = t.holes.data();
+    Far::TopologyDescriptor::FVarChannel channel;
+    if (!t.fvarIndices.empty()) {
+        channel.numValues = t.fvarValues;
+        channel.valueIndices = t.fvarIndices.data();
+        d.numFVarChannels = 1;
+        d.fvarChannels = &channel;
+    }
     std::unique_ptr<Refiner> r(
-        Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode, chaikin))));
+        Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, sdcOptions(mode, chaikin, t.fvarBoundary))));
     if (!r) throw SubdivError("OpenSubdiv could not build the mesh's topology");
     return r;
 }
@@ -275,7 +313,38 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
     // 1. Uniform refinement of the control mesh.
     SubdivResult out;
     out.level = level;
-    const Topology topo = topologyOf(mesh, &out.warnings);
+    Topology topo = topologyOf(mesh, &out.warnings);
+    const SubdivSmoothTexCoords* smoothST = options.texCoords;
+    std::vector<P2> st;  // at the current level: per vertex, or per face-varying value
+    if (smoothST) {
+        const size_t want = smoothST->perCorner ? mesh.faceVerts.size() : mesh.points.size();
+        if (smoothST->values.size() != want)
+            throw SubdivError(std::to_string(smoothST->values.size()) + " texture coordinates for " +
+                              std::to_string(want) + (smoothST->perCorner ? " face corners" : " vertices"));
+        if (smoothST->perCorner) {
+            // Corners at one vertex with equal values share a value (continuous there); different values
+            // at a vertex are a seam (OpenSubdiv joins corners by value index).
+            std::map<std::tuple<int, float, float>, int> valueOf;
+            topo.fvarBoundary = smoothST->boundary;
+            for (size_t k = 0; k < mesh.faceVerts.size(); ++k) {
+                const Vec2 v = smoothST->values[k];
+                auto [it, added] = valueOf.try_emplace({mesh.faceVerts[k], v.x, v.y}, int(st.size()));
+                if (added) st.push_back({v.x, v.y});
+                topo.fvarIndices.push_back(it->second);
+            }
+            topo.fvarValues = int(st.size());
+        } else {
+            for (const Vec2& v : smoothST->values) st.push_back({v.x, v.y});
+        }
+    }
+    std::vector<std::vector<P3>> values3;  // options.vertexValues at the current level
+    for (const std::vector<Vec3>* v : options.vertexValues) {
+        if (!v || v->size() != mesh.points.size())
+            throw SubdivError(std::to_string(v ? v->size() : 0) + " vertex values for " +
+                              std::to_string(mesh.points.size()) + " vertices");
+        values3.emplace_back();
+        for (const Vec3& x : *v) values3.back().push_back({x.x, x.y, x.z});
+    }
     std::unique_ptr<Refiner> A =
         makeRefiner(int(mesh.points.size()), topo, mesh.boundary, mesh.chaikinCreases);
     const std::vector<char> rendered0 = renderedFaces(mesh, *A);
@@ -304,6 +373,22 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
         std::vector<P3> next(size_t(A->GetLevel(l).GetNumVertices()));
         primvar.Interpolate(l, pts, next);
         pts.swap(next);
+        for (std::vector<P3>& v : values3) {
+            std::vector<P3> nextValues(pts.size());
+            primvar.Interpolate(l, v, nextValues);
+            v.swap(nextValues);
+        }
+        if (smoothST) {
+            std::vector<P2> nextST;
+            if (smoothST->perCorner) {
+                nextST.resize(size_t(A->GetLevel(l).GetNumFVarValues(0)));
+                primvar.InterpolateFaceVarying(l, st, nextST, 0);
+            } else {
+                nextST.resize(pts.size());
+                primvar.Interpolate(l, st, nextST);
+            }
+            st.swap(nextST);
+        }
         const Far::TopologyLevel& P = A->GetLevel(l - 1);
         const Far::TopologyLevel& C = A->GetLevel(l);
         std::vector<Place> childPlace(size_t(C.GetNumFaces()));
@@ -350,6 +435,25 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
         }
         place.swap(childPlace);
     }
+
+    // Smooth texture coordinates at the limit of every vertex (face-varying value) of the last level: the
+    // patch corners' s, t (vertex ones are the same affine combinations of the control values as the
+    // limit position is of the control points).
+    std::vector<P2> limitST;
+    if (smoothST) {
+        limitST.resize(st.size());
+        if (smoothST->perCorner)
+            primvar.LimitFaceVarying(st, limitST, 0);
+        else
+            primvar.Limit(st, limitST);
+    }
+
+    std::vector<std::vector<P3>> limitValues3;
+    for (const std::vector<P3>& v : values3) {
+        limitValues3.emplace_back(v.size());
+        primvar.Limit(v, limitValues3.back());
+    }
+    out.patchVertexValues.resize(values3.size());
 
     // 2. The refined level as the base of a second refiner, with the sharpness left at that level.
     const Far::TopologyLevel& L = A->GetLevel(level);
@@ -520,6 +624,25 @@ SubdivResult subdivideOsd(const SubdivMesh& mesh, const OsdSubdivOptions& option
         out.patchBaseFace.push_back(uint32_t(pl.base));
         out.patchSubFace.push_back(pl.sub);
         out.patchUV.push_back(pl.uv);
+        if (smoothST) {
+            // Patch corner c is face vertex c (Bfr's quad parameterization).
+            std::array<Vec2, 4> corners;
+            const auto fv = L.GetFaceVertices(f);
+            for (int c = 0; c < 4; ++c) {
+                const P2& v = limitST[size_t(smoothST->perCorner ? L.GetFaceFVarValues(f, 0)[c] : fv[c])];
+                corners[size_t(c)] = {float(v.x), float(v.y)};
+            }
+            out.patchST.push_back(corners);
+        }
+        for (size_t k = 0; k < limitValues3.size(); ++k) {
+            std::array<Vec3, 4> corners;
+            const auto fv = L.GetFaceVertices(f);
+            for (int c = 0; c < 4; ++c) {
+                const P3& v = limitValues3[k][size_t(fv[c])];
+                corners[size_t(c)] = {float(v.x), float(v.y), float(v.z)};
+            }
+            out.patchVertexValues[k].push_back(corners);
+        }
     }
 
     // 3. Shared boundary curves: every vertex and every edge's inner points from one patch (a regular one

@@ -30,12 +30,37 @@ namespace tessera {
 constexpr int kDefaultSubdivLevel = 2;
 constexpr int kMaxSubdivLevel = 5;
 
+// How a face-varying channel is interpolated at its boundaries and seams: PRMan's SubdivisionMesh tag
+// "facevaryinginterpolateboundary" 0..3, with the meaning USD's usdRi gives those values in OpenSubdiv's
+// terms (Sdc::Options::FVarLinearInterpolation): 0 linear everywhere (FVAR_LINEAR_ALL: bilinear over each
+// face, like "facevarying"), 1 smooth with sharp corners, propagated one face (FVAR_LINEAR_CORNERS_PLUS1,
+// PRMan's default), 2 smooth everywhere, seams included (FVAR_LINEAR_NONE), 3 smooth inside, linear along
+// boundaries and seams (FVAR_LINEAR_BOUNDARIES).
+enum class FaceVaryingBoundary { LinearAll = 0, CornersPlus1 = 1, Smooth = 2, LinearBoundaries = 3 };
+
+// Texture coordinates that follow the surface smoothly: RI "vertex" s, t (one per control point, refined
+// with the vertex rules as P is) or PRMan "facevertex" s, t (one per face corner: a face-varying channel
+// refined with the smooth rules; the corners at a vertex that have equal values are joined, different values
+// make a seam).
+struct SubdivSmoothTexCoords {
+    bool perCorner = false;  // facevertex (one per entry of SubdivMesh::faceVerts), else vertex
+    std::vector<Vec2> values;
+    FaceVaryingBoundary boundary = FaceVaryingBoundary::CornersPlus1;  // facevertex only
+};
+
 struct OsdSubdivOptions {
     // Uniform refinement level 1..kMaxSubdivLevel; -1 (automatic): subdivLevelFor(mesh, rasterSize).
     int level = -1;
     // Extent in raster pixels of the mesh's projection (the larger side of its bounding rectangle); 0 when
     // not known (no camera at conversion).
     float rasterSize = 0.f;
+    // Smooth texture coordinates to carry to SubdivResult::patchST (the limit values at every patch
+    // corner); nullptr: none. Validated: a wrong count is a SubdivError.
+    const SubdivSmoothTexCoords* texCoords = nullptr;
+    // Values per control point refined with the vertex rules, as P is (RI "vertex" Cs and N): their limit
+    // values at every patch corner go to SubdivResult::patchVertexValues, in this order. Each needs one
+    // value per point (else SubdivError).
+    std::vector<const std::vector<Vec3>*> vertexValues;
 };
 
 // The automatic level: from the screen size, about 8 pixels or less per refined face edge, level 2..4

@@ -235,3 +235,30 @@ def test_frames_of_a_multi_frame_rib(tmp_path):
     assert tessera.load(rib, frame=7).width == 48
     with pytest.raises(ValueError, match="no FrameBegin 5"):
         tessera.load(rib, frame=5)
+
+
+CUBE = """Format 200 200 1
+Projection "perspective" "fov" 40
+Translate 0 0 30
+WorldBegin
+LightSource "ambientlight" 1
+SubdivisionMesh "catmull-clark" [4 4 4 4 4 4] [0 3 2 1 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]
+  "P" [-1 -1 -1 1 -1 -1 1 1 -1 -1 1 -1 -1 -1 1 1 -1 1 1 1 1 -1 1 1]
+WorldEnd
+"""
+
+
+def test_res_at_load_chooses_the_subdivision_level(tmp_path):
+    # A SubdivisionMesh is refined for its size in the image rendered (docs/subdivision.md): level 2
+    # (6 x 16 patches) at the file's 200 x 200, level 3 (6 x 64) loaded for 1600 x 1600, as the CLI's --res.
+    path = tmp_path / "cube.rib"
+    path.write_text(CUBE)
+    assert tessera.load(path).surfaces == 96
+    big = tessera.load(path, res=(1600, 1600))
+    assert big.surfaces == 384 and big.width == 1600 and big.height == 1600
+    assert tessera.load(path, res="1600x1600").surfaces == 384
+    assert tessera.load_rib(CUBE, res=(1600, 1600)).surfaces == 384
+    # render(path, res=...) loads for that size
+    assert tessera.render(path, res=(1600, 1600), crop=(0.45, 0.55, 0.45, 0.55)).stats["patches_in"] == 384
+    with pytest.raises(ValueError):
+        tessera.load(path, res=(0, 5))
