@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Writes the multi-object benchmark scenes of scenes/ (run from the repository root):
-killeroo2.rib (2 killeroos), bigguy9.rib / bigguy24.rib (3x3 and 6x4 grids of the 3570-patch Big Guy) and
+killeroo2.rib (2 killeroos), bigguy9.rib / bigguy24.rib (3x3 and 6x4 grids of the 3570-patch Big Guy;
+bigguy24_instanced.rib: the same with ObjectInstance) and
 bigguy_box.rib (Big Guy in a five-walled box, for the lighting work to come) and smooth_polygons.rib
 (polygons with per-vertex normals and colours)."""
 import math
@@ -50,18 +51,24 @@ Attribute "light" "shadows" [ "off" ]  # fill lights do not
 LightSource "distantlight" 3 "intensity" [ 0.3 ] "lightcolor" [ 0.8 0.88 1 ] "from" [ -14 2 6 ] "to" [ 0 0 0 ]
 """
 
-def bigguy_grid(name, cols, rows):
+def bigguy_grid(name, cols, rows, instanced=False):
+    """instanced: the Big Guy is one object (ObjectBegin) and each cell an ObjectInstance of it, the same
+    scene as the ReadArchive copies (the ray tracer shares the instances' subpatch trees, docs/rt.md)."""
     body = LIGHTS_Y_UP + 'Surface "plastic" "Ka" [ 1 ] "Kd" [ 0.8 ] "Ks" [ 0.35 ] "roughness" [ 0.15 ]\n'
+    if instanced:
+        body += 'ObjectBegin "bigguy"\nReadArchive "archives/bigguy_patches.rib"\nObjectEnd\n'
+    place = 'ObjectInstance "bigguy"' if instanced else 'ReadArchive "archives/bigguy_patches.rib"'
     sx, sz = 6.5, 6.5
     for r in range(rows):
         for c in range(cols):
             x, z = (c - (cols - 1) / 2) * sx, (r - (rows - 1) / 2) * sz
             hue = (0.55 + 0.3 * ((r * cols + c) % 3) / 2, 0.6, 0.5 + 0.2 * (c % 2))
             body += (f"AttributeBegin\nTranslate {x:g} 0 {z:g}\nColor [ {hue[0]:.3g} {hue[1]:.3g} {hue[2]:.3g} ]\n"
-                     'ReadArchive "archives/bigguy_patches.rib"\nAttributeEnd\n')
+                     f"{place}\nAttributeEnd\n")
     extent = max(cols * sx, rows * sz)
     eye = [0.3 * extent, 0.45 * extent, 1.3 * extent]
-    write(name, f"{cols * rows} Big Guys ({cols * rows * 3570} bicubic patches) on a {cols}x{rows} grid",
+    write(name, f"{cols * rows} Big Guys ({cols * rows * 3570} bicubic patches) on a {cols}x{rows} grid" +
+          (", instances of one object" if instanced else ""),
           1024, 768, 42, eye, [0, -1, 0], [0, 1, 0], 0.5, 1000, body)
 
 def killeroo2():
@@ -171,6 +178,7 @@ Polygon "P" [ -4 -1 -1.5  4 -1 -1.5  4 -1 3  -4 -1 3 ]
 if __name__ == "__main__":
     bigguy_grid("bigguy9", 3, 3)
     bigguy_grid("bigguy24", 6, 4)
+    bigguy_grid("bigguy24_instanced", 6, 4, instanced=True)
     killeroo2()
     bigguy_box()
     bigguy_box(glossy=True)

@@ -54,12 +54,16 @@ void expectSameScene(const Scene& a, const Scene& b) {
     ASSERT_EQ(a.quadrics.size(), b.quadrics.size());
 }
 
+// `a` has the instances, `b` the geometry written out. Bit for bit, with the ray tracer's instancing off
+// (with it, the instances' patches test their prototype's boxes with the ray moved into its frame, which
+// rounds differently: tests/test_rt_instancing.cpp compares those images to a tolerance).
 void expectSameImages(const Scene& a, const Scene& b) {
     for (const char* engine : {"reyes", "rt"}) {
         SCOPED_TRACE(engine);
         RenderSettings rs;
         rs.engine = engine;
         rs.threads = 2;
+        rs.instancing = false;
         const Image ia = render(a, rs).image, ib = render(b, rs).image;
         ASSERT_EQ(ia.width, ib.width);
         double covered = 0;
@@ -106,6 +110,28 @@ TEST(RibObjects, HandlesAndNesting) {
     for (const SceneQuadric& q : l.scene.quadrics) EXPECT_EQ(q.q.kind, QuadricKind::Sphere);
     EXPECT_FLOAT_EQ(l.scene.quadrics[1].worldFromObject.point({0, 0, 0}).z,
                     l.scene.quadrics[0].worldFromObject.point({0, 0, 0}).z + 1.f);
+}
+
+TEST(RibObjects, InstancesAreRecordedForTheEngines) {
+    // Per top-level ObjectInstance: its surfaces, its object and its placement (Scene::instances); one nested
+    // in a definition is part of the outer copy, and an instance under a moving transform is not recorded.
+    Loaded l =
+        load(sceneWith("ObjectBegin 1\nPatch \"bilinear\" \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\nObjectEnd\n"
+                       "ObjectBegin \"two\"\nObjectInstance 1\nDisk 0 1 360\nObjectEnd\n"
+                       "ObjectInstance \"two\"\nAttributeBegin\nTranslate 0 0 3\nObjectInstance 1\n"
+                       "AttributeEnd\nAttributeBegin\nMotionBegin [0 1]\nTranslate 0 0 0\n"
+                       "Translate 1 0 0\nMotionEnd\nObjectInstance 1\nAttributeEnd\n",
+                       "Shutter 0 1\n"));
+    ASSERT_EQ(l.scene.instances.size(), 2u);
+    const SurfaceInstance &a = l.scene.instances[0], &b = l.scene.instances[1];
+    EXPECT_EQ(a.first, 0u);
+    EXPECT_EQ(a.count, 2u);  // the nested patch and the disk
+    EXPECT_EQ(b.first, 2u);
+    EXPECT_EQ(b.count, 1u);
+    EXPECT_NE(a.object, b.object);
+    EXPECT_EQ(l.scene.patches.size(), 4u);  // and the moving patch, a plain copy
+    EXPECT_FLOAT_EQ(b.objectToWorld.point({0, 0, 0}).z, 3.f);
+    EXPECT_FLOAT_EQ(a.objectToWorld.point({0, 0, 0}).z, 0.f);
 }
 
 TEST(RibObjects, BadInputFailsNamingTheLine) {

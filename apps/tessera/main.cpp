@@ -1106,6 +1106,9 @@ int main(int argc, char** argv) {
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,
                      "rt: per-ray traversal for camera and shadow rays (no binning; same image)");
+    render->add_flag("--no-instancing", ra.noInstancing,
+                     "rt: every ObjectInstance builds its own subpatch trees (no sharing; same image to "
+                     "rounding)");
     render->add_option("--shutter", ra.shutter,
                        "Shutter interval OPEN,CLOSE in scene time (overrides the RIB Shutter; motion keys "
                        "outside it are clamped)");

@@ -143,6 +143,9 @@ struct RenderSettings {
     // of one traversal per ray (same candidates); the renderer uses it where it pays (few subpatch leaves
     // per sample). Off: always per ray (tests, benchmarks).
     bool rayBinning = true;
+    // rt: the surfaces of RIB ObjectInstances of one object share the first instance's subpatch trees (rays
+    // are moved into its frame); off: every instance builds its own (tests, benchmarks).
+    bool instancing = true;
     ShadowOverride shadows = ShadowOverride::Scene;
     ReyesShadows reyesShadows = ReyesShadows::Map;
     // Reyes shadow maps shared by the processes of a farm (--shadow-map-cache, reyes/shadow_maps.h): a

@@ -1347,6 +1347,7 @@ class RibReader {
     struct RetainedObject {
         std::string file;
         int line = 0;
+        uint32_t id = 0;  // SurfaceInstance::object
         std::vector<RecordedRequest> requests;
     };
     struct Definition {
@@ -1376,6 +1377,7 @@ class RibReader {
         d.object = std::make_shared<RetainedObject>();
         d.object->file = diag_.file();
         d.object->line = r.line;
+        d.object->id = objectDefinitions_++;
         d.archiveDepth = archiveDepth_;
         defining_ = std::move(d);
     }
@@ -1461,7 +1463,17 @@ class RibReader {
     }
     void objectInstance(const Request& r, const Arguments&) {
         if (!state_.inWorld()) diag_.fail(r.line, "ObjectInstance outside WorldBegin/WorldEnd");
-        instantiate(*findObject(r), r);
+        const std::shared_ptr<const RetainedObject> object = findObject(r);
+        // Record which surfaces the instance made and where it stands, so that an engine can share
+        // structures between the instances of one object (a moving instance is a plain copy).
+        const bool record = instanceDepth_ == 0 && !state_.transform().moving();
+        SurfaceInstance placed;
+        placed.first = uint32_t(scene_.patches.size());
+        placed.object = object->id;
+        if (record) placed.objectToWorld = state_.transform().at(0.0);
+        instantiate(*object, r);
+        placed.count = uint32_t(scene_.patches.size() - placed.first);
+        if (record && placed.count > 0) scene_.instances.push_back(placed);
     }
     void instantiate(const RetainedObject& object, const Request& at) {
         if (instanceDepth_ + 1 > kMaxArchiveDepth)
@@ -1623,6 +1635,7 @@ class RibReader {
     int archiveDepth_ = 0;   // ReadArchive nesting of the file being read
     std::optional<Definition> defining_;                                    // the open ObjectBegin
     std::map<std::string, std::shared_ptr<const RetainedObject>> objects_;  // by handle
+    uint32_t objectDefinitions_ = 0;
     int instanceDepth_ = 0;
     // Option "searchpath" "texture" and "archive" (empty: the directory of the file that names the texture
     // or the archive); "shader" (kept, unused).

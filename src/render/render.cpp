@@ -33,7 +33,7 @@ RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSet
         displacement.dicer = makeReyesDisplacedDicer(scene, settings, FrameSetup(scene, settings));
     displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
     buildRtAccel(scene, viewCamera(scene, settings).cameraFromWorld, settings.subpatchDepth, false, acc,
-                 nullptr, kDefaultTimeSlabs, &displacement);
+                 nullptr, kDefaultTimeSlabs, &displacement, settings.instancing);
     const double buildMs = msSince(t0);
     // Per-ray traversal: a grid's lists of shadow rays are too short for the shadow binning to pay.
     const RayTracedVisibility visibility(acc, rt::TraceServiceOptions{false, false});

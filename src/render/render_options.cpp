@@ -124,6 +124,7 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     s.lightSamples = o.lightSamples;
     s.cullBackfaces = o.cullBackfaces;
     s.rayBinning = !o.noRayBinning;
+    s.instancing = !o.noInstancing;
     s.maxGridEdge = o.maxGridEdge;
     const std::string mpSampling =
         !o.micropolygonSampling.empty() ? o.micropolygonSampling : scene.image.micropolygonSampling;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <map>
 
 namespace tessera {
 namespace {
@@ -70,11 +71,83 @@ void buildPatchBvh(size_t n, PatchBox&& patchBox, Bvh& bvh, Bounds3* all) {
     for (uint32_t& p : bvh.prims) p = ids[p];
     collapseBvh4(bvh, boxes);
 }
+
+Affine3 affineOf(const Mat4& m) {
+    Affine3 a;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 4; ++c) a.m[r][c] = float(m.m[r][c]);
+    return a;
+}
+
+// Instancing: which patches of Scene::instances can use the subpatch tree of the same patch of their
+// object's first instance (the prototype). A patch qualifies when both it and its prototype patch are
+// static, undisplaced bicubic patches and its control points (in the accel's space) are the prototype's
+// moved by the instance's placement to within a fraction of the leaf boxes' margin (enlargedHull), so the
+// prototype's boxes, tested with the ray in the prototype's frame, hold it. Anything else (a Basis or
+// displacement that differs per instance, a count that differs) keeps its own tree. Sets acc.placementOf,
+// acc.placements and, per shared patch, its prototype patch in `protoPatch`.
+void findSharedPatches(const Scene& scene, const Mat4& toSpace, const RtDisplacementOptions* displacement,
+                       RtAccel& acc, std::vector<uint32_t>& protoPatch) {
+    const size_t n = acc.patches.size();
+    const DisplacedDicer* dicer = displacement ? displacement->dicer.get() : nullptr;
+    auto eligible = [&](uint32_t i) {
+        return scene.attributes[i].kind == SurfaceKind::BicubicBezier && !(dicer && dicer->displaced(i));
+    };
+    const Mat4 fromSpace = toSpace.inverse();
+    std::map<uint32_t, size_t> prototypeOf;  // object -> its first instance
+    acc.placementOf.assign(n, RtAccel::kOwnTree);
+    protoPatch.assign(n, RtAccel::kOwnTree);
+    for (size_t k = 0; k < scene.instances.size(); ++k) {
+        const SurfaceInstance& in = scene.instances[k];
+        if (size_t(in.first) + in.count > n) continue;
+        const auto [it, first] = prototypeOf.emplace(in.object, k);
+        if (first) continue;
+        const SurfaceInstance& proto = scene.instances[it->second];
+        if (proto.count != in.count) continue;
+        const Mat4 place = toSpace * in.objectToWorld * proto.objectToWorld.inverse() * fromSpace;
+        const double det = place.det3();
+        bool affine = std::isfinite(det) && std::fabs(det) > 1e-12;
+        for (int c = 0; c < 3; ++c) affine = affine && std::fabs(place.m[3][c]) < 1e-9;
+        if (!affine || std::fabs(place.m[3][3] - 1.0) > 1e-9) continue;
+        uint32_t placement = RtAccel::kOwnTree;
+        for (uint32_t j = 0; j < in.count; ++j) {
+            const uint32_t i = in.first + j, q = proto.first + j;
+            if (!eligible(i) || !eligible(q) || protoPatch[q] != RtAccel::kOwnTree) continue;
+            const BezierPatch& mine = acc.patches[i];
+            const Bounds3 hull = hullBounds(mine);
+            float mag = 0.f;
+            for (int a = 0; a < 3; ++a) mag = std::max({mag, std::fabs(hull.lo[a]), std::fabs(hull.hi[a])});
+            const float tol = 1e-6f * maxComponent(hull.diagonal()) + 2e-7f * mag;
+            bool same = true;
+            for (int c = 0; c < 16 && same; ++c) {
+                const Vec3 moved = place.point(acc.patches[q].cp[c]), d = moved - mine.cp[c];
+                same = std::max({std::fabs(d.x), std::fabs(d.y), std::fabs(d.z)}) <= tol;
+            }
+            if (!same) continue;
+            if (placement == RtAccel::kOwnTree) {
+                placement = uint32_t(acc.placements.size());
+                acc.placements.push_back({affineOf(place.inverse()), affineOf(place)});
+            }
+            acc.placementOf[i] = placement;
+            protoPatch[i] = q;
+        }
+    }
+    if (acc.placements.empty()) acc.placementOf.clear(), protoPatch.clear();
+}
+
+// The box of `b` moved by an affine map (its eight corners').
+Bounds3 placedBox(const Affine3& a, const Bounds3& b) {
+    Bounds3 r;
+    for (int c = 0; c < 8; ++c)
+        r.extend(
+            affinePoint(a, Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z}));
+    return r;
+}
 }  // namespace
 
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs,
-                  const RtDisplacementOptions* displacement) {
+                  const RtDisplacementOptions* displacement, bool instancing) {
     const size_t n = scene.patches.size();
     acc.motion = motion && motion->blurred() ? *motion : FrameMotion();
     acc.movingPatches = 0;
@@ -128,9 +201,35 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         for (size_t i = 0; i < n; ++i) acc.vertexValuesOf[i] = scene.attributes[i].vertexValues;
     }
     auto t0 = Clock::now();
-    buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
-                        acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,
-                        quadricPtr);
+    // Instancing: the patches that share a prototype's tree, and the trees to build (the other patches').
+    acc.treeOf.clear(), acc.placementOf.clear(), acc.placements.clear(), acc.sharedRoot.clear();
+    acc.sharedPatches = 0;
+    std::vector<uint32_t> protoPatch;
+    if (instancing && !cullFromOrigin && acc.movingPatches == 0 && !scene.instances.empty())
+        findSharedPatches(scene, toSpace, displacement, acc, protoPatch);
+    if (acc.instanced()) {
+        std::vector<BezierPatch> treePatches;
+        std::vector<uint8_t> treeFlip;
+        std::vector<const PlacedQuadric*> treeQuadric;
+        acc.treeOf.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            if (protoPatch[i] != RtAccel::kOwnTree) {  // the prototype comes first, so its tree is known
+                acc.treeOf[i] = acc.treeOf[protoPatch[i]];
+                ++acc.sharedPatches;
+                continue;
+            }
+            acc.treeOf[i] = uint32_t(treePatches.size());
+            treePatches.push_back(acc.patches[i]);
+            treeFlip.push_back(acc.flip[i]);
+            if (!quadricPtr.empty()) treeQuadric.push_back(quadricPtr[i]);
+        }
+        buildSubpatchForest(treePatches, subpatchDepth, acc.forest, false, treeFlip, nullptr, maxTimeSlabs,
+                            kTimeSlabBudgetBytes, treeQuadric);
+    } else {
+        buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
+                            acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,
+                            quadricPtr);
+    }
     acc.subpatchMs = msSince(t0);
     // Displaced patches: their micro-grids (now or lazily) and their subpatch boxes.
     acc.displaced = DisplacedGrids();
@@ -142,8 +241,15 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
                 displacement->dicer->displaced(i))
                 which.push_back(i);
         buildDisplacedGrids(which, displacement->dicer, acc.forest.depth, displacement->budgetBytes,
-                            displacement->forceLazy, acc.forest, acc.displaced);
+                            displacement->forceLazy, acc.forest, acc.displaced, acc.treeOf);
         acc.displaced.buildMs = msSince(td);
+    }
+    if (acc.instanced()) {
+        acc.sharedRoot.assign(n, Bounds3());
+        tbb::parallel_for(size_t(0), n, [&](size_t i) {
+            if (const InstancePlacement* pl = acc.placement(uint32_t(i)))
+                acc.sharedRoot[i] = placedBox(pl->fromPrototype, acc.forest.tree(acc.tree(uint32_t(i)))[0]);
+        });
     }
     acc.patchSoa.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
@@ -151,7 +257,10 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         for (int k = 0; k < 16; ++k)
             ps.x[k] = acc.patches[i].cp[k].x, ps.y[k] = acc.patches[i].cp[k].y,
             ps.z[k] = acc.patches[i].cp[k].z;
-        const Bounds3& b = acc.forest.tree(uint32_t(i))[0];
+        // Newton's tolerance from the patch's own box (a shared patch's hull: close to the root box its own
+        // tree would have, which the placed prototype box overestimates when the instance turns).
+        const Bounds3 b =
+            acc.placement(uint32_t(i)) ? enlargedHull(acc.patches[i]) : acc.rootBox(uint32_t(i));
         float mag = 0.f;
         for (int k = 0; k < 3; ++k) mag = std::max({mag, std::fabs(b.lo[k]), std::fabs(b.hi[k])});
         ps.boxMagnitude = mag;
@@ -160,11 +269,12 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
     auto t1 = Clock::now();
     Bounds3 all;
     buildPatchBvh(
-        n, [&](uint32_t i) { return acc.forest.tree(i)[0]; }, acc.bvh, &all);
+        n, [&](uint32_t i) { return acc.rootBox(i); }, acc.bvh, &all);
     acc.slabBvh.assign(size_t(acc.forest.slabCount), Bvh());  // (their boxes lie in the swept ones)
     tbb::parallel_for(0, acc.forest.slabCount, [&](int s) {
         buildPatchBvh(
-            n, [&](uint32_t i) { return acc.forest.rootBox(i, s); }, acc.slabBvh[size_t(s)], nullptr);
+            n, [&](uint32_t i) { return acc.forest.rootBox(acc.tree(i), s); }, acc.slabBvh[size_t(s)],
+            nullptr);
     });
     acc.bounds = all;
     acc.bvhMs = msSince(t1);

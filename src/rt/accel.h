@@ -22,6 +22,14 @@ struct alignas(16) PatchSoa {
     float boxExtent;     // largest side of the root box
 };
 
+// Where an instance stands relative to its prototype, in the accel's space: instance point =
+// fromPrototype applied to the prototype's point; toPrototype is its inverse. A ray is moved into the
+// prototype's frame with affinePoint / affineVector (core/quadric.h), its direction not renormalised, so
+// a distance t along it is the same point as t along the original ray.
+struct InstancePlacement {
+    Affine3 toPrototype, fromPrototype;
+};
+
 // Scene prepared for tracing in one space (the renderer uses camera space: eye at the origin).
 struct RtAccel {
     std::vector<BezierPatch> patches;
@@ -47,6 +55,28 @@ struct RtAccel {
     }
     Bvh bvh;
     SubpatchForest forest;
+    // Instancing (docs/rt.md, "Instancing"): the patches of an ObjectInstance that are affine copies of the
+    // object's first instance (the prototype) have no subpatch tree of their own. Per patch, `treeOf` is its
+    // tree in `forest` (the prototype patch's for a shared one; empty: every patch has its own, tree i) and
+    // `placementOf` its entry in `placements` (kOwnTree: its own tree); a ray tests a shared tree's boxes
+    // moved into the prototype's frame (InstancePlacement::toPrototype), while Newton runs on the patch's
+    // own control points. `sharedRoot`: per patch, the BVH's box of a shared patch (its prototype's root box
+    // placed, so it holds every leaf box a ray can reach through it).
+    static constexpr uint32_t kOwnTree = 0xffffffffu;
+    std::vector<uint32_t> treeOf, placementOf;
+    std::vector<InstancePlacement> placements;
+    std::vector<Bounds3> sharedRoot;
+    size_t sharedPatches = 0;  // patches that use a prototype's tree
+    bool instanced() const { return !placements.empty(); }
+    uint32_t tree(uint32_t patch) const { return treeOf.empty() ? patch : treeOf[patch]; }
+    const InstancePlacement* placement(uint32_t patch) const {
+        return placementOf.empty() || placementOf[patch] == kOwnTree ? nullptr
+                                                                     : &placements[placementOf[patch]];
+    }
+    // The root box of a patch in the accel's space (what the BVH holds).
+    const Bounds3& rootBox(uint32_t patch) const {
+        return placement(patch) ? sharedRoot[patch] : forest.tree(tree(patch))[0];
+    }
     // Displaced patches (rt/displaced.h): their micro-grids, intersected instead of the patch; their
     // subpatch boxes bound the grids' triangles.
     DisplacedGrids displaced;
@@ -106,9 +136,12 @@ struct RtDisplacementOptions {
     size_t budgetBytes = size_t(512) << 20;  // --displacement-cache-mb
     bool forceLazy = false;                  // build lazily even when everything fits (tests)
 };
+// `instancing`: the patches of Scene::instances that are affine copies of their object's first instance
+// share its subpatch trees (RtAccel::treeOf); not with `cullFromOrigin` (the back-facing marks depend on
+// where the eye is in the prototype's frame) nor in a frame where anything moves.
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs,
-                  const RtDisplacementOptions* displacement = nullptr);
+                  const RtDisplacementOptions* displacement = nullptr, bool instancing = false);
 
 // The ray against quadric surface `patch` (analytic, core/quadric.h), restricted to the (u,v) rectangle
 // [u0,u1] x [v0,v1] (a subpatch leaf's; a hit on its border counts for both neighbours): the nearest hit

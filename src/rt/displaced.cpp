@@ -233,12 +233,14 @@ std::shared_ptr<const DisplacedMesh> DisplacedGrids::build(uint32_t s) const {
 
 void buildDisplacedGrids(std::span<const uint32_t> which, std::shared_ptr<const DisplacedDicer> dicer,
                          int depth, size_t budgetBytes, bool forceLazy, SubpatchForest& forest,
-                         DisplacedGrids& out) {
+                         DisplacedGrids& out, std::span<const uint32_t> treeOf) {
     out = DisplacedGrids();
     if (which.empty()) return;
     const size_t n = which.size();
     const uint32_t leaves = 1u << depth;
-    out.slotOf_.assign(forest.boxes.size() / forest.nodesPerPatch, DisplacedGrids::kNone);
+    out.slotOf_.assign(treeOf.empty() ? forest.boxes.size() / forest.nodesPerPatch : treeOf.size(),
+                       DisplacedGrids::kNone);
+    auto treeIndex = [&](uint32_t patch) { return treeOf.empty() ? patch : treeOf[patch]; };
     out.patchOf_.assign(which.begin(), which.end());
     for (size_t m = 0; m < n; ++m) out.slotOf_[which[m]] = uint32_t(m);
     out.slotCount_ = n;
@@ -283,7 +285,7 @@ void buildDisplacedGrids(std::span<const uint32_t> which, std::shared_ptr<const 
             auto mesh = std::make_shared<DisplacedMesh>();
             std::vector<Bounds3> boxes;
             buildDisplacedMesh(std::move(grid), depth, *mesh, boxes);
-            setSubpatchLeafBoxes(forest, which[m], boxes);
+            setSubpatchLeafBoxes(forest, treeIndex(which[m]), boxes);
             out.slots_[m].bytes = mesh->bytes();
             out.slots_[m].mesh.store(std::move(mesh));
         });
@@ -316,7 +318,7 @@ void buildDisplacedGrids(std::span<const uint32_t> which, std::shared_ptr<const 
             b = grown(b, grow * 1.001f + 1e-6f * mag);
             boxes[l] = b;
         }
-        setSubpatchLeafBoxes(forest, which[m], boxes);
+        setSubpatchLeafBoxes(forest, treeIndex(which[m]), boxes);
         out.slots_[m].bytes = estimate[m];
     });
 }

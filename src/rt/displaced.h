@@ -103,7 +103,8 @@ class DisplacedGrids {
 
   private:
     friend void buildDisplacedGrids(std::span<const uint32_t>, std::shared_ptr<const DisplacedDicer>, int,
-                                    size_t, bool, SubpatchForest&, DisplacedGrids&);
+                                    size_t, bool, SubpatchForest&, DisplacedGrids&,
+                                    std::span<const uint32_t>);
     struct Slot;
     struct Shared;
     std::shared_ptr<const DisplacedMesh> build(uint32_t slot) const;
@@ -120,10 +121,11 @@ class DisplacedGrids {
 
 // Patches `which` (displaced by `dicer`) of a forest of `patchCount` trees: their grids built up front when
 // they fit `budgetBytes`, lazily otherwise (`forceLazy`: always lazily, for tests), and their subpatch
-// boxes in `forest` set accordingly (setSubpatchLeafBoxes).
+// boxes in `forest` set accordingly (setSubpatchLeafBoxes). `treeOf` (empty: tree i is patch i's): per
+// patch its tree in `forest` (RtAccel::treeOf; a displaced patch always has its own).
 void buildDisplacedGrids(std::span<const uint32_t> which, std::shared_ptr<const DisplacedDicer> dicer,
                          int depth, size_t budgetBytes, bool forceLazy, SubpatchForest& forest,
-                         DisplacedGrids& out);
+                         DisplacedGrids& out, std::span<const uint32_t> treeOf = {});
 
 // Sort a diced grid's triangles into the subpatch leaves of a tree of `depth` (by their (u,v) centroids),
 // build each leaf's BVH, and return the leaves' boxes (grown a little, so rays through shared edges reach

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -531,14 +532,16 @@ struct AcceptAnyHit {
     bool operator()(const PatchHit&) const { return true; }
 };
 
+// intersectPatch (below) with the tree's boxes given and tested with a ray of origin boxO and inverse
+// direction boxInv that has the same distances as `ray` (an instance's patch through its prototype's tree,
+// with the ray in the prototype's frame: RtAccel::placement); `toleranceBox`: the patch's root box for
+// Newton's tolerance.
 template <class T = float, class Accept = AcceptAnyHit>
-bool intersectPatch(const BezierPatch& patch, const SubpatchForest& forest, uint32_t patchId, const Ray& ray,
-                    PatchHit& best, const uint8_t* backface = nullptr, uint32_t* runs = nullptr,
-                    uint32_t* iterations = nullptr, Accept&& accept = Accept()) {
-    const Bounds3* tree = forest.tree(patchId);
-    const Vec3 inv = safeInverse(ray.d);
+bool intersectPatchTree(const BezierPatch& patch, const SubpatchForest& forest, const Bounds3* tree,
+                        const Bounds3& toleranceBox, Vec3 boxO, Vec3 boxInv, const Ray& ray, PatchHit& best,
+                        const uint8_t* backface, uint32_t* runs, uint32_t* iterations, Accept&& accept) {
     const RayPlanes pl = makeRayPlanes(ray.o, ray.d);
-    NewtonParams prm{newtonTolerance(tree[0], ray.o)};
+    NewtonParams prm{newtonTolerance(toleranceBox, ray.o)};
     if constexpr (sizeof(T) > sizeof(float)) prm.epsR *= 1e-4f;
     const uint32_t firstLeaf = forest.firstLeaf();
     float hu, hv;
@@ -551,7 +554,7 @@ bool intersectPatch(const BezierPatch& patch, const SubpatchForest& forest, uint
     while (sp > 0) {
         const uint32_t n = stack[--sp];
         float te;
-        if (!rayBox(tree[n], r.o, inv, r.tmin, r.tmax, te)) continue;
+        if (!rayBox(tree[n], boxO, boxInv, r.tmin, r.tmax, te)) continue;
         if (backface && backface[n]) continue;
         if (n >= firstLeaf) {
             const Vec2 c = forest.leafCentre[n - firstLeaf];
@@ -571,6 +574,17 @@ bool intersectPatch(const BezierPatch& patch, const SubpatchForest& forest, uint
         stack[sp++] = 2 * n + 1;
     }
     return found;
+}
+
+// The nearest hit on `patch` (accepted by `accept`) from Newton in each leaf of its subpatch tree that the
+// ray passes through.
+template <class T = float, class Accept = AcceptAnyHit>
+bool intersectPatch(const BezierPatch& patch, const SubpatchForest& forest, uint32_t patchId, const Ray& ray,
+                    PatchHit& best, const uint8_t* backface = nullptr, uint32_t* runs = nullptr,
+                    uint32_t* iterations = nullptr, Accept&& accept = Accept()) {
+    const Bounds3* tree = forest.tree(patchId);
+    return intersectPatchTree<T>(patch, forest, tree, tree[0], ray.o, safeInverse(ray.d), ray, best, backface,
+                                 runs, iterations, std::forward<Accept>(accept));
 }
 
 }  // namespace tessera

@@ -734,7 +734,7 @@ std::vector<uint64_t> tileWork(const RtAccel& acc, const Projector& proj, const 
     std::vector<double> covered(nb, 0.0);
     for (uint32_t patch = 0; patch < acc.patches.size(); ++patch) {
         float x0, x1, y0, y1;  // the patch's root box, as the BVH has it
-        if (!proj.rasterBounds(acc.forest.tree(patch)[0], x0, x1, y0, y1))
+        if (!proj.rasterBounds(acc.rootBox(patch), x0, x1, y0, y1))
             x0 = y0 = -INFINITY, x1 = y1 = INFINITY;  // reaches behind the eye: the whole view
         x0 = std::max(x0, float(layout.region.x0)), x1 = std::min(x1, float(layout.region.x1));
         y0 = std::max(y0, float(layout.region.y0)), y1 = std::min(y1, float(layout.region.y1));
@@ -967,7 +967,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     const bool displacedDicer = displacement.dicer != nullptr;
     displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
     buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc,
-                 &frame.motion, kDefaultTimeSlabs, &displacement);
+                 &frame.motion, kDefaultTimeSlabs, &displacement, settings.instancing);
     const double buildMs = msSince(tBuild);
     if (displacedDicer)
         for (size_t i = 0; i < scene.patches.size(); ++i)
@@ -987,8 +987,9 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     // The binning stages group the candidates of the boxes swept over the whole shutter; with time slabs
     // (a motion frame of several segments) the per-ray traversal's slab boxes are far tighter (killeroo_spin,
     // 800x600: binning needed 9 GB of candidate lists).
-    const bool binning =
-        settings.rayBinning && TraceService::binningPays(leavesPerSample) && acc.forest.slabCount == 0;
+    // The binning stages do not know instances' shared trees (TraceService::traceList).
+    const bool binning = settings.rayBinning && TraceService::binningPays(leavesPerSample) &&
+                         acc.forest.slabCount == 0 && !acc.instanced();
     const TraceServiceOptions traceOpt{settings.cullBackfaces, binning};
     const Projector& proj = frame.projector;
     std::vector<uint8_t> castsShadows;
@@ -1113,11 +1114,18 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     s["bvh_depth"] = acc.bvh.maxDepth;
     s["subpatch_depth"] = acc.forest.depth;
     s["subpatch_nodes"] = acc.forest.boxes.size();
+    s["subpatch_trees"] = acc.forest.boxes.size() / std::max<size_t>(1, acc.forest.nodesPerPatch);
+    s["instancing"] = {{"instances", acc.placements.size()}, {"shared_patches", acc.sharedPatches}};
     const size_t np = std::max<size_t>(1, scene.patches.size());
+    const size_t instancingBytes =
+        acc.treeOf.size() * sizeof(uint32_t) + acc.placementOf.size() * sizeof(uint32_t) +
+        acc.placements.size() * sizeof(InstancePlacement) + acc.sharedRoot.size() * sizeof(Bounds3);
     s["memory"] = {{"bvh_bytes", acc.bvh.memoryBytes()},
                    {"subpatch_bytes", acc.forest.memoryBytes()},
+                   {"instancing_bytes", instancingBytes},
                    {"patch_bytes", acc.patches.size() * sizeof(BezierPatch)},
-                   {"bytes_per_patch", double(acc.bvh.memoryBytes() + acc.forest.memoryBytes()) / double(np)},
+                   {"bytes_per_patch",
+                    double(acc.bvh.memoryBytes() + acc.forest.memoryBytes() + instancingBytes) / double(np)},
                    {"workspace_bytes", wsBytes},
                    {"displaced_bytes", acc.displaced.peakBytes()}};
     s["build_ms"] = buildMs;

@@ -55,6 +55,9 @@ void TraceService::traceList(const RayList& rays, std::vector<RayHit>& hits, boo
     using Clock = std::chrono::steady_clock;
     const RtAccel& acc = *acc_;
     const bool cull = opt_.cullBackfaces;
+    // The binning stages test the subpatch boxes in the accel's space; an instance's patch has its
+    // prototype's boxes in the prototype's frame, which only the per-ray traversal moves the ray into.
+    if (acc.instanced()) how = Stage::kPerRay;
     auto t0 = Clock::now();
     if (how == Stage::kCameraBinning) {
         binCameraRays(acc, rays, *camera, bin_, chunks_, cull);
@@ -116,7 +119,7 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
         for (uint32_t k = 0; k < node.count; ++k) {
             const uint32_t patch = acc.bvh.prims[node.offset + k];
             PatchHit h;
-            const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(patch) : nullptr;
+            const uint8_t* back = opt.cullBackfaces ? acc.forest.backfaceBits(acc.tree(patch)) : nullptr;
             auto accept = [&](const PatchHit& ph) { return acceptHit(acc, r, opt, patch, ph); };
             // The nearest hit so far: the ray ends there (true: an any-hit query is answered).
             auto record = [&](const PatchHit& found) {
@@ -136,10 +139,22 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
                     if (intersectDisplacedLeaf(*dm, leaf, r, wr, accept, h) && record(h)) return true;
                 continue;
             }
+            if (const InstancePlacement* pl =
+                    acc.placement(patch)) {  // the prototype's tree, ray moved there
+                const Vec3 boxO = affinePoint(pl->toPrototype, r.o);
+                const Vec3 boxInv = safeInverse(affineVector(pl->toPrototype, r.d));
+                if (intersectPatchTree<float>(acc.patches[patch], acc.forest,
+                                              acc.forest.tree(acc.tree(patch)),
+                                              enlargedHull(acc.patches[patch]), boxO, boxInv, r, h, nullptr,
+                                              nullptr, nullptr, accept) &&
+                    record(h))
+                    return true;
+                continue;
+            }
             BezierPatch moved;
             if (acc.moving(patch)) patchAtTime(acc, patch, opt.time, moved);  // at the ray's time
-            if (intersectPatch<float>(acc.moving(patch) ? moved : acc.patches[patch], acc.forest, patch, r, h,
-                                      back, nullptr, nullptr, accept) &&
+            if (intersectPatch<float>(acc.moving(patch) ? moved : acc.patches[patch], acc.forest,
+                                      acc.tree(patch), r, h, back, nullptr, nullptr, accept) &&
                 record(h))
                 return true;
         }

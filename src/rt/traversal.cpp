@@ -43,12 +43,17 @@ struct PatchPair {
     uint32_t ray;  // index in the chunk
     float te;      // entry distance of the root box
     float selfT;
+    uint32_t ray4;  // the ray its boxes are tested with (TraverseScratch::ray4): `ray`, or the ray moved
+                    // into the frame of the prototype whose tree an instance's patch shares
 };
 static_assert(sizeof(PatchPair) == 64);
 
 // Per-thread scratch of the traversal, reused from chunk to chunk.
 struct TraverseScratch {
+    // The chunk's rays (one per ray, in order), then the rays moved into prototype frames (instancing),
+    // with the origin and inverse direction of each for the odd-depth pair step.
     std::vector<Ray4> ray4;
+    std::vector<Vec3> boxO, boxInv;
     std::vector<PatchPair> pairs;
     std::vector<uint32_t, DefaultInitAllocator<uint32_t>> items, next;
     std::vector<uint32_t> count;  // candidates per ray of the chunk
@@ -71,7 +76,7 @@ inline uint32_t innerLevelTail(const LevelIn& in, uint32_t j, uint32_t* next, ui
         const uint32_t it = in.items[j], quad = it & kItemQuadMask;
         const PatchPair& pp = in.pairs[it >> kItemQuadBits];
         F4 te4;
-        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray4], pp.selfT4, te4);
         if (pp.qback) mask &= ~int(pp.qback[quad]);
         storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
         nNext += kPop4[mask];
@@ -85,7 +90,7 @@ inline size_t leafLevelTail(const LevelIn& in, uint32_t j, uint32_t leafQuadFirs
         const uint32_t it = in.items[j], quad = it & kItemQuadMask;
         const PatchPair& pp = in.pairs[it >> kItemQuadBits];
         F4 te4;
-        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray], pp.selfT4, te4);
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray4], pp.selfT4, te4);
         if (pp.qback) mask &= ~int(pp.qback[quad]);
         storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], &pp.rayId, 4 * (quad - leafQuadFirst), te4);
         used += kPop4[mask];
@@ -122,7 +127,7 @@ inline ItemPair itemPair(const LevelIn& in, uint32_t j) {
 // j's, 4-7 item j + 1's; te8 gets the entry distances.
 TESSERA_AVX2 inline int itemPairHits(const LevelIn& in, const ItemPair& p, __m256& te8) {
     const PatchPair &pa = *p.pa, &pb = *p.pb;
-    int mask = quadHits2(pa.quads[p.qa], in.ray4[pa.ray], pa.selfT4, pb.quads[p.qb], in.ray4[pb.ray],
+    int mask = quadHits2(pa.quads[p.qa], in.ray4[pa.ray4], pa.selfT4, pb.quads[p.qb], in.ray4[pb.ray4],
                          pb.selfT4, te8);
     if (pa.qback) mask &= ~int(pa.qback[p.qa]);
     if (pb.qback) mask &= ~(int(pb.qback[p.qb]) << 4);
@@ -201,6 +206,8 @@ template <bool kAvx2>
     const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
     const uint32_t nr = uint32_t(r1 - r0);
     sc.ray4.resize(nr);
+    sc.boxO.resize(nr);
+    sc.boxInv.resize(nr);
     sc.count.assign(nr, 0);
     sc.pairs.clear();
 
@@ -208,8 +215,12 @@ template <bool kAvx2>
     // pushed far first, patches listed near first).
     for (uint32_t rl = 0; rl < nr; ++rl) {
         const size_t r = r0 + rl;
-        sc.ray4[rl] = Ray4(rays.o[r], safeInverse(rays.d[r]), rays.tmin[r], rays.tmax[r]);
-        const Ray4& r4 = sc.ray4[rl];
+        sc.boxO[rl] = rays.o[r], sc.boxInv[rl] = safeInverse(rays.d[r]);
+        sc.ray4[rl] = Ray4(rays.o[r], sc.boxInv[rl], rays.tmin[r], rays.tmax[r]);
+        const Ray4 r4 = sc.ray4[rl];  // (a copy: the moved rays below may grow the array)
+        // Instancing: the ray moved into the frame of the last placement it met (patches of one instance
+        // come together in the BVH, so one entry per instance visited, nearly).
+        uint32_t lastPlacement = RtAccel::kOwnTree, lastRay4 = rl;
         const bool cullRay = cull && rays.kind[r] == kPrimary && !forest.backfacing.empty();
         const uint32_t ignore = rays.ignore[r];
         // A blurred frame's ray traverses the boxes of its time slab (SubpatchForest::slabCount).
@@ -239,13 +250,25 @@ template <bool kAvx2>
             const HitOrder& h = kHitOrder[size_t(patches | pb)];
             for (int q = 0, k = kPop4[patches]; q < k; ++q) {
                 const int i = h.order[q];
-                const uint32_t patch = nd.child[i] & ~kBvh4Patch;
-                const uint8_t* back = cullRay ? forest.backfaceBits(patch) : nullptr;
+                const uint32_t patch = nd.child[i] & ~kBvh4Patch, tree = acc.tree(patch);
+                const uint8_t* back = cullRay ? forest.backfaceBits(tree) : nullptr;
                 const float selfT = patch == ignore ? ignoreT : -std::numeric_limits<float>::infinity();
                 if (tx[i] < selfT || (back && back[0])) continue;
-                sc.pairs.push_back({splatF4(selfT), forest.quadTree(patch, slab),
-                                    cullRay ? forest.quadBackBits(patch) : nullptr, back, uint32_t(r), patch,
-                                    rl, te[i], selfT});
+                uint32_t boxRay = rl;
+                if (const InstancePlacement* pl = acc.placement(patch)) {
+                    const uint32_t placement = acc.placementOf[patch];
+                    if (placement != lastPlacement) {
+                        const Vec3 o = affinePoint(pl->toPrototype, rays.o[r]);
+                        const Vec3 inv = safeInverse(affineVector(pl->toPrototype, rays.d[r]));
+                        lastPlacement = placement, lastRay4 = uint32_t(sc.ray4.size());
+                        sc.ray4.emplace_back(o, inv, rays.tmin[r], rays.tmax[r]);
+                        sc.boxO.push_back(o), sc.boxInv.push_back(inv);
+                    }
+                    boxRay = lastRay4;
+                }
+                sc.pairs.push_back({splatF4(selfT), forest.quadTree(tree, slab),
+                                    cullRay ? forest.quadBackBits(tree) : nullptr, back, uint32_t(r), patch,
+                                    rl, te[i], selfT, boxRay});
             }
         }
     }
@@ -310,9 +333,10 @@ template <bool kAvx2>
             const PatchPair& pp = pairs[it >> kItemQuadBits];
             const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
             const size_t r = r0 + pp.ray;
-            const PairRay pr(rays.o[r], safeInverse(rays.d[r]));
+            const PairRay pr(sc.boxO[pp.ray4], sc.boxInv[pp.ray4]);
             float tn[2], tf[2];
-            const int mask = rayBoxPair(forest.tree(pp.patch) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
+            const int mask =
+                rayBoxPair(forest.tree(acc.tree(pp.patch)) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
             const float ta = tn[0], tb = tn[1];
             const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
             const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);

@@ -294,6 +294,18 @@ struct PatchAttributes {
     int32_t vertexValues = -1;
 };
 
+// One RIB ObjectInstance (retained geometry): Scene surfaces [first, first + count) are the object's
+// surfaces placed by `objectToWorld` (static; instances under a moving transform are not recorded).
+// Instances with the same `object` replay the same definition, so their surfaces are transformed copies
+// of each other unless the graphics state at the instance changes the geometry (Basis, displacement):
+// an engine that shares per-surface structures between instances checks that (rt: docs/rt.md,
+// "Instancing"). Instances nested inside an object definition are part of the outer instance's copy.
+struct SurfaceInstance {
+    uint32_t first = 0, count = 0;
+    uint32_t object = 0;  // the definition (ObjectBegin) it replays, numbered in order of definition
+    Mat4 objectToWorld;
+};
+
 struct Scene {
     Camera camera;
     ImageOptions image;
@@ -319,6 +331,7 @@ struct Scene {
     std::vector<DisplacementShader> displacements;  // PatchAttributes::displacement
     std::vector<ShadowMapFile> shadowMapFiles;      // Light::shadowFiles
     uint32_t objectCount = 0;
+    std::vector<SurfaceInstance> instances;  // ObjectInstance requests, in order (none for other inputs)
     std::string sourcePath;
 
     Bounds3 worldBounds() const;

@@ -72,6 +72,17 @@ def test_stats_are_a_dict_of_the_render():
     assert "micropolygons" not in rt
 
 
+def test_instancing_can_be_turned_off():
+    # The eight teapots of instanced_teapots.rib share their object's subpatch trees unless instancing=False;
+    # the images agree to rounding (docs/rt.md, "Instancing").
+    scene = SOURCE / "scenes" / "instanced_teapots.rib"
+    shared = tessera.render(scene, engine="rt", res=(80, 60), spp=1)
+    copies = tessera.render(scene, engine="rt", res=(80, 60), spp=1, instancing=False)
+    assert shared.stats["instancing"]["shared_patches"] == 6 * 32
+    assert copies.stats["instancing"]["shared_patches"] == 0
+    assert np.abs(np.asarray(shared.image) - np.asarray(copies.image)).max() < 0.05
+
+
 def test_a_scene_renders_many_times_under_different_options():
     scene = tessera.load(TEAPOT)
     assert (scene.width, scene.height) == (800, 600) and scene.surfaces == 32 and scene.lights >= 1
