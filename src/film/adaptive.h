@@ -33,7 +33,7 @@ struct AdaptiveThresholds {
 
 // The geometry attributes of one hit (paper 004's GeometryAttributeMap entry).
 struct HitAttributes {
-    uint32_t object = 0;      // RI object (per primitive call, not per patch); kNoObject: no hit
+    uint32_t object = 0;      // RI object (per attribute block or name, not per patch); kNoObject: no hit
     Vec3 normal;              // shading normal facing the viewer (0 where nothing was hit)
     uint8_t shadowCount = 0;  // lights in shadow at the hit
     uint8_t textured = 0;     // a texture shades the hit
