@@ -887,16 +887,20 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
 
     // 3. Extra samples: slot s of a 4x4 tile lies in stratum (s % 4, s / 4), i.e. in quadrant
     // ((s % 4) / 2, (s / 4) / 2) of its pixel.
-    ws.tile.reset(target, 4, 4, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler, 0,
-                  {});
-    ws.tile.setBlur(blur.pattern);
-    ws.tracedSamples.assign(ws.tile.sampleCount(), 0);
-    for (size_t p = 0; p < size_t(tw) * th; ++p)
-        for (int slot = 0; slot < 16; ++slot) {
-            const int q = ((slot % 4) / 2) + 2 * ((slot / 4) / 2);
-            ws.tracedSamples[p * 16 + size_t(slot)] = ws.activeSubpixels[p * 4 + size_t(q)];
-        }
-    if (active > 0) traceTile(fr, settings, proj, sr, ws, &ws.tracedSamples);
+    // A tile with nothing active sets up no 16-sample tile at all (its samples' positions and clearing
+    // cost about as much per pixel as the subpixel test).
+    if (active > 0) {
+        ws.tile.reset(target, 4, 4, settings.seed, std::numeric_limits<float>::infinity(), settings.sampler,
+                      0, {});
+        ws.tile.setBlur(blur.pattern);
+        ws.tracedSamples.assign(ws.tile.sampleCount(), 0);
+        for (size_t p = 0; p < size_t(tw) * th; ++p)
+            for (int slot = 0; slot < 16; ++slot) {
+                const int q = ((slot % 4) / 2) + 2 * ((slot / 4) / 2);
+                ws.tracedSamples[p * 16 + size_t(slot)] = ws.activeSubpixels[p * 4 + size_t(q)];
+            }
+        traceTile(fr, settings, proj, sr, ws, &ws.tracedSamples);
+    }
 
     // 4. The paper's weighting, and the map of refined subpixels.
     const Image& img = result.image;
@@ -934,7 +938,7 @@ void renderAdaptiveTile(const Frame& fr, const RenderSettings& settings, const P
                         rgba[3] += alpha / 4.f;
                 }
             }
-            for (int slot = 0; slot < 16; ++slot) {
+            for (int slot = 0; slot < 16 && n > 0; ++slot) {
                 const size_t s = p * 16 + size_t(slot);
                 if (!ws.tracedSamples[s]) continue;
                 rgba[0] += ws.tile.r[s] / 16.f, rgba[1] += ws.tile.g[s] / 16.f;
