@@ -28,7 +28,9 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 # cross-check at high spp and a convergence sweep. They still run in the Release stage (the README's test
 # command). TESSERA_ASAN_ALL=1 runs them here too.
 heavy='^(MotionBlurCrossEngine\.MovingSphereWithLensAgrees|DefaultFraming\.(YUpCupShowsItsOpeningFromAbove|ShippedModelsKeepSensibleViews)'
-heavy+='|Files/ShippedSceneFile\.RendersWithBothEngines/(bigguy24|bigguy9|killeroo_spin)_rib'
+# bigguy24_instanced (21 s here) is bigguy24 as instances, whose sharing RtInstancing's tests run;
+# displaced_killeroo (19 s) repeats the displaced dicing of RtDisplacement's and Displacement's tests.
+heavy+='|Files/ShippedSceneFile\.RendersWithBothEngines/(bigguy24|bigguy24_instanced|bigguy9|killeroo_spin|displaced_killeroo)_rib'
 heavy+='|BothEngines/ShippedScenes\.RendersWithoutPinholes/bigguy(24|9)_(reyes|rt)'
 heavy+='|ReyesSampling\.TeapotCoverageConvergesWithSpp|ReyesDeterminism\.SameImageForAnyThreadCount'
 # Shadow maps: ReyesShadowMaps.EveryKindOfMapAgreesWithRayTracedShadows and the shadow-count and one-map
