@@ -310,6 +310,111 @@ inline bool shiftFactors(int cell, int cells, float a, float b, float& lo, float
     return false;
 }
 
+// The bound of a still micropolygon (depth of field only) over one lens cell whose l.x and l.y keep one
+// sign (shiftFactors): at lens point l it is [x0 + l.x loX, x1 + l.x hiX] x [y0 + l.y loY, y1 + l.y hiY].
+struct StillLensBound {
+    float x0, x1, y0, y1, loX, hiX, loY, hiY;
+};
+
+// Calls hit(e) for each entry e of [first, end) of the strata whose position lies in `b` at its own lens
+// point, in order. Most entries fail (the bound over a lens cell is the micropolygon grown by the cell's
+// share of its circle of confusion, the bound at one lens point is the micropolygon), so the test runs four
+// entries at a time; it is the scalar test's float operations lane by lane (the same products and sums),
+// so the same entries pass.
+template <class Hit>
+inline void filterStillLens(const BlurStrata& s, uint32_t first, uint32_t end, const StillLensBound& b,
+                            Hit&& hit) {
+#if defined(__SSE2__)
+    const __m128 x0 = _mm_set1_ps(b.x0), x1 = _mm_set1_ps(b.x1), y0 = _mm_set1_ps(b.y0),
+                 y1 = _mm_set1_ps(b.y1), loX = _mm_set1_ps(b.loX), hiX = _mm_set1_ps(b.hiX),
+                 loY = _mm_set1_ps(b.loY), hiY = _mm_set1_ps(b.hiY);
+    for (uint32_t e = first; e < end; e += 4) {  // reads up to 3 entries past end: the padding
+        const __m128 lx = _mm_loadu_ps(&s.lensX[e]), ly = _mm_loadu_ps(&s.lensY[e]);
+        const __m128 fx = _mm_loadu_ps(&s.fx[e]), fy = _mm_loadu_ps(&s.fy[e]);
+        __m128 out = _mm_or_ps(_mm_cmplt_ps(fx, _mm_add_ps(x0, _mm_mul_ps(lx, loX))),
+                               _mm_cmpgt_ps(fx, _mm_add_ps(x1, _mm_mul_ps(lx, hiX))));
+        out = _mm_or_ps(out, _mm_or_ps(_mm_cmplt_ps(fy, _mm_add_ps(y0, _mm_mul_ps(ly, loY))),
+                                       _mm_cmpgt_ps(fy, _mm_add_ps(y1, _mm_mul_ps(ly, hiY)))));
+        unsigned in = ~unsigned(_mm_movemask_ps(out)) & 15u;
+        if (end - e < 4) in &= (1u << (end - e)) - 1u;
+        for (; in; in &= in - 1) hit(e + uint32_t(__builtin_ctz(in)));
+    }
+#else
+    for (uint32_t e = first; e < end; ++e) {
+        const float lx = s.lensX[e], ly = s.lensY[e], fx = s.fx[e], fy = s.fy[e];
+        if (fx < b.x0 + lx * b.loX || fx > b.x1 + lx * b.hiX || fy < b.y0 + ly * b.loY ||
+            fy > b.y1 + ly * b.hiY)
+            continue;
+        hit(e);
+    }
+#endif
+}
+
+// The bound of a micropolygon over one segment of the knot timeline: its box at the segment's knots p and
+// q (equal for a grid that does not move), lerped at w = (t - t0) invDt, then grown by the lens point
+// times the lerped lens-coefficient range (inBoundAt's bound, for a sample of that segment).
+struct SegmentBound {
+    KnotBox p, q;
+    float t0, invDt, sx, sy;
+};
+
+// Calls hit(e) for each entry e of [first, end) whose position lies in `b` at its own time (and, with
+// kLens, lens point), in order; four entries at a time as filterStillLens. The time -> w map may differ
+// from timelineSegment's in the last bit, and a sample at a knot may be lerped a rounding past the
+// segment's end: both far inside kBoundSlack.
+template <bool kLens, class Hit>
+inline void filterSegment(const BlurStrata& s, uint32_t first, uint32_t end, const SegmentBound& b,
+                          Hit&& hit) {
+#if defined(__SSE2__)
+    const __m128 slack = _mm_set1_ps(kBoundSlack), t0 = _mm_set1_ps(b.t0), invDt = _mm_set1_ps(b.invDt);
+    const __m128 px0 = _mm_set1_ps(b.p.x0), dx0 = _mm_set1_ps(b.q.x0 - b.p.x0);
+    const __m128 px1 = _mm_set1_ps(b.p.x1), dx1 = _mm_set1_ps(b.q.x1 - b.p.x1);
+    const __m128 py0 = _mm_set1_ps(b.p.y0), dy0 = _mm_set1_ps(b.q.y0 - b.p.y0);
+    const __m128 py1 = _mm_set1_ps(b.p.y1), dy1 = _mm_set1_ps(b.q.y1 - b.p.y1);
+    const __m128 pc0 = _mm_set1_ps(b.p.c0), dc0 = _mm_set1_ps(b.q.c0 - b.p.c0);
+    const __m128 pc1 = _mm_set1_ps(b.p.c1), dc1 = _mm_set1_ps(b.q.c1 - b.p.c1);
+    const __m128 sx = _mm_set1_ps(b.sx), sy = _mm_set1_ps(b.sy);
+    for (uint32_t e = first; e < end; e += 4) {  // reads up to 3 entries past end: the padding
+        const __m128 w = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(&s.time[e]), t0), invDt);
+        __m128 x0 = _mm_sub_ps(_mm_add_ps(px0, _mm_mul_ps(w, dx0)), slack);
+        __m128 x1 = _mm_add_ps(_mm_add_ps(px1, _mm_mul_ps(w, dx1)), slack);
+        __m128 y0 = _mm_sub_ps(_mm_add_ps(py0, _mm_mul_ps(w, dy0)), slack);
+        __m128 y1 = _mm_add_ps(_mm_add_ps(py1, _mm_mul_ps(w, dy1)), slack);
+        if constexpr (kLens) {
+            const __m128 c0 = _mm_add_ps(pc0, _mm_mul_ps(w, dc0)), c1 = _mm_add_ps(pc1, _mm_mul_ps(w, dc1));
+            const __m128 ax = _mm_mul_ps(_mm_loadu_ps(&s.lensX[e]), sx);
+            const __m128 ay = _mm_mul_ps(_mm_loadu_ps(&s.lensY[e]), sy);
+            const __m128 xa = _mm_mul_ps(ax, c0), xb = _mm_mul_ps(ax, c1);
+            const __m128 ya = _mm_mul_ps(ay, c0), yb = _mm_mul_ps(ay, c1);
+            x0 = _mm_add_ps(x0, _mm_min_ps(xa, xb)), x1 = _mm_add_ps(x1, _mm_max_ps(xa, xb));
+            y0 = _mm_add_ps(y0, _mm_min_ps(ya, yb)), y1 = _mm_add_ps(y1, _mm_max_ps(ya, yb));
+        }
+        const __m128 fx = _mm_loadu_ps(&s.fx[e]), fy = _mm_loadu_ps(&s.fy[e]);
+        const __m128 out = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(fx, x0), _mm_cmpgt_ps(fx, x1)),
+                                     _mm_or_ps(_mm_cmplt_ps(fy, y0), _mm_cmpgt_ps(fy, y1)));
+        unsigned in = ~unsigned(_mm_movemask_ps(out)) & 15u;
+        if (end - e < 4) in &= (1u << (end - e)) - 1u;
+        for (; in; in &= in - 1) hit(e + uint32_t(__builtin_ctz(in)));
+    }
+#else
+    for (uint32_t e = first; e < end; ++e) {
+        const float w = (s.time[e] - b.t0) * b.invDt;
+        float x0 = b.p.x0 + w * (b.q.x0 - b.p.x0) - kBoundSlack,
+              x1 = b.p.x1 + w * (b.q.x1 - b.p.x1) + kBoundSlack;
+        float y0 = b.p.y0 + w * (b.q.y0 - b.p.y0) - kBoundSlack,
+              y1 = b.p.y1 + w * (b.q.y1 - b.p.y1) + kBoundSlack;
+        if constexpr (kLens) {
+            const float c0 = b.p.c0 + w * (b.q.c0 - b.p.c0), c1 = b.p.c1 + w * (b.q.c1 - b.p.c1);
+            const float ax = s.lensX[e] * b.sx, ay = s.lensY[e] * b.sy;
+            x0 += std::min(ax * c0, ax * c1), x1 += std::max(ax * c0, ax * c1);
+            y0 += std::min(ay * c0, ay * c1), y1 += std::max(ay * c0, ay * c1);
+        }
+        if (s.fx[e] < x0 || s.fx[e] > x1 || s.fy[e] < y0 || s.fy[e] > y1) continue;
+        hit(e);
+    }
+#endif
+}
+
 // Whether sample point (fx, fy) (pixels) can be inside the micropolygon at the sample's time (segment k,
 // weight w) and lens point: the box at that time, grown by the lens point times the corners'
 // lens-coefficient range (x + l c sx >= min x + min over c of l c sx). A dozen flops, against moving
@@ -325,31 +430,6 @@ inline bool inBoundAt(const KnotBox* knotBox, int knots, int k, float w, Vec2 le
     }
     return fx >= x0 && fx <= x1 && fy >= y0 && fy <= y1;
 }
-
-// A side of a micropolygon's box moving linearly over a knot segment: a + d w, w in [0, 1], with 1 / d
-// kept for the per-pixel intervals of the sweep.
-struct SweptSide {
-    float a, d, inv;
-    SweptSide(float a_, float d_) : a(a_), d(d_), inv(d_ != 0.f ? 1.f / d_ : 0.f) {}
-    float at(float w) const { return a + d * w; }
-    // Restrict [w0, w1] to the w where the side is at most c (keepAtMost) or at least c (keepAtLeast).
-    void keepAtMost(float c, float& w0, float& w1) const {
-        if (d > 0.f)
-            w1 = std::min(w1, (c - a) * inv);
-        else if (d < 0.f)
-            w0 = std::max(w0, (c - a) * inv);
-        else if (a > c)
-            w1 = -1.f;  // never
-    }
-    void keepAtLeast(float c, float& w0, float& w1) const {
-        if (d > 0.f)
-            w0 = std::max(w0, (c - a) * inv);
-        else if (d < 0.f)
-            w1 = std::min(w1, (c - a) * inv);
-        else if (a < c)
-            w1 = -1.f;
-    }
-};
 
 // The bounding-box scheme (paper 000, sec. 3.3): each micropolygon meets every sample whose (x, y) its
 // bound over the shutter and lens covers, each at the sample's own (t, lens). With strata bounds the
@@ -423,69 +503,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                     tile.pixelHit[si / size_t(spp)] = 1;
             };
 
-            if (cut && strata.sweep && allValid) {
-                // The sweep: between two knots the micropolygon's box moves linearly, so for each pixel it
-                // sweeps over, the part of the segment in which the box overlaps the pixel follows from four
-                // linear inequalities, and only the pixel's samples (sorted by time) inside it are looked at.
-                const int segments = std::max(1, g.knots - 1);
-                for (int s = 0; s < segments; ++s) {
-                    const bool still = g.knots == 1;
-                    const float t0 = still ? 0.f : knots[s], t1 = still ? 1.f : knots[s + 1], dt = t1 - t0;
-                    // Samples of this segment (timelineSegment): [t0, t1), the first one open below, the last
-                    // one closed above.
-                    const float own1 = s + 1 < segments ? t1 : INFINITY;
-                    const KnotBox& p = knotBox[s];
-                    const KnotBox& q = still ? p : knotBox[s + 1];
-                    const SweptSide left(p.x0 - kBoundSlack, q.x0 - p.x0),
-                        right(p.x1 + kBoundSlack, q.x1 - p.x1);
-                    const SweptSide top(p.y0 - kBoundSlack, q.y0 - p.y0),
-                        bottom(p.y1 + kBoundSlack, q.y1 - p.y1);
-                    const int py0 = std::max(reg.y0, floorToInt((std::min(top.a, top.a + top.d)))),
-                              py1 =
-                                  std::min(reg.y1 - 1, floorToInt((std::max(bottom.a, bottom.a + bottom.d))));
-                    for (int py = py0; py <= py1; ++py) {
-                        float r0 = 0.f, r1 = 1.f;  // where the box overlaps row py
-                        top.keepAtMost(float(py + 1), r0, r1);
-                        bottom.keepAtLeast(float(py), r0, r1);
-                        if (r0 > r1) continue;
-                        const int px0 = std::max(reg.x0, floorToInt((std::min(left.at(r0), left.at(r1))))),
-                                  px1 = std::min(reg.x1 - 1,
-                                                 floorToInt((std::max(right.at(r0), right.at(r1)))));
-                        const size_t rowPixel = size_t(py - reg.y0) * reg.width();
-                        for (int px = px0; px <= px1; ++px) {
-                            float w0 = r0, w1 = r1;  // where it overlaps pixel (px, py)
-                            left.keepAtMost(float(px + 1), w0, w1);
-                            right.keepAtLeast(float(px), w0, w1);
-                            if (w0 > w1) continue;
-                            // In shutter time, with slack for the rounding of w (inBoundAt decides).
-                            const float ta = t0 + w0 * dt - 1e-5f, tb = t0 + w1 * dt + 1e-5f;
-                            const size_t first = (rowPixel + size_t(px - reg.x0)) * spp;
-                            const float* times = &strata.pixelTime[first];
-                            // The first of the pixel's samples at or after ta: start where it would be if the
-                            // times were stratified (the film's Sobol' times are), then step to it.
-                            int r = std::clamp(int(ta * float(spp)), 0, spp);
-                            while (r > 0 && times[r - 1] >= ta) --r;
-                            while (r < spp && times[r] < ta) ++r;
-                            for (; r < spp && times[r] <= tb; ++r) {
-                                const float t = times[r];
-                                if (t >= own1) break;
-                                const size_t si = strata.pixelSample[first + r];
-                                const float w = still ? 0.f : (g.knots == 2 ? t : (t - t0) / dt);
-                                // In the box at time t (the sides already carry the slack).
-                                const float fx = float(tile.sx[si]) * (1.f / kSubpixelScale),
-                                            fy = float(tile.sy[si]) * (1.f / kSubpixelScale);
-                                if (fx < left.at(w) || fx > right.at(w) || fy < top.at(w) ||
-                                    fy > bottom.at(w))
-                                    continue;
-                                testAt(si, s, w, Vec2{});
-                            }
-                        }
-                    }
-                }
-                continue;
-            }
-
-            if (!cut || strata.sweep) {  // the paper's one bound over the whole shutter and lens
+            if (!cut) {  // the paper's one bound over the whole shutter and lens
                 const int64_t bx0 = int64_t((all.x0 - gx - kBoundSlack) * kSubpixelScale),
                               bx1 = int64_t((all.x1 + gx + kBoundSlack) * kSubpixelScale),
                               by0 = int64_t((all.y0 - gy - kBoundSlack) * kSubpixelScale),
@@ -549,29 +567,47 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                     // two multiply-adds per side and sample.
                     const bool still = g.knots == 1 && allValid;
                     const KnotBox& b0 = knotBox[0];
-                    float loX, hiX, loY, hiY;
-                    const bool oneSigned = still && lensOn &&
-                                           shiftFactors(lc % L, L, b0.c0 * pr.sx, b0.c1 * pr.sx, loX, hiX) &&
-                                           shiftFactors(lc / L, L, b0.c0 * pr.sy, b0.c1 * pr.sy, loY, hiY);
-                    const float stillX0 = b0.x0 - kBoundSlack, stillX1 = b0.x1 + kBoundSlack,
-                                stillY0 = b0.y0 - kBoundSlack, stillY1 = b0.y1 + kBoundSlack;
+                    StillLensBound stillBound;
+                    const bool oneSigned =
+                        still && lensOn &&
+                        shiftFactors(lc % L, L, b0.c0 * pr.sx, b0.c1 * pr.sx, stillBound.loX,
+                                     stillBound.hiX) &&
+                        shiftFactors(lc / L, L, b0.c0 * pr.sy, b0.c1 * pr.sy, stillBound.loY, stillBound.hiY);
+                    stillBound.x0 = b0.x0 - kBoundSlack, stillBound.x1 = b0.x1 + kBoundSlack,
+                    stillBound.y0 = b0.y0 - kBoundSlack, stillBound.y1 = b0.y1 + kBoundSlack;
                     for (int py = sp.py0; py <= sp.py1; ++py)
                         for (int tb = j0; tb < j1; ++tb) {
                             const size_t base = strata.runBase(py, tb * LL + lc);
                             const uint32_t first = strata.start[base + c0], end = strata.start[base + c1];
                             if (oneSigned) {
-                                for (uint32_t e = first; e < end; ++e) {
-                                    const Vec2 lens = strata.lens[e];
-                                    const float fx = strata.fx[e], fy = strata.fy[e];
-                                    if (fx < stillX0 + lens.x * loX || fx > stillX1 + lens.x * hiX ||
-                                        fy < stillY0 + lens.y * loY || fy > stillY1 + lens.y * hiY)
-                                        continue;
-                                    testAt(strata.sample[e], 0, 0.f, lens);
-                                }
+                                filterStillLens(strata, first, end, stillBound, [&](uint32_t e) {
+                                    testAt(strata.sample[e], 0, 0.f, Vec2{strata.lensX[e], strata.lensY[e]});
+                                });
+                                continue;
+                            }
+                            const int seg = g.knots == 1 ? 0 : strata.stratumSegment[size_t(tb)];
+                            if (allValid && seg >= 0) {
+                                SegmentBound sb;
+                                sb.p = knotBox[size_t(seg)];
+                                sb.q = g.knots == 1 ? sb.p : knotBox[size_t(seg) + 1];
+                                sb.t0 = g.knots == 1 ? 0.f : knots[size_t(seg)];
+                                sb.invDt =
+                                    g.knots == 1 ? 0.f : 1.f / (knots[size_t(seg) + 1] - knots[size_t(seg)]);
+                                sb.sx = pr.sx, sb.sy = pr.sy;
+                                auto hit = [&](uint32_t e) {
+                                    int k;
+                                    float w;
+                                    timelineSegment(knots.data(), g.knots, strata.time[e], k, w);
+                                    testAt(strata.sample[e], k, w, Vec2{strata.lensX[e], strata.lensY[e]});
+                                };
+                                if (lensOn)
+                                    filterSegment<true>(strata, first, end, sb, hit);
+                                else
+                                    filterSegment<false>(strata, first, end, sb, hit);
                                 continue;
                             }
                             for (uint32_t e = first; e < end; ++e) {
-                                const Vec2 lens = strata.lens[e];
+                                const Vec2 lens{strata.lensX[e], strata.lensY[e]};
                                 int k;
                                 float w;
                                 timelineSegment(knots.data(), g.knots, strata.time[e], k, w);
@@ -673,14 +709,23 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
 
 }  // namespace
 
-void BlurStrata::configure(const BlurPattern& p) {
+void BlurStrata::configure(const BlurPattern& p, const std::vector<float>& knots) {
     timeStrata = 1, lensCells = 1;
-    sweep = p.motion && !p.lens;
-    if (p.motion && p.lens) {
+    if (p.motion) {
         timeStrata = std::min(256, p.spp);
-        lensCells = p.spp >= 4 ? 2 : 1;
+        lensCells = p.lens && p.spp >= 4 ? 2 : 1;
     } else if (p.lens) {
         lensCells = std::max(1, floorToInt((std::sqrt(float(p.spp)) + 1e-4f)));
+    }
+    stratumSegment.assign(size_t(timeStrata), -1);
+    const int count = int(knots.size());
+    for (int tb = 0; tb < timeStrata; ++tb) {
+        // Samples of stratum tb have tb <= t T < tb + 1 (build's cellOf).
+        const float lo = float(tb) / float(timeStrata), hi = float(tb + 1) / float(timeStrata);
+        int k;
+        float w;
+        timelineSegment(knots.data(), count, lo, k, w);
+        if (count <= 1 || hi <= knots[size_t(k) + 1] + 1e-6f) stratumSegment[size_t(tb)] = count <= 1 ? 0 : k;
     }
 }
 
@@ -688,22 +733,6 @@ void BlurStrata::build(const SampleTile& tile) {
     const int C = cells(), spp = tile.spp, L = lensCells;
     x0 = tile.region.x0, y0 = tile.region.y0, cols = tile.region.width();
     const int rows = tile.region.height();
-    if (sweep) {
-        const size_t pixels = size_t(cols) * rows;
-        pixelTime.resize(pixels * spp), pixelSample.resize(pixels * spp);
-        thread_local std::vector<uint32_t> order;
-        order.resize(size_t(spp));
-        for (size_t p = 0; p < pixels; ++p) {
-            const size_t first = p * spp;
-            for (int s = 0; s < spp; ++s) order[s] = uint32_t(first + s);
-            std::sort(order.begin(), order.end(),
-                      [&](uint32_t a, uint32_t b) { return tile.time[a] < tile.time[b]; });
-            for (int r = 0; r < spp; ++r)
-                pixelSample[first + r] = order[r], pixelTime[first + r] = tile.time[order[r]];
-        }
-        start.assign(1, 0);  // built (rasterizeBoundingBox reads start.empty() as "no strata")
-        return;
-    }
     const size_t samples = size_t(cols) * rows * spp;
     // Counting sort by (row, cell, column): count into start[base + col + 1], then a running sum over the
     // whole array makes every block's first entry the previous block's end.
@@ -726,8 +755,9 @@ void BlurStrata::build(const SampleTile& tile) {
         start[b] = running;  // the block's first entry
         for (int c = 1; c <= cols; ++c) running = start[b + c] += running;
     }
-    fx.resize(samples), fy.resize(samples), time.resize(samples), lens.resize(samples),
-        sample.resize(samples);
+    const size_t padded = samples + kRunPadding;
+    fx.assign(padded, 0.f), fy.assign(padded, 0.f), time.assign(padded, 0.f), lensX.assign(padded, 0.f),
+        lensY.assign(padded, 0.f), sample.assign(padded, 0);
     std::vector<uint32_t> fill(start);
     for (int py = 0; py < rows; ++py)
         for (int px = 0; px < cols; ++px)
@@ -737,7 +767,7 @@ void BlurStrata::build(const SampleTile& tile) {
                 fx[e] = float(tile.sx[si]) * (1.f / kSubpixelScale);
                 fy[e] = float(tile.sy[si]) * (1.f / kSubpixelScale);
                 time[e] = tile.time[si];
-                lens[e] = tile.lens[si];
+                lensX[e] = tile.lens[si].x, lensY[e] = tile.lens[si].y;
                 sample[e] = uint32_t(si);
             }
 }

@@ -31,21 +31,22 @@ struct BlurStrata {
     // Per (row, cell): cols + 1 entry indices; the samples of the row and cell in columns [a, b] are the
     // entries [start[base + a], start[base + b + 1]), base = (row * cells() + cell) * (cols + 1).
     std::vector<uint32_t> start;
+    // Structure of arrays, padded with kRunPadding entries past the last so that the candidate filters
+    // can read four at a time past a run's end (the lanes past it are masked off).
+    static constexpr size_t kRunPadding = 4;
     std::vector<float> fx, fy, time;  // raster position in pixels, normalised shutter time
-    std::vector<Vec2> lens;
-    std::vector<uint32_t> sample;  // index in the tile
-    // Motion without a lens (the sweep, rasterize_blur.cpp): instead, each pixel's samples sorted by time,
-    // spp per pixel: their times and their indices in the tile.
-    bool sweep = false;
-    std::vector<float> pixelTime;
-    std::vector<uint32_t> pixelSample;
+    std::vector<float> lensX, lensY;  // lens point
+    std::vector<uint32_t> sample;     // index in the tile
+    // Per time stratum, the segment of the frame's knot timeline that holds it whole (-1: it straddles a
+    // knot), so that a run of one stratum is bounded by one linear motion (the vector filter).
+    std::vector<int> stratumSegment;
     int cells() const { return timeStrata * lensCells * lensCells; }
     size_t runBase(int py, int cell) const {
         return (size_t(py - y0) * cells() + size_t(cell)) * size_t(cols + 1);
     }
-    // Choose the strata for a pattern: time only (the sweep), lens only (about sqrt(spp) cells per axis),
-    // or both (spp time strata, 2 x 2 lens cells).
-    void configure(const BlurPattern& pattern);
+    // Choose the strata for a pattern: motion: spp time strata (times 2 x 2 lens cells with a lens); lens
+    // only: about sqrt(spp) cells per axis. `knots`: the frame's timeline (FrameMotion::knots).
+    void configure(const BlurPattern& pattern, const std::vector<float>& knots);
     void build(const SampleTile& tile);
 };
 

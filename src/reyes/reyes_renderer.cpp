@@ -188,7 +188,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         const Rect target = layout.target(b);
         frame.resetTile(tc.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
         if (useStrata) {
-            tc.strata.configure(frame.blur);
+            tc.strata.configure(frame.blur, motion.knots);
             tc.strata.build(tc.tile);
         }
         for (uint32_t k = begin; k < end; ++k) {
