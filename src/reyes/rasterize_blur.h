@@ -40,12 +40,13 @@ struct BlurStrata {
     // Per time stratum, the segment of the frame's knot timeline that holds it whole (-1: it straddles a
     // knot), so that a run of one stratum is bounded by one linear motion (the vector filter).
     std::vector<int> stratumSegment;
+    std::vector<float> segmentInvDt;  // per segment k, 1 / (knots[k + 1] - knots[k])
     int cells() const { return timeStrata * lensCells * lensCells; }
     size_t runBase(int py, int cell) const {
         return (size_t(py - y0) * cells() + size_t(cell)) * size_t(cols + 1);
     }
-    // Choose the strata for a pattern: motion: spp time strata (times 2 x 2 lens cells with a lens); lens
-    // only: about sqrt(spp) cells per axis. `knots`: the frame's timeline (FrameMotion::knots).
+    // Choose the strata for a pattern: spp time strata with motion (at most 256), 2 x 2 lens cells with a
+    // lens. `knots`: the frame's timeline (FrameMotion::knots).
     void configure(const BlurPattern& pattern, const std::vector<float>& knots);
     void build(const SampleTile& tile);
 };
