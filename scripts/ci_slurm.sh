@@ -104,6 +104,9 @@ MpiDefault=none
 SelectType=select/cons_tres
 SelectTypeParameters=CR_CPU
 SchedulerType=sched/builtin
+# Look at pending jobs every second (default 60 s): a dependent job (the assemble step, a retried tile)
+# starts as soon as what it waits for ends.
+SchedulerParameters=sched_interval=1
 JobAcctGatherType=jobacct_gather/none
 AccountingStorageType=accounting_storage/none
 JobCompType=jobcomp/none
