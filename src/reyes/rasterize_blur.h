@@ -10,7 +10,9 @@
 //  - bbox: one bound over the whole shutter and lens (every corner at every knot, grown by its circle of
 //    confusion), against every sample in it. With strata bounds on, the bound is cut per time stratum and
 //    lens cell, and each piece meets only the samples whose (t, lens) lie in its stratum: the same hits,
-//    far fewer tests.
+//    far fewer tests; the candidates are checked four at a time against the bound at their own (t, lens).
+//    With strata bounds on, the interleaved scheme's samples take this path too (the same hits as its
+//    passes, at a fraction of their cost).
 #pragma once
 #include <cstdint>
 #include <vector>
