@@ -736,8 +736,8 @@ void BlurStrata::configure(const BlurPattern& p, const std::vector<float>& knots
     // Lens cells: 2 x 2 (a cell never straddles l = 0, so a still micropolygon's bound over it has
     // one-signed shift factors). Finer cells cut the samples in each bound but cost a run lookup per row
     // and cell, which the four-wide filter made the larger cost: on dof_teapot (1 thread, sample stage)
-    // 2 x 2 cells beat sqrt(spp)^2 cells at 16 spp (1.33 vs 1.60 s), 64 spp (0.75 vs 1.09 s at 400x300)
-    // and 256 spp (0.72 vs 0.57-0.60 s for 4 x 4 and 8 x 8, 200x150: about even).
+    // 2 x 2 cells against the earlier sqrt(spp)^2: 1.33 vs 1.60 s at 16 spp (800x600), 0.75 vs 1.09 s
+    // at 64 spp (400x300); at 256 spp (200x150) 0.57 s against 0.60 (4 x 4) and 0.72 (8 x 8).
     timeStrata = p.motion ? std::min(256, p.spp) : 1;
     lensCells = p.lens && p.spp >= 4 ? 2 : 1;
     stratumSegment.assign(size_t(timeStrata), -1);
