@@ -37,6 +37,9 @@ heavy='^(MotionBlurCrossEngine\.MovingSphereWithLensAgrees|DefaultFraming\.(YUpC
 heavy+='|Files/ShippedSceneFile\.RendersWithBothEngines/(bigguy24|bigguy24_instanced|bigguy9|killeroo_spin|displaced_killeroo)_rib'
 heavy+='|BothEngines/ShippedScenes\.RendersWithoutPinholes/bigguy(24|9)_(reyes|rt)'
 heavy+='|ReyesSampling\.TeapotCoverageConvergesWithSpp|ReyesDeterminism\.SameImageForAnyThreadCount'
+# The engines' thread-count determinism (the same renders at 1, 2 and 4 threads and twice; 13 s here):
+# every other render here runs multi-threaded too.
+heavy+='|Engines/Determinism\.SameImageForAnyThreadCountAndAcrossRuns/(reyes|rt)'
 # Shadow maps: ReyesShadowMaps.EveryKindOfMapAgreesWithRayTracedShadows and the shadow-count and one-map
 # tests run the map passes here; the larger scenes and the bias studies (15-25 s each) only in Release.
 heavy+='|ReyesShadowMaps\.AgreeWithTheRayTracersHardShadowsOnShippedScenes'
