@@ -313,6 +313,16 @@ inline bool shiftFactors(int cell, int cells, float a, float b, float& lo, float
 // The most lens cells per axis (BlurStrata::configure).
 constexpr int kMaxLensCells = 2;
 
+#if defined(__SSE2__)
+// The lanes of entries e .. e + 3 that `out` does not mark (and that lie before end), in order: hit(entry).
+template <class Hit>
+inline void forEachInside(__m128 out, uint32_t e, uint32_t end, Hit& hit) {
+    unsigned in = ~unsigned(_mm_movemask_ps(out)) & 15u;
+    if (end - e < 4) in &= (1u << (end - e)) - 1u;
+    for (; in; in &= in - 1) hit(e + uint32_t(__builtin_ctz(in)));
+}
+#endif
+
 // The bound of a still micropolygon (depth of field only) over one lens cell whose l.x and l.y keep one
 // sign (shiftFactors): at lens point l it is [x0 + l.x loX, x1 + l.x hiX] x [y0 + l.y loY, y1 + l.y hiY].
 struct StillLensBound {
@@ -338,9 +348,7 @@ inline void filterStillLens(const BlurStrata& s, uint32_t first, uint32_t end, c
                                _mm_cmpgt_ps(fx, _mm_add_ps(x1, _mm_mul_ps(lx, hiX))));
         out = _mm_or_ps(out, _mm_or_ps(_mm_cmplt_ps(fy, _mm_add_ps(y0, _mm_mul_ps(ly, loY))),
                                        _mm_cmpgt_ps(fy, _mm_add_ps(y1, _mm_mul_ps(ly, hiY)))));
-        unsigned in = ~unsigned(_mm_movemask_ps(out)) & 15u;
-        if (end - e < 4) in &= (1u << (end - e)) - 1u;
-        for (; in; in &= in - 1) hit(e + uint32_t(__builtin_ctz(in)));
+        forEachInside(out, e, end, hit);
     }
 #else
     for (uint32_t e = first; e < end; ++e) {
@@ -395,9 +403,7 @@ inline void filterSegment(const BlurStrata& s, uint32_t first, uint32_t end, con
         const __m128 fx = _mm_loadu_ps(&s.fx[e]), fy = _mm_loadu_ps(&s.fy[e]);
         const __m128 out = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(fx, x0), _mm_cmpgt_ps(fx, x1)),
                                      _mm_or_ps(_mm_cmplt_ps(fy, y0), _mm_cmpgt_ps(fy, y1)));
-        unsigned in = ~unsigned(_mm_movemask_ps(out)) & 15u;
-        if (end - e < 4) in &= (1u << (end - e)) - 1u;
-        for (; in; in &= in - 1) hit(e + uint32_t(__builtin_ctz(in)));
+        forEachInside(out, e, end, hit);
     }
 #else
     for (uint32_t e = first; e < end; ++e) {
@@ -656,8 +662,7 @@ uint64_t rasterizeImpl(const Grid& g, SampleTile& tile, float nearZ, const BlurR
         return (size_t(py - reg.y0) * tw + size_t(px - reg.x0)) * spp + size_t(slot);
     };
 
-    if (pat.scheme == BlurSampling::Simple ||
-        (pat.scheme == BlurSampling::Interleaved && !ctx.strataBounds)) {
+    if (pat.scheme != BlurSampling::BoundingBox && !blurUsesStrata(pat.scheme, ctx.strataBounds)) {
         // Simple, and interleaved as the paper runs it: every micropolygon of the grid takes the same
         // (t, lens) per pass, so the whole grid is moved once per pass (each vertex shared by four
         // micropolygons) and then sampled. With strata bounds the interleaved samples go through the bbox

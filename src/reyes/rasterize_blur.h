@@ -60,6 +60,13 @@ struct BlurRasterContext {
     bool strataBounds = true;
 };
 
+// Whether a blurred frame samples through BlurStrata (built per tile) and the bbox rasterizer: the bbox
+// scheme, and the interleaved one (its samples each at their own time and lens point: the same hits as
+// its per-pass form, which strata bounds off keep), when strata bounds are on.
+inline bool blurUsesStrata(BlurSampling scheme, bool strataBounds) {
+    return strataBounds && scheme != BlurSampling::Simple;
+}
+
 // Rasterize a blurred grid (Grid::blurred). `strata` must be built for the tile when the scheme is bbox
 // with strata bounds. Returns the number of sample tests.
 uint64_t rasterizeBlurredGrid(const Grid& grid, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,

@@ -157,7 +157,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     blurContext.pattern = &frame.blur;
     blurContext.knots = &motion.knots;
     blurContext.strataBounds = settings.blur.strataBounds;
-    const bool useStrata = blurred && frame.blur.scheme != BlurSampling::Simple && settings.blur.strataBounds;
+    const bool useStrata = blurred && blurUsesStrata(frame.blur.scheme, settings.blur.strataBounds);
     view.maxGridEdge = std::max(1, settings.maxGridEdge);
     const int rx = frame.filter.radiusX(), ry = frame.filter.radiusY();
     const Rect& region = frame.region;
