@@ -55,7 +55,7 @@ inline MovedVertex moveVertex(const Grid& g, size_t v, int k, float w, Vec2 lens
 
 // A micropolygon's corners moved to one (time, lens point), in fixed point, with their depths.
 struct MovedQuad {
-    int64_t X[4], Y[4];
+    int32_t X[4], Y[4];  // within blurredToFixed's clamp of +-2^20 pixels, i.e. +-2^28
     float Z[4];
     int64_t minX, maxX, minY, maxY;
     bool valid;
@@ -119,11 +119,9 @@ inline MovedQuad moveQuad(const CornerSegment& s, float w, Vec2 lens, const Proj
             _mm_min_ps(_mm_max_ps(_mm_mul_ps(v, scale), _mm_sub_ps(_mm_setzero_ps(), limit)), limit);
         return _mm_cvttps_epi32(_mm_add_ps(f, _mm_or_ps(half, _mm_and_ps(f, sign))));
     };
-    alignas(16) int32_t X[4], Y[4];
-    _mm_store_si128(reinterpret_cast<__m128i*>(X), toFixed(x));
-    _mm_store_si128(reinterpret_cast<__m128i*>(Y), toFixed(y));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(q.X), toFixed(x));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(q.Y), toFixed(y));
     _mm_storeu_ps(q.Z, _mm_add_ps(_mm_loadu_ps(s.z), _mm_mul_ps(w4, _mm_loadu_ps(s.dz))));
-    for (int c = 0; c < 4; ++c) q.X[c] = X[c], q.Y[c] = Y[c];
 #else
     for (int c = 0; c < 4; ++c) {
         const float x = s.x[c] + w * s.dx[c], y = s.y[c] + w * s.dy[c];
@@ -137,13 +135,13 @@ inline MovedQuad moveQuad(const CornerSegment& s, float w, Vec2 lens, const Proj
         q.Z[c] = s.z[c] + w * s.dz[c];
     }
 #endif
-    finishQuad(q);
-    return q;
+    return q;  // without its box (finishQuad): the bbox scheme's sample passed the bound at its (t, lens)
 }
 
 // Signed doubled area of corners (0, 1, 2) of a moved quad.
 inline int64_t signedArea(const MovedQuad& q) {
-    return (q.X[1] - q.X[0]) * (q.Y[2] - q.Y[0]) - (q.X[2] - q.X[0]) * (q.Y[1] - q.Y[0]);
+    const int64_t X0 = q.X[0], Y0 = q.Y[0];
+    return (q.X[1] - X0) * (q.Y[2] - Y0) - (q.X[2] - X0) * (q.Y[1] - Y0);
 }
 
 // The moved quad's triangles (0,1,2) and (0,2,3).
@@ -195,12 +193,12 @@ inline bool testMovedSample(const Grid& g, const int vid[4], const MovedQuad& q,
 
 // testMovedSample for a quad met by one sample (the bbox scheme): the same integer edge functions,
 // fill rule and weights as setupTriangleEdges + insideTriangle (so the same hits, bit for bit), evaluated
-// directly at the sample, edge by edge, with the weights' division only for a hit.
+// directly at the sample, edge by edge, with the weights' division only for a hit. No box test first:
+// the sample passed the quad's bound at its (t, lens), and one outside the box fails an edge anyway.
 template <bool kAttributes>
 inline bool testMovedSampleOnce(const Grid& g, const int vid[4], const MovedQuad& q, size_t i,
                                 SampleTile& tile, float nearZ) {
     const int64_t sx = tile.sx[i], sy = tile.sy[i];
-    if (sx < q.minX || sx > q.maxX || sy < q.minY || sy > q.maxY) return false;
     auto edge = [sx, sy](int64_t xa, int64_t ya, int64_t xb, int64_t yb) {
         return (xb - xa) * (sy - ya) - (yb - ya) * (sx - xa) - fillBias(xa, ya, xb, yb);
     };
@@ -955,12 +953,15 @@ void BlurStrata::build(const SampleTile& tile) {
         const int ly = std::clamp(int((tile.lens[si].y + 1.f) * 0.5f * L), 0, L - 1);
         return (tb * L + ly) * L + lx;
     };
-    auto slotOf = [&](size_t si, int py, int px) { return runBase(y0 + py, cellOf(si)) + size_t(px); };
+    // Each sample's slot in `start` (its row, cell and column), computed once for the count and the fill.
+    thread_local std::vector<uint32_t> slot;
+    slot.resize(samples);
     for (int py = 0; py < rows; ++py)
         for (int px = 0; px < cols; ++px)
             for (int s = 0; s < spp; ++s) {
                 const size_t si = (size_t(py) * cols + px) * spp + s;
-                ++start[slotOf(si, py, px) + 1];
+                slot[si] = uint32_t(runBase(y0 + py, cellOf(si)) + size_t(px));
+                ++start[slot[si] + 1];
             }
     uint32_t running = 0;
     for (size_t b = 0; b < start.size(); b += size_t(cols + 1)) {
@@ -968,20 +969,23 @@ void BlurStrata::build(const SampleTile& tile) {
         for (int c = 1; c <= cols; ++c) running = start[b + c] += running;
     }
     const size_t padded = samples + kRunPadding;
-    fx.assign(padded, 0.f), fy.assign(padded, 0.f), time.assign(padded, 0.f), lensX.assign(padded, 0.f),
-        lensY.assign(padded, 0.f), sample.assign(padded, 0);
-    std::vector<uint32_t> fill(start);
-    for (int py = 0; py < rows; ++py)
-        for (int px = 0; px < cols; ++px)
-            for (int s = 0; s < spp; ++s) {
-                const size_t si = (size_t(py) * cols + px) * spp + s;
-                const uint32_t e = fill[slotOf(si, py, px)]++;
-                fx[e] = float(tile.sx[si]) * (1.f / kSubpixelScale);
-                fy[e] = float(tile.sy[si]) * (1.f / kSubpixelScale);
-                time[e] = tile.time[si];
-                lensX[e] = tile.lens[si].x, lensY[e] = tile.lens[si].y;
-                sample[e] = uint32_t(si);
-            }
+    // Every entry below `samples` is written below; the padding is zero.
+    for (auto* v : {&fx, &fy, &time, &lensX, &lensY}) {
+        v->resize(padded);
+        std::fill(v->begin() + std::ptrdiff_t(samples), v->end(), 0.f);
+    }
+    sample.resize(padded);
+    std::fill(sample.begin() + std::ptrdiff_t(samples), sample.end(), 0u);
+    thread_local std::vector<uint32_t> fill;
+    fill.assign(start.begin(), start.end());
+    for (size_t si = 0; si < samples; ++si) {
+        const uint32_t e = fill[slot[si]]++;
+        fx[e] = float(tile.sx[si]) * (1.f / kSubpixelScale);
+        fy[e] = float(tile.sy[si]) * (1.f / kSubpixelScale);
+        time[e] = tile.time[si];
+        lensX[e] = tile.lens[si].x, lensY[e] = tile.lens[si].y;
+        sample[e] = uint32_t(si);
+    }
 }
 
 uint64_t rasterizeBlurredGrid(const Grid& grid, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,
