@@ -321,6 +321,7 @@ constexpr int kMaxLensCells = 2;
 template <class Hit>
 inline void forEachInside(__m128 out, uint32_t e, uint32_t end, Hit& hit) {
     unsigned in = ~unsigned(_mm_movemask_ps(out)) & 15u;
+    if (!in) return;  // the common case: all four outside (the tail's mask only matters for a hit)
     if (end - e < 4) in &= (1u << (end - e)) - 1u;
     for (; in; in &= in - 1) hit(e + uint32_t(__builtin_ctz(in)));
 }
