@@ -57,8 +57,8 @@ py::object jsonToPython(const nlohmann::json& j) {
 }
 
 // A numpy array that owns a copy of `values` (rows x cols x components; components 1: 2-D).
-template <typename T>
-py::array_t<T> toArray(const std::vector<T>& values, int rows, int cols, int components) {
+template <typename T, typename Allocator>
+py::array_t<T> toArray(const std::vector<T, Allocator>& values, int rows, int cols, int components) {
     std::vector<py::ssize_t> shape{rows, cols};
     if (components > 1) shape.push_back(components);
     py::array_t<T> a(shape);
@@ -435,7 +435,10 @@ void writeResult(const PyResult& r, const std::filesystem::path& file) {
     OutputEncoding enc = r.encoding;
     enc.exr = &meta;
     py::gil_scoped_release release;
-    writeImage(path, withLayers(r.image, r.aovs), enc);
+    if (writesAsRendered(r.image, r.aovs))
+        writeImage(path, r.image, enc);
+    else
+        writeImage(path, withLayers(r.image, r.aovs), enc);
 }
 
 const char* kRenderDoc = R"(Render a scene and return a Result.

@@ -609,7 +609,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         }
         if (pass == 0) {
             result = std::move(r);
-            sum = result.image;
+            if (passes > 1) sum = result.image;
         } else {
             for (size_t i = 0; i < sum.rgba.size(); ++i) sum.rgba[i] += r.image.rgba[i];
             result.stats = std::move(r.stats);
@@ -693,9 +693,14 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
             writeDepthMap(output, depthMapOf(result.image, meta, scene.image.displayType));
         } else {
             // The primary output: the beauty and --aov's layers; then each secondary display's file.
-            writeImage(output, withLayers(result.image, *aovs), enc);
-            for (const Secondary& d : secondaries)
-                writeImage(d.path, withLayers(result.image, d.layers), enc);
+            auto writeLayers = [&](const std::string& path, const AovRequest& layers) {
+                if (writesAsRendered(result.image, layers))
+                    writeImage(path, result.image, enc);
+                else
+                    writeImage(path, withLayers(result.image, layers), enc);
+            };
+            writeLayers(output, *aovs);
+            for (const Secondary& d : secondaries) writeLayers(d.path, d.layers);
         }
         if (!a.adaptiveMap.empty()) writeAdaptiveMap(a.adaptiveMap, result);
         if (!statsTmp.empty()) fs::rename(statsTmp, a.stats);

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/buffer_allocator.h"
 #include "core/random.h"
 #include "core/vec.h"
 #include "film/blur_pattern.h"
@@ -56,8 +57,8 @@ struct Rect {
 // farm tile); pixel() takes raster coordinates.
 struct Image {
     int width = 0, height = 0;
-    int x0 = 0, y0 = 0;  // raster position of the first pixel
-    std::vector<float> rgba;
+    int x0 = 0, y0 = 0;                               // raster position of the first pixel
+    std::vector<float, BufferAllocator<float>> rgba;  // huge pages for large frames (core/buffer_allocator.h)
     std::vector<ImagePlane> planes;
     Image() = default;
     Image(int w, int h) : width(w), height(h), rgba(size_t(w) * h * 4, 0.f) {}
