@@ -25,7 +25,6 @@ std::vector<PlacedQuadric> quadricsInSpace(const Scene& scene, const Mat4& toSpa
 std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
                                 const std::atomic<bool>* cancel, SplitStats& stats) {
     const size_t n = scene.patches.size();
-    std::vector<std::vector<Piece>> perPatch(n);
     // Every patch's micropolygon side, for the edges that displaced neighbours share (ReyesView::patchSide).
     std::vector<float> sides(n);
     for (size_t i = 0; i < n; ++i) {
@@ -35,17 +34,30 @@ std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float
     ReyesView withSides = view;
     withSides.patchSide = sides.data();
     std::atomic<uint64_t> splits{0}, pieceCulls{0}, patchesCulled{0};
-    tbb::parallel_for(size_t(0), n, [&](size_t i) {
-        // Ctrl-C during a long split: skip the remaining patches (the bucket loop then reports it).
-        if (cancel && cancel->load(std::memory_order_relaxed)) return;
-        SplitCounters c;
-        splitSurface(withSides, scene.attributes[i], uint32_t(i), sides[i], perPatch[i], c);
-        splits += c.splits;
-        pieceCulls += c.culled;
-        if (c.patchCulled) ++patchesCulled;
+    // Fixed chunks of patches, each split into its own list, then the lists copied into place in parallel:
+    // the pieces stay in patch order (determinism), without a vector per patch or a serial concatenation
+    // (24 Big Guys: 85,680 patches; the serial copy and its page faults were half the split stage).
+    constexpr size_t kChunk = 64;
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    std::vector<std::vector<Piece>> perChunk(chunks);
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        for (size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+            // Ctrl-C during a long split: skip the remaining patches (the bucket loop then reports it).
+            if (cancel && cancel->load(std::memory_order_relaxed)) return;
+            SplitCounters counters;
+            splitSurface(withSides, scene.attributes[i], uint32_t(i), sides[i], perChunk[c], counters);
+            splits += counters.splits;
+            pieceCulls += counters.culled;
+            if (counters.patchCulled) ++patchesCulled;
+        }
     });
-    std::vector<Piece> pieces;
-    for (auto& v : perPatch) pieces.insert(pieces.end(), v.begin(), v.end());
+    std::vector<size_t> offset(chunks + 1, 0);
+    for (size_t c = 0; c < chunks; ++c) offset[c + 1] = offset[c] + perChunk[c].size();
+    std::vector<Piece> pieces(offset[chunks]);
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        std::copy(perChunk[c].begin(), perChunk[c].end(), pieces.begin() + std::ptrdiff_t(offset[c]));
+        std::vector<Piece>().swap(perChunk[c]);
+    });
     stats.splits = splits.load();
     stats.pieceCulls = pieceCulls.load();
     stats.patchesCulled = patchesCulled.load();

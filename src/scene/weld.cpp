@@ -1,7 +1,12 @@
 #include "scene/weld.h"
 
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <tuple>
 #include <unordered_map>
 
 namespace tessera {
@@ -82,11 +87,23 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
                         return;
                     }
             };
-            // The point's own cell first (the common case), then the 26 neighbours.
+            // The point's own cell first (the common case), then those of the 26 neighbours that a point
+            // within tol can lie in: along each axis, the lower neighbour only when p is near the cell's
+            // lower side, the upper one only when near its upper side. "Near" is 1.5 tol, not tol, so
+            // that the float rounding of keyOf (about 1e-7 of the coordinate, against tol = 1e-5 of the
+            // scene's size) never hides a cell; the cells skipped hold no point within tol, so the same
+            // representative is found as when searching all 26.
             search(k);
-            for (int64_t dx = -1; dx <= 1 && !found; ++dx)
-                for (int64_t dy = -1; dy <= 1 && !found; ++dy)
-                    for (int64_t dz = -1; dz <= 1 && !found; ++dz)
+            auto reach = [&](float v, int64_t kv, int64_t& lo, int64_t& hi) {
+                const float offset = v - float(kv) * cell;
+                lo = offset < 1.5f * tol ? -1 : 0;
+                hi = offset > cell - 1.5f * tol ? 1 : 0;
+            };
+            int64_t x0, x1, y0, y1, z0, z1;
+            reach(p.x, k.x, x0, x1), reach(p.y, k.y, y0, y1), reach(p.z, k.z, z0, z1);
+            for (int64_t dx = x0; dx <= x1 && !found; ++dx)
+                for (int64_t dy = y0; dy <= y1 && !found; ++dy)
+                    for (int64_t dz = z0; dz <= z1 && !found; ++dz)
                         if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
             if (found) {
                 if (plan) plan->push_back({pi, found->patch, uint8_t(c), found->cp});
@@ -99,36 +116,62 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
             }
         }
     }
-    // 2. Edges: key by their (now exactly shared) end corners, in canonical order.
-    struct EdgeRef {
-        uint32_t patch;
-        int edge;
-    };
-    struct PairHash {
-        size_t operator()(const std::pair<CellKey, CellKey>& k) const {
-            CellHash h;
-            return h(k.first) * 31 + h(k.second);
-        }
-    };
+    // 2. Edges: key by their (now exactly shared) end corners, in canonical order. An edge welds onto the
+    // first earlier edge of its key that matches; a weld writes only the edge's two inner control points,
+    // which belong to no other edge, and reads only edges of the same key. So the keys are independent:
+    // the edges are sorted by (key, patch, edge) and each key's group is welded in patch order, the groups
+    // in parallel (24 Big Guys: 343 K edges), with the same result as one pass in patch order.
     auto lexLess = [](Vec3 a, Vec3 b) {
         if (a.x != b.x) return a.x < b.x;
         if (a.y != b.y) return a.y < b.y;
         return a.z < b.z;
     };
-    std::unordered_map<std::pair<CellKey, CellKey>, std::vector<EdgeRef>, PairHash> edges;
-    edges.reserve(patches.size() * 3);
-    for (uint32_t pi = 0; pi < patches.size(); ++pi) {
+    struct EdgeItem {
+        CellKey a, b;
+        uint32_t patch;
+        int edge;
+        bool operator<(const EdgeItem& o) const {
+            auto tie = [](const EdgeItem& i) {
+                return std::tie(i.a.x, i.a.y, i.a.z, i.b.x, i.b.y, i.b.z, i.patch, i.edge);
+            };
+            return tie(*this) < tie(o);
+        }
+        bool sameKey(const EdgeItem& o) const { return a == o.a && b == o.b; }
+    };
+    std::vector<EdgeItem> items(patches.size() * 4);
+    std::vector<uint8_t> valid(items.size(), 0);
+    tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
         for (int e = 0; e < 4; ++e) {
-            BezierPatch& patch = patches[pi];
+            const BezierPatch& patch = patches[pi];
             Vec3 a = patch.cp[edgeIndex(e, 0)], b = patch.cp[edgeIndex(e, 3)];
             if (!isFinite(a) || !isFinite(b)) continue;
             if (lexLess(b, a)) std::swap(a, b);
-            auto key = std::make_pair(keyOf(a), keyOf(b));
-            auto& list = edges[key];
+            items[pi * 4 + size_t(e)] = {keyOf(a), keyOf(b), uint32_t(pi), e};
+            valid[pi * 4 + size_t(e)] = 1;
+        }
+    });
+    size_t kept = 0;
+    for (size_t i = 0; i < items.size(); ++i)
+        if (valid[i]) items[kept++] = items[i];
+    items.resize(kept);
+    tbb::parallel_sort(items.begin(), items.end());
+    std::vector<size_t> groups;  // first item of each key
+    for (size_t i = 0; i < items.size(); ++i)
+        if (i == 0 || !items[i].sameKey(items[i - 1])) groups.push_back(i);
+    groups.push_back(items.size());
+    std::vector<WeldPlan> groupPlans(plan ? groups.size() - 1 : 0);
+    std::atomic<size_t> edgesWelded{0};
+    tbb::parallel_for(size_t(0), groups.size() - 1, [&](size_t g) {
+        std::vector<const EdgeItem*> list;  // the group's edges that did not weld, in patch order
+        size_t welds = 0;
+        for (size_t i = groups[g]; i < groups[g + 1]; ++i) {
+            const uint32_t pi = items[i].patch;
+            const int e = items[i].edge;
+            BezierPatch& patch = patches[pi];
             bool welded = false;
-            for (const EdgeRef& other : list) {
-                const BezierPatch& q = patches[other.patch];
-                Vec3 qa = q.cp[edgeIndex(other.edge, 0)], qd = q.cp[edgeIndex(other.edge, 3)];
+            for (const EdgeItem* other : list) {
+                const BezierPatch& q = patches[other->patch];
+                Vec3 qa = q.cp[edgeIndex(other->edge, 0)], qd = q.cp[edgeIndex(other->edge, 3)];
                 Vec3 pa = patch.cp[edgeIndex(e, 0)], pd = patch.cp[edgeIndex(e, 3)];
                 bool same = qa == pa && qd == pd, reversed = qa == pd && qd == pa;
                 for (int dir = 0; dir < 2 && !welded; ++dir) {
@@ -136,26 +179,31 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
                     bool match = true;
                     for (int k = 1; k <= 2 && match; ++k)
                         match = near(patch.cp[edgeIndex(e, k)],
-                                     q.cp[edgeIndex(other.edge, dir == 0 ? k : 3 - k)], tol);
+                                     q.cp[edgeIndex(other->edge, dir == 0 ? k : 3 - k)], tol);
                     if (!match) continue;
                     bool changed = false;
                     for (int k = 1; k <= 2; ++k) {
-                        const int srcCp = edgeIndex(other.edge, dir == 0 ? k : 3 - k);
+                        const int srcCp = edgeIndex(other->edge, dir == 0 ? k : 3 - k);
                         if (plan)
-                            plan->push_back({pi, other.patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
+                            groupPlans[g].push_back(
+                                {pi, other->patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
                         Vec3 src = q.cp[srcCp];
                         Vec3& dst = patch.cp[edgeIndex(e, k)];
                         changed |= !(dst == src);
                         dst = src;
                     }
-                    if (changed) ++result.edgesWelded;
+                    if (changed) ++welds;
                     welded = true;
                 }
                 if (welded) break;
             }
-            if (!welded) list.push_back({pi, e});
+            if (!welded) list.push_back(&items[i]);
         }
-    }
+        edgesWelded += welds;
+    });
+    result.edgesWelded = edgesWelded.load();
+    if (plan)
+        for (const WeldPlan& p : groupPlans) plan->insert(plan->end(), p.begin(), p.end());
     return result;
 }
 
