@@ -28,7 +28,8 @@ Scene twoSquares() {
 void seenAt(const Projector& proj, float x, float y, uint32_t& id, float& depth) {
     const Vec3 d = proj.fromRaster(x, y);
     auto inside = [&](int k) {
-        return std::abs(d.x * kDepth[k] - kCx[k]) <= kHalf[k] && std::abs(d.y * kDepth[k] - kCy[k]) <= kHalf[k];
+        return std::abs(d.x * kDepth[k] - kCx[k]) <= kHalf[k] &&
+               std::abs(d.y * kDepth[k] - kCy[k]) <= kHalf[k];
     };
     if (inside(1)) {
         id = 1, depth = kDepth[1];
@@ -154,7 +155,8 @@ TEST(Film, ARegionRendersTheSamePixelsAsTheWholeImage) {
         int differing = 0;
         for (int y = 7; y < 29; ++y)
             for (int x = 13; x < 45; ++x) {
-                for (int c = 0; c < 4; ++c) differing += part.image.pixel(x, y)[c] != whole.image.pixel(x, y)[c];
+                for (int c = 0; c < 4; ++c)
+                    differing += part.image.pixel(x, y)[c] != whole.image.pixel(x, y)[c];
                 differing += part.image.plane("id")->ids[part.image.index(x, y)] !=
                              whole.image.plane("id")->ids[whole.image.index(x, y)];
             }
@@ -164,4 +166,31 @@ TEST(Film, ARegionRendersTheSamePixelsAsTheWholeImage) {
         const char* work = std::string(engine) == "rt" ? "rays_total" : "buckets";
         EXPECT_LT(part.stats[work].get<double>(), whole.stats[work].get<double>()) << engine;
     }
+}
+
+// The image buffer's allocator (core/buffer_allocator.h): large buffers come 2 MB-aligned for huge pages,
+// small ones from operator new; both behave as ordinary vectors (zeroed, copied, grown across the
+// threshold, compared).
+TEST(BufferAllocator, LargeAndSmallBuffersBehaveAsVectors) {
+    const size_t big = size_t(1024) * 1024 * 4;  // a 1024 x 1024 RGBA float image: 16 MB
+    Image image(Rect{0, 0, 1024, 1024});
+    ASSERT_EQ(image.rgba.size(), big);
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(image.rgba.data()) % kHugePageBytes, 0u);
+    size_t nonzero = 0;
+    for (float v : image.rgba) nonzero += v != 0.f;
+    EXPECT_EQ(nonzero, 0u);
+    image.rgba[big - 1] = 3.f, image.rgba[7] = 2.f;
+    const Image copy = image;
+    EXPECT_TRUE(copy.rgba == image.rgba);
+    EXPECT_EQ(copy.rgba[big - 1], 3.f);
+
+    std::vector<float, BufferAllocator<float>> grown(16, 1.f);  // small: operator new
+    for (size_t i = 0; grown.size() * sizeof(float) < 2 * kHugeBufferBytes; ++i) grown.push_back(float(i));
+    EXPECT_EQ(grown[15], 1.f);
+    EXPECT_EQ(grown[16], 0.f);
+    EXPECT_EQ(grown.back(), float(grown.size() - 17));
+    grown.resize(8);  // shrinking keeps the buffer; freeing it takes the large path's free
+    grown.shrink_to_fit();
+    EXPECT_EQ(grown.size(), 8u);
+    EXPECT_EQ(grown[7], 1.f);
 }
