@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <numbers>
 
 #include "io/scene_loader.h"
@@ -241,6 +242,49 @@ TEST(Weld, UnifiesNearlyEqualEdgesAndLeavesDistinctOnesAlone) {
     EXPECT_EQ(w.cornersMoved, 2u);
     EXPECT_EQ(w.edgesWelded, 1u);
     for (int k = 0; k < 16; ++k) EXPECT_TRUE(ps[2].cp[k] == far.cp[k]);
+}
+
+// A 120 x 120 grid of patches whose shared control points differ by up to half the tolerance: the weld
+// (in parallel by blocks of cells, and by edge keys) must give every shared point the value of its copy in
+// the first patch in order, as one greedy pass in patch order does, and move every other copy.
+TEST(Weld, AGridOfJitteredPatchesTakesEachSharedPointFromItsFirstPatch) {
+    const int n = 120;
+    const float tol = 1e-3f;
+    std::vector<BezierPatch> ps(size_t(n) * n);
+    uint32_t state = 12345u;
+    auto jitter = [&]() {  // +-(0.1 .. 0.25) tol, never 0
+        state = state * 1664525u + 1013904223u;
+        const float m = 0.1f + 0.15f * float(state >> 8) / float(1u << 24);
+        return (state & 1u) ? m * tol : -m * tol;
+    };
+    // Every control point by its exact grid position (in thirds): (patch, cp) copies in patch order.
+    std::map<std::pair<int, int>, std::vector<std::pair<size_t, int>>> copies;
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            const size_t pi = size_t(j) * n + size_t(i);
+            for (int row = 0; row < 4; ++row)
+                for (int col = 0; col < 4; ++col) {
+                    ps[pi].cp[row * 4 + col] = Vec3{float(i) + float(col) / 3.f + jitter(),
+                                                    float(j) + float(row) / 3.f + jitter(), jitter()};
+                    copies[{3 * i + col, 3 * j + row}].push_back({pi, row * 4 + col});
+                }
+        }
+    const std::vector<BezierPatch> before = ps;
+    const WeldResult w = weldSharedEdges(ps, tol);
+    size_t moved = 0, shared = 0, wrong = 0;
+    for (const auto& [position, list] : copies) {
+        if (list.size() < 2) continue;
+        ++shared;
+        const Vec3 first = before[list[0].first].cp[list[0].second];
+        for (const auto& [pi, cp] : list) wrong += !(ps[pi].cp[cp] == first);
+        moved += list.size() - 1;
+    }
+    EXPECT_EQ(wrong, 0u) << "of " << shared << " shared points";
+    // Inner grid corners have 4 copies (3 move), those on the border but not at a grid corner 2 (1 moves).
+    const size_t sharedCorners = size_t(n - 1) * (n - 1) * 3 + size_t(4 * (n - 1));
+    EXPECT_EQ(w.cornersMoved, sharedCorners);
+    EXPECT_EQ(w.edgesWelded, size_t(2) * n * (n - 1));
+    EXPECT_GT(moved, w.cornersMoved);  // the edges' inner points moved too
 }
 
 TEST(ReyesSides, OneSidedSurfacesFacingAwayAreCulled) {

@@ -1,8 +1,9 @@
-// An allocator for large, long-lived buffers (the frame's image): a request of at least kHugeBufferBytes is
-// aligned to 2 MB and offered to the kernel's transparent huge pages (madvise), so that touching it takes
-// one page fault per 2 MB instead of one per 4 KB. On a virtual machine each fault is expensive: a
-// 1024 x 1024 RGBA float image is 4,096 faults, about 10% of the whole teapot frame (issue 18). Smaller
-// requests, and systems without madvise, get plain operator new.
+// An allocator for large buffers touched once (the frame's image, the weld's scratch arrays): a request of
+// at least kHugeBufferBytes (1 MB) is aligned to 2 MB, rounded up to whole 2 MB pages and offered to the
+// kernel's transparent huge pages (madvise), so that touching it takes one page fault per 2 MB instead of
+// one per 4 KB. On a virtual machine each fault is expensive (about 10 us here): a 1024 x 1024 RGBA float
+// image is 4,096 faults, about 10% of the whole teapot frame (issue 18). Smaller requests, and systems
+// without madvise, get plain operator new.
 #pragma once
 #include <cstddef>
 #include <cstdlib>
@@ -14,7 +15,7 @@
 namespace tessera {
 
 inline constexpr std::size_t kHugePageBytes = std::size_t(2) << 20;
-inline constexpr std::size_t kHugeBufferBytes = std::size_t(4) << 20;
+inline constexpr std::size_t kHugeBufferBytes = std::size_t(1) << 20;
 
 template <class T>
 struct BufferAllocator {
