@@ -39,6 +39,17 @@ struct CellHash {
     }
 };
 
+// The items whose flag is set, in their order, then sorted (their operator< orders them completely, so
+// the parallel sort is deterministic).
+template <class Items, class Flags>
+void keepAndSort(Items& items, const Flags& keep) {
+    size_t kept = 0;
+    for (size_t i = 0; i < items.size(); ++i)
+        if (keep[i]) items[kept++] = items[i];
+    items.resize(kept);
+    tbb::parallel_sort(items.begin(), items.end());
+}
+
 bool near(Vec3 a, Vec3 b, float tol) {
     return std::fabs(a.x - b.x) <= tol && std::fabs(a.y - b.y) <= tol && std::fabs(a.z - b.z) <= tol;
 }
@@ -156,11 +167,7 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
             finite[pi * 4 + size_t(ci)] = 1;
         }
     });
-    size_t finiteCorners = 0;
-    for (size_t i = 0; i < corners.size(); ++i)
-        if (finite[i]) corners[finiteCorners++] = corners[i];
-    corners.resize(finiteCorners);
-    tbb::parallel_sort(corners.begin(), corners.end());
+    keepAndSort(corners, finite);
     std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
     std::vector<uint32_t, BufferAllocator<uint32_t>> ids(corners.size());
     std::vector<uint32_t> rest;
@@ -224,11 +231,7 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
             valid[pi * 4 + size_t(e)] = 1;
         }
     });
-    size_t kept = 0;
-    for (size_t i = 0; i < items.size(); ++i)
-        if (valid[i]) items[kept++] = items[i];
-    items.resize(kept);
-    tbb::parallel_sort(items.begin(), items.end());
+    keepAndSort(items, valid);
     std::vector<size_t> groups;  // first item of each key
     for (size_t i = 0; i < items.size(); ++i)
         if (i == 0 || !items[i].sameKey(items[i - 1])) groups.push_back(i);
