@@ -435,10 +435,8 @@ void writeResult(const PyResult& r, const std::filesystem::path& file) {
     OutputEncoding enc = r.encoding;
     enc.exr = &meta;
     py::gil_scoped_release release;
-    if (writesAsRendered(r.image, r.aovs))
-        writeImage(path, r.image, enc);
-    else
-        writeImage(path, withLayers(r.image, r.aovs), enc);
+    Image storage;
+    writeImage(path, fileImage(r.image, r.aovs, storage), enc);
 }
 
 const char* kRenderDoc = R"(Render a scene and return a Result.

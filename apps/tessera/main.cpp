@@ -694,10 +694,8 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
         } else {
             // The primary output: the beauty and --aov's layers; then each secondary display's file.
             auto writeLayers = [&](const std::string& path, const AovRequest& layers) {
-                if (writesAsRendered(result.image, layers))
-                    writeImage(path, result.image, enc);
-                else
-                    writeImage(path, withLayers(result.image, layers), enc);
+                Image storage;
+                writeImage(path, fileImage(result.image, layers, storage), enc);
             };
             writeLayers(output, *aovs);
             for (const Secondary& d : secondaries) writeLayers(d.path, d.layers);

@@ -50,6 +50,13 @@ std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad) {
     return r;
 }
 
+const Image& fileImage(const Image& rendered, const AovRequest& want, Image& storage) {
+    if (rendered.planes.empty() && want.channels == 0 && want.planes.empty() && !want.ci && !want.alpha)
+        return rendered;
+    storage = withLayers(rendered, want);
+    return storage;
+}
+
 Image withLayers(const Image& rendered, const AovRequest& want) {
     Image img = rendered;
     img.planes.clear();

@@ -27,10 +27,9 @@ std::optional<AovRequest> parseAovs(const std::string& list, std::string& bad);
 // The image a file holds: RGBA and the planes of `want` (the render may have made more for other files),
 // plus Ci and a (the colour, premultiplied, and alpha as named layers) when asked.
 Image withLayers(const Image& rendered, const AovRequest& want);
-// Whether that image is `rendered` as it is (RGBA, no layers made or asked for): the writer then takes it
-// without withLayers' copy (16 MB of page faults at 1024 x 1024).
-inline bool writesAsRendered(const Image& rendered, const AovRequest& want) {
-    return rendered.planes.empty() && want.channels == 0 && want.planes.empty() && !want.ci && !want.alpha;
-}
+// The image a file holds, without withLayers' copy when that is `rendered` as it is (RGBA, no layers made
+// or asked for: 16 MB of page faults at 1024 x 1024 saved): `rendered` itself, else withLayers' image kept
+// in `storage`.
+const Image& fileImage(const Image& rendered, const AovRequest& want, Image& storage);
 
 }  // namespace tessera

@@ -290,15 +290,16 @@ inline int floorToInt(float v) {
     return i - (float(i) > v);
 }
 
-// Lens cell `cell` of `cells` along one axis spans l in [-1 + 2 cell / cells, -1 + 2 (cell + 1) / cells].
-// When l keeps one sign there, min over c in [a, b] of l c is l * lo and the max is l * hi for every l of
-// the cell; returns false for a cell that straddles l = 0. (Samples lie in their cell up to float rounding
-// of about 1e-7, far inside kBoundSlack.)
 // Edge e of `cells` lens cells along an axis: -1 + 2 e / cells (the same values, without the division for
 // the one or two cells used).
 inline float lensCellEdge(int e, int cells) {
     return cells == 2 ? float(e - 1) : cells == 1 ? float(2 * e - 1) : -1.f + 2.f * float(e) / float(cells);
 }
+
+// Lens cell `cell` of `cells` along one axis spans l in [-1 + 2 cell / cells, -1 + 2 (cell + 1) / cells].
+// When l keeps one sign there, min over c in [a, b] of l c is l * lo and the max is l * hi for every l of
+// the cell; returns false for a cell that straddles l = 0. (Samples lie in their cell up to float rounding
+// of about 1e-7, far inside kBoundSlack.)
 inline bool shiftFactors(int cell, int cells, float a, float b, float& lo, float& hi) {
     const float l0 = lensCellEdge(cell, cells), l1 = lensCellEdge(cell + 1, cells);
     if (l0 >= 0.f) {
@@ -507,14 +508,14 @@ struct BlockCandidates {
     }
 };
 
-// Depth of field blocks: micropolygons are taken kBlockSide x kBlockSide at a time when the block's
-// circle of confusion is at least kBlockMinCoc pixels. The block's bound over a lens cell is about
-// (b + r)^2 pixels against b^2 (1 + r)^2 for its b^2 micropolygons one by one (r: the cell's share of
-// the circle of confusion), so the strata are read once for the block; each micropolygon then filters
-// only the block's candidates (about spp b^2 samples, contiguous). For small circles that second filter
-// costs more than it saves. dof_teapot, 1 thread, callgrind: 20.1 G instructions without blocks, 11.8 G
-// with b = 2, 10.3 G with 3, 10.0 G with 4 (the sample stage 1.29 -> 0.86 s); the threshold matters
-// little between 1 and 3 pixels.
+// Blocks: micropolygons go through the strata kBlockSide x kBlockSide at a time when the block blurs by at
+// least kBlockMinBlur pixels (its circle of confusion or the grid's motion). The block's bound over a lens
+// cell is about (b + r)^2 pixels against b^2 (1 + r)^2 for its b^2 micropolygons one by one (r: the cell's
+// share of the blur), so the strata are read once for the block; each micropolygon then filters only the
+// block's candidates (about spp b^2 samples, contiguous). For small blurs that second filter costs more
+// than it saves. dof_teapot, 1 thread, callgrind: 20.1 G instructions without blocks, 11.8 G with b = 2,
+// 10.3 G with 3, 10.0 G with 4 (the sample stage 1.29 -> 0.86 s); the threshold matters little between 1
+// and 3 pixels.
 constexpr int kBlockSide = 4;
 constexpr float kBlockMinBlur = 2.f;
 constexpr float kBlockSlack = 1.f / 512.f;
@@ -553,6 +554,11 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     for (int e = 0; e <= groups; ++e)
         timelineSegment(knots.data(), g.knots, float(std::min(T, e * group)) / T, endKnot[e], endWeight[e]);
 
+    // How far the lens moves a box with lens coefficients `box.c0 .. c1` at most, in raster x and y.
+    auto lensReach = [&](const KnotBox& box, float& gx, float& gy) {
+        const float cmax = lensOn ? std::max(std::abs(box.c0), std::abs(box.c1)) : 0.f;
+        gx = cmax * std::abs(pr.sx), gy = cmax * std::abs(pr.sy);
+    };
     // One micropolygon: its corners, raster box per knot, facing at shutter open and the corners of the
     // timeline segment its last sample met.
     struct Micropolygon {
@@ -586,8 +592,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
             m.all = unionBox(m.all, kb);
         }
         const KnotBox& all = m.all;
-        const float cmax = lensOn ? std::max(std::abs(all.c0), std::abs(all.c1)) : 0.f;
-        const float gx = cmax * std::abs(pr.sx), gy = cmax * std::abs(pr.sy);
+        float gx, gy;
+        lensReach(all, gx, gy);
         if (allValid && (all.x1 + gx < float(reg.x0) - 1.f || all.x0 - gx > float(reg.x1) + 1.f ||
                          all.y1 + gy < float(reg.y0) - 1.f || all.y0 - gy > float(reg.y1) + 1.f))
             return false;
@@ -617,8 +623,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     // The paper's one bound over the whole shutter and lens, against every sample of the tile in it.
     auto rasterizeUncut = [&](Micropolygon& m) {
         const KnotBox& all = m.all;
-        const float cmax = lensOn ? std::max(std::abs(all.c0), std::abs(all.c1)) : 0.f;
-        const float gx = cmax * std::abs(pr.sx), gy = cmax * std::abs(pr.sy);
+        float gx, gy;
+        lensReach(all, gx, gy);
         const int64_t bx0 = int64_t((all.x0 - gx - kBoundSlack) * kSubpixelScale),
                       bx1 = int64_t((all.x1 + gx + kBoundSlack) * kSubpixelScale),
                       by0 = int64_t((all.y0 - gy - kBoundSlack) * kSubpixelScale),
@@ -717,8 +723,9 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         // sweeps across several buckets meets each in a part of the shutter (motion_teapot: about half).
         int gFirst = 0, gLast = groups - 1;
         if (g.knots == 2 && allValid) {
-            const float cmax = lensOn ? std::max(std::abs(all.c0), std::abs(all.c1)) : 0.f;
-            const float gx = cmax * std::abs(pr.sx) + 1.f, gy = cmax * std::abs(pr.sy) + 1.f;
+            float gx, gy;
+            lensReach(all, gx, gy);
+            gx += 1.f, gy += 1.f;
             float ta = 0.f, tb = 1.f;
             // Keep the w in [ta, tb] where p + w (q - p) >= b.
             auto atLeast = [&](float p, float q, float b) {
@@ -805,10 +812,9 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                 blockBoxes[size_t(kn)] = u;
                 blockAll = unionBox(blockAll, u);
             }
-            const float coc = lensOn ? std::max(std::abs(blockAll.c0), std::abs(blockAll.c1)) *
-                                           std::max(std::abs(pr.sx), std::abs(pr.sy))
-                                     : 0.f;
-            if (n == 1 || std::max(coc, g.motionPixels) < kBlockMinBlur) {
+            float cocX, cocY;
+            lensReach(blockAll, cocX, cocY);
+            if (n == 1 || std::max({cocX, cocY, g.motionPixels}) < kBlockMinBlur) {
                 for (int m = 0; m < n; ++m) rasterizeOne(ms[m]);
                 continue;
             }

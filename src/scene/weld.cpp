@@ -50,6 +50,14 @@ void keepAndSort(Items& items, const Flags& keep) {
     tbb::parallel_sort(items.begin(), items.end());
 }
 
+// Whether v, in cell `key` of side `side` along its axis, lies within `margin` of the cell's lower and of
+// its upper side (offset from float(key) * side, as both uses compute it).
+void nearSides(float v, int64_t key, float side, float margin, bool& lower, bool& upper) {
+    const float offset = v - float(key) * side;
+    lower = offset < margin;
+    upper = offset > side - margin;
+}
+
 bool near(Vec3 a, Vec3 b, float tol) {
     return std::fabs(a.x - b.x) <= tol && std::fabs(a.y - b.y) <= tol && std::fabs(a.z - b.z) <= tol;
 }
@@ -112,9 +120,9 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
             // representative is found as when searching all 26.
             search(k);
             auto reach = [&](float v, int64_t kv, int64_t& lo, int64_t& hi) {
-                const float offset = v - float(kv) * cell;
-                lo = offset < 1.5f * tol ? -1 : 0;
-                hi = offset > cell - 1.5f * tol ? 1 : 0;
+                bool lower, upper;
+                nearSides(v, kv, cell, 1.5f * tol, lower, upper);
+                lo = lower ? -1 : 0, hi = upper ? 1 : 0;
             };
             int64_t x0, x1, y0, y1, z0, z1;
             reach(p.x, k.x, x0, x1), reach(p.y, k.y, y0, y1), reach(p.z, k.z, z0, z1);
@@ -160,8 +168,9 @@ WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPla
             item.inside = true;
             auto axis = [&](float v, int64_t& key) {
                 key = int64_t(std::floor(v / blockSide));
-                const float offset = v - float(key) * blockSide;
-                item.inside = item.inside && offset >= 1.5f * tol && offset <= blockSide - 1.5f * tol;
+                bool lower, upper;
+                nearSides(v, key, blockSide, 1.5f * tol, lower, upper);
+                item.inside = item.inside && !lower && !upper;
             };
             axis(p.x, item.block.x), axis(p.y, item.block.y), axis(p.z, item.block.z);
             finite[pi * 4 + size_t(ci)] = 1;
