@@ -371,7 +371,7 @@ TEST(RtMotion, TimeSlabsBoundTheMovingPatchesAtEveryTime) {
             for (uint32_t leaf = 0; leaf < (1u << f.depth); ++leaf) {
                 const SubpatchQuad& q = quads[leafQuadFirst + leaf / 4];
                 const int lane = int(leaf % 4);
-                const Bounds3& swept = f.tree(patch)[f.firstLeaf() + leaf];
+                const Bounds3 swept = f.nodeBox(patch, f.firstLeaf() + leaf);
                 sweptArea += swept.diagonal().x * swept.diagonal().z;
                 slabArea += (q.hi[0][lane] - q.lo[0][lane]) * (q.hi[2][lane] - q.lo[2][lane]);
                 float u0, u1, v0, v1;

@@ -248,7 +248,7 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
         acc.sharedRoot.assign(n, Bounds3());
         tbb::parallel_for(size_t(0), n, [&](size_t i) {
             if (const InstancePlacement* pl = acc.placement(uint32_t(i)))
-                acc.sharedRoot[i] = placedBox(pl->fromPrototype, acc.forest.tree(acc.tree(uint32_t(i)))[0]);
+                acc.sharedRoot[i] = placedBox(pl->fromPrototype, acc.forest.roots[acc.tree(uint32_t(i))]);
         });
     }
     acc.patchSoa.resize(n);

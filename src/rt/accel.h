@@ -75,7 +75,7 @@ struct RtAccel {
     }
     // The root box of a patch in the accel's space (what the BVH holds).
     const Bounds3& rootBox(uint32_t patch) const {
-        return placement(patch) ? sharedRoot[patch] : forest.tree(tree(patch))[0];
+        return placement(patch) ? sharedRoot[patch] : forest.roots[tree(patch)];
     }
     // Displaced patches (rt/displaced.h): their micro-grids, intersected instead of the patch; their
     // subpatch boxes bound the grids' triangles.

@@ -53,7 +53,6 @@ void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, S
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
     auto visitPatch = [&](uint32_t patch) {
-        const Bounds3* tree = forest.tree(patch);
         uint32_t stack[64];
         int sp = 0;
         stack[sp++] = 0;
@@ -61,12 +60,14 @@ void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, S
             const uint32_t n = stack[--sp];
             if (skip(patch, n)) continue;
             Rect2 rect;
-            if (!overlaps(tree[n], rect)) continue;
+            const Bounds3 box = forest.nodeBox(patch, n);
+            if (!overlaps(box, rect)) continue;
             if (n >= firstLeaf) {
-                leaf(patch, n, tree[n], rect);
+                leaf(patch, n, box, rect);
                 continue;
             }
-            const bool lowFirst = nearKey(tree[2 * n + 1]) <= nearKey(tree[2 * n + 2]);
+            const bool lowFirst =
+                nearKey(forest.nodeBox(patch, 2 * n + 1)) <= nearKey(forest.nodeBox(patch, 2 * n + 2));
             stack[sp++] = lowFirst ? 2 * n + 2 : 2 * n + 1;
             stack[sp++] = lowFirst ? 2 * n + 1 : 2 * n + 2;
         }

@@ -238,7 +238,7 @@ void buildDisplacedGrids(std::span<const uint32_t> which, std::shared_ptr<const 
     if (which.empty()) return;
     const size_t n = which.size();
     const uint32_t leaves = 1u << depth;
-    out.slotOf_.assign(treeOf.empty() ? forest.boxes.size() / forest.nodesPerPatch : treeOf.size(),
+    out.slotOf_.assign(treeOf.empty() ? forest.treeCount() : treeOf.size(),
                        DisplacedGrids::kNone);
     auto treeIndex = [&](uint32_t patch) { return treeOf.empty() ? patch : treeOf[patch]; };
     out.patchOf_.assign(which.begin(), which.end());

@@ -491,7 +491,7 @@ bool newtonSolve(const BezierPatch& patch, const RayPlanes& pl, const Ray& ray, 
 }
 
 // Closest root on one patch over all leaves of its subpatch tree that the ray hits (the scalar reference
-// used by the tests, and by traceRayScalar). `tree` is the patch's box array from a SubpatchForest.
+// used by the tests, and by traceRayScalar). `tree` is the patch's tree in a SubpatchForest.
 // `backface` (optional) skips nodes marked back-facing. Returns the number of Newton runs in *runs.
 // Newton for one leaf of half-size (hu, hv) centred at (u0, v0): start at the centre; if that fails or
 // converges to a root outside the leaf (which the leaf owning it will find), retry from the four quarter
@@ -532,12 +532,12 @@ struct AcceptAnyHit {
     bool operator()(const PatchHit&) const { return true; }
 };
 
-// intersectPatch (below) with the tree's boxes given and tested with a ray of origin boxO and inverse
-// direction boxInv that has the same distances as `ray` (an instance's patch through its prototype's tree,
-// with the ray in the prototype's frame: RtAccel::placement); `toleranceBox`: the patch's root box for
+// intersectPatch (below) with the patch's tree given and its boxes tested with a ray of origin boxO and
+// inverse direction boxInv that has the same distances as `ray` (an instance's patch through its prototype's
+// tree, with the ray in the prototype's frame: RtAccel::placement); `toleranceBox`: the patch's root box for
 // Newton's tolerance.
 template <class T = float, class Accept = AcceptAnyHit>
-bool intersectPatchTree(const BezierPatch& patch, const SubpatchForest& forest, const Bounds3* tree,
+bool intersectPatchTree(const BezierPatch& patch, const SubpatchForest& forest, uint32_t tree,
                         const Bounds3& toleranceBox, Vec3 boxO, Vec3 boxInv, const Ray& ray, PatchHit& best,
                         const uint8_t* backface, uint32_t* runs, uint32_t* iterations, Accept&& accept) {
     const RayPlanes pl = makeRayPlanes(ray.o, ray.d);
@@ -554,7 +554,7 @@ bool intersectPatchTree(const BezierPatch& patch, const SubpatchForest& forest, 
     while (sp > 0) {
         const uint32_t n = stack[--sp];
         float te;
-        if (!rayBox(tree[n], boxO, boxInv, r.tmin, r.tmax, te)) continue;
+        if (!rayBox(forest.nodeBox(tree, n), boxO, boxInv, r.tmin, r.tmax, te)) continue;
         if (backface && backface[n]) continue;
         if (n >= firstLeaf) {
             const Vec2 c = forest.leafCentre[n - firstLeaf];
@@ -582,9 +582,8 @@ template <class T = float, class Accept = AcceptAnyHit>
 bool intersectPatch(const BezierPatch& patch, const SubpatchForest& forest, uint32_t patchId, const Ray& ray,
                     PatchHit& best, const uint8_t* backface = nullptr, uint32_t* runs = nullptr,
                     uint32_t* iterations = nullptr, Accept&& accept = Accept()) {
-    const Bounds3* tree = forest.tree(patchId);
-    return intersectPatchTree<T>(patch, forest, tree, tree[0], ray.o, safeInverse(ray.d), ray, best, backface,
-                                 runs, iterations, std::forward<Accept>(accept));
+    return intersectPatchTree<T>(patch, forest, patchId, forest.roots[patchId], ray.o, safeInverse(ray.d),
+                                 ray, best, backface, runs, iterations, std::forward<Accept>(accept));
 }
 
 }  // namespace tessera

@@ -1117,8 +1117,8 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     s["bvh_nodes"] = acc.bvh.nodes.size();
     s["bvh_depth"] = acc.bvh.maxDepth;
     s["subpatch_depth"] = acc.forest.depth;
-    s["subpatch_nodes"] = acc.forest.boxes.size();
-    s["subpatch_trees"] = acc.forest.boxes.size() / std::max<size_t>(1, acc.forest.nodesPerPatch);
+    s["subpatch_nodes"] = acc.forest.treeCount() * acc.forest.nodesPerPatch;
+    s["subpatch_trees"] = acc.forest.treeCount();
     s["instancing"] = {{"instances", acc.placements.size()}, {"shared_patches", acc.sharedPatches}};
     const size_t np = std::max<size_t>(1, scene.patches.size());
     const size_t instancingBytes =

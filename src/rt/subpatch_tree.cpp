@@ -275,6 +275,15 @@ void writeQuads(const Bounds3* bx, int depth, SubpatchQuad* q) {
     for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
         for (uint32_t n = first; n <= 2 * first; ++n, ++q) transposeQuad(&bx[4 * n + 3].lo.x, *q);
 }
+
+// What the forest keeps of tree `tree`'s boxes `bx` (all its nodes): the quads, the root and, for an odd
+// depth, the leaves.
+void storeTree(SubpatchForest& f, size_t tree, const Bounds3* bx) {
+    writeQuads(bx, f.depth, f.quads.data() + tree * f.quadsPerPatch);
+    f.roots[tree] = bx[0];
+    if (f.depth & 1)
+        std::copy(bx + f.firstLeaf(), bx + f.nodesPerPatch, f.oddLeaves.data() + (tree << f.depth));
+}
 }  // namespace
 
 void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, SubpatchForest& f,
@@ -284,9 +293,11 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     depth = std::clamp(depth, 0, kMaxSubpatchDepth);
     f.depth = depth;
     f.nodesPerPatch = (2u << depth) - 1u;
-    f.boxes.resize(patches.size() * f.nodesPerPatch);
+    f.roots.resize(patches.size());
+    f.oddLeaves.clear();
+    if (depth & 1) f.oddLeaves.resize(patches.size() << depth);
     f.backfacing.clear();
-    if (backfaceFromOrigin) f.backfacing.assign(f.boxes.size(), 0);
+    if (backfaceFromOrigin) f.backfacing.assign(patches.size() * f.nodesPerPatch, 0);
     f.quadsPerPatch = ((1u << (2 * (depth / 2))) - 1u) / 3u;
     f.quads.resize(patches.size() * f.quadsPerPatch);
     f.quadBack.clear();
@@ -330,11 +341,11 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, patches.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
             TreeBuilder tb(depth);  // scratch grid, reused over the range
-            std::vector<Bounds3> knotBoxes, slabBoxes;
+            std::vector<Bounds3> treeBoxes(f.nodesPerPatch), knotBoxes, slabBoxes;
             for (size_t i = r.begin(); i != r.end(); ++i) {
                 uint8_t* back = backfaceFromOrigin ? f.backfacing.data() + i * f.nodesPerPatch : nullptr;
                 float sign = (!flip.empty() && flip[i]) ? -1.f : 1.f;
-                Bounds3* boxes = f.boxes.data() + i * f.nodesPerPatch;
+                Bounds3* boxes = treeBoxes.data();
                 const PlacedQuadric* quadric = quadrics.empty() ? nullptr : quadrics[i];
                 if (quadric) {
                     // The leaves' boxes, then every inner box the union of its children's (as for patches).
@@ -390,7 +401,7 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                     }
                     if (back) std::fill(back, back + f.nodesPerPatch, uint8_t(0));
                 }
-                writeQuads(boxes, depth, f.quads.data() + i * f.quadsPerPatch);
+                storeTree(f, i, boxes);
                 if (!backfaceFromOrigin) continue;
                 uint8_t* qb = f.quadBack.data() + i * f.quadsPerPatch;
                 for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
@@ -405,14 +416,17 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
 }
 
 void setSubpatchLeafBoxes(SubpatchForest& f, uint32_t patch, std::span<const Bounds3> leaves) {
-    Bounds3* boxes = f.boxes.data() + size_t(patch) * f.nodesPerPatch;
+    std::vector<Bounds3> tree(f.nodesPerPatch);
+    for (uint32_t n = 0; n < f.nodesPerPatch; ++n)
+        tree[n] = f.nodeBox(patch, n);  // leaves not given keep theirs
+    Bounds3* boxes = tree.data();
     const uint32_t first = f.firstLeaf();
     for (uint32_t l = 0; l < leaves.size() && first + l < f.nodesPerPatch; ++l) boxes[first + l] = leaves[l];
     for (uint32_t n = first; n-- > 0;) {
         boxes[n] = boxes[2 * n + 1];
         boxes[n].extend(boxes[2 * n + 2]);
     }
-    writeQuads(boxes, f.depth, f.quads.data() + size_t(patch) * f.quadsPerPatch);
+    storeTree(f, patch, boxes);
     if (!f.backfacing.empty())
         std::fill_n(f.backfacing.data() + size_t(patch) * f.nodesPerPatch, f.nodesPerPatch, uint8_t(0));
     if (!f.quadBack.empty())

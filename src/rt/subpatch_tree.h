@@ -1,9 +1,11 @@
 // Bottom level of the ray tracer's two-level hierarchy: under every patch a complete binary tree of
 // subpatch bounding boxes made by alternating u/v de Casteljau splits at 1/2 (level k splits u when k is
-// even, v when k is odd). Only the boxes are kept, as one flat array per patch with implicit indexing:
-// node i has children 2i+1 (low half) and 2i+2 (high half); leaves are nodes 2^D-1 .. 2^(D+1)-2.
+// even, v when k is odd). Only the boxes are kept, with implicit indexing: node i has children 2i+1 (low
+// half) and 2i+2 (high half); leaves are nodes 2^D-1 .. 2^(D+1)-2.
 // A leaf that a ray hits gives Newton's initial guess: the centre of the leaf's (u,v) rectangle.
 #pragma once
+#include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -61,23 +63,28 @@ struct DefaultInitAllocator : std::allocator<T> {
     }
 };
 
+// A tree's boxes are stored once: levels 2, 4, ... in its quads (what the wavefront traversal tests), the
+// root per tree, and for an odd depth the leaves (the level below the last quads). An odd inner level is
+// not stored: every inner box is the union of its children's, so nodeBox makes it from the two in the
+// quad below. (All 2^(depth+1) - 1 boxes beside the quads were 3 of 5 KB per patch at depth 6.)
 struct SubpatchForest {
     int depth = 6;
-    uint32_t nodesPerPatch = 127;                               // 2^(depth+1) - 1
-    std::vector<Bounds3, DefaultInitAllocator<Bounds3>> boxes;  // patchCount * nodesPerPatch, enlarged
+    uint32_t nodesPerPatch = 127;  // 2^(depth+1) - 1: the node numbering (`backfacing` has one per node)
+    std::vector<Bounds3> roots;    // per tree, its root box (enlarged, as every box)
+    std::vector<Bounds3, DefaultInitAllocator<Bounds3>> oddLeaves;  // odd depth: per tree, its 2^depth leaves
     std::vector<uint8_t> backfacing;   // optional, one per node: every point faces away from the eye at 0
     std::vector<Vec2> leafCentre;      // per leaf (shared by all patches): centre of its (u,v) rectangle
     std::vector<LeafBasis> leafBasis;  // per leaf (shared by all patches)
     // Per leaf, its four quarters (index 4 * leaf + q; q bit 0: high u half, bit 1: high v half).
     std::vector<LeafBasis> quarterBasis;
     // Per patch, quadsPerPatch = (4^floor(depth/2) - 1) / 3 grandchild groups: node i at level 2k has
-    // group (4^k - 1) / 3 + i - (4^k - 1). A copy of `boxes` (levels 2, 4, ...) for the 4-wide traversal.
+    // group (4^k - 1) / 3 + i - (4^k - 1): the boxes of levels 2, 4, ..., four per 4-wide test.
     std::vector<SubpatchQuad, DefaultInitAllocator<SubpatchQuad>> quads;
     uint32_t quadsPerPatch = 21;
     // With `backfacing`, per quad: bit i set when grandchild i or its parent (the odd level in between)
     // is backfacing, i.e. the traversal's cull test of the four grandchildren as one 4-bit mask.
     std::vector<uint8_t> quadBack;
-    // Motion blur: per moving patch, its leaf boxes at every knot of the timeline (`boxes` holds their
+    // Motion blur: per moving patch, its leaf boxes at every knot of the timeline (the tree holds their
     // unions), at [(FrameMotion::firstKey[patch] + knot) * leaves + leaf]. Control points move linearly
     // between knots, so the lerp of a leaf's boxes at the two knots around a time holds the leaf then
     // (min of lerps >= lerp of mins): the Newton stage tests it per candidate (knotLeafBox).
@@ -97,7 +104,25 @@ struct SubpatchForest {
     std::vector<Bounds3> slabRoots;
     static constexpr uint32_t kNoSlabs = 0xffffffffu;
 
-    const Bounds3* tree(uint32_t patch) const { return boxes.data() + size_t(patch) * nodesPerPatch; }
+    size_t treeCount() const { return roots.size(); }
+    // The box of node `node` of tree `patch` (see above: an odd inner level is its children's union).
+    Bounds3 nodeBox(uint32_t patch, uint32_t node) const {
+        if (node == 0) return roots[patch];
+        const int level = int(std::bit_width(node + 1u)) - 1;
+        if (level == depth && (depth & 1)) return oddLeaves[(size_t(patch) << depth) + (node - firstLeaf())];
+        // An even level 2k >= 2: lane (e - 3) % 4 of its grandparent g's quad, g - 2 (4^(k-1) - 1) / 3.
+        // An odd inner level: the union of lanes c, c + 1 there for its first child e = 2 node + 1.
+        const bool odd = level & 1;
+        const uint32_t e = odd ? 2 * node + 1 : node, g = (e - 3) >> 2, lane = (e - 3) & 3;
+        const int gLevel = odd ? level - 1 : level - 2;
+        const SubpatchQuad& q = quads[size_t(patch) * quadsPerPatch + g - 2 * ((1u << gLevel) - 1u) / 3];
+        Bounds3 b;
+        for (int a = 0; a < 3; ++a) {
+            b.lo[a] = odd ? std::min(q.lo[a][lane], q.lo[a][lane + 1]) : q.lo[a][lane];
+            b.hi[a] = odd ? std::max(q.hi[a][lane], q.hi[a][lane + 1]) : q.hi[a][lane];
+        }
+        return b;
+    }
     const uint8_t* backfaceBits(uint32_t patch) const {
         return backfacing.empty() ? nullptr : backfacing.data() + size_t(patch) * nodesPerPatch;
     }
@@ -112,15 +137,15 @@ struct SubpatchForest {
     }
     // The root box of `patch` over time slab `slab`.
     const Bounds3& rootBox(uint32_t patch, int slab) const {
-        if (slabCount == 0 || slabPatch[patch] == kNoSlabs) return tree(patch)[0];
+        if (slabCount == 0 || slabPatch[patch] == kNoSlabs) return roots[patch];
         return slabRoots[size_t(slabPatch[patch]) * slabCount + slab];
     }
     const uint8_t* quadBackBits(uint32_t patch) const {
         return quadBack.empty() ? nullptr : quadBack.data() + size_t(patch) * quadsPerPatch;
     }
     size_t memoryBytes() const {
-        return boxes.size() * sizeof(Bounds3) + backfacing.size() + leafCentre.size() * sizeof(Vec2) +
-               quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
+        return (roots.size() + oddLeaves.size()) * sizeof(Bounds3) + backfacing.size() +
+               leafCentre.size() * sizeof(Vec2) + quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
                (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis) +
                knotLeaves.size() * sizeof(Bounds3) + slabQuads.size() * sizeof(SubpatchQuad) +
                slabRoots.size() * sizeof(Bounds3) + slabPatch.size() * sizeof(uint32_t);

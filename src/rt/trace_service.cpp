@@ -144,7 +144,7 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
                 const Vec3 boxO = affinePoint(pl->toPrototype, r.o);
                 const Vec3 boxInv = safeInverse(affineVector(pl->toPrototype, r.d));
                 if (intersectPatchTree<float>(acc.patches[patch], acc.forest,
-                                              acc.forest.tree(acc.tree(patch)),
+                                              acc.tree(patch),
                                               enlargedHull(acc.patches[patch]), boxO, boxInv, r, h, nullptr,
                                               nullptr, nullptr, accept) &&
                     record(h))

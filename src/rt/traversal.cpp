@@ -336,7 +336,8 @@ template <bool kAvx2>
             const PairRay pr(sc.boxO[pp.ray4], sc.boxInv[pp.ray4]);
             float tn[2], tf[2];
             const int mask =
-                rayBoxPair(forest.tree(acc.tree(pp.patch)) + m, pr, rays.tmin[r], rays.tmax[r], tn, tf);
+                rayBoxPair(forest.oddLeaves.data() + (size_t(acc.tree(pp.patch)) << depth) + (m - firstLeaf),
+                           pr, rays.tmin[r], rays.tmax[r], tn, tf);
             const float ta = tn[0], tb = tn[1];
             const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
             const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
