@@ -56,7 +56,7 @@ std::vector<DicedVertex> diceAll(const Scene& scene, int maxGrid = 16) {
     view.maxGridEdge = maxGrid;
     view.cullX0 = view.cullY0 = -1e9f, view.cullX1 = view.cullY1 = 1e9f;
     SplitStats stats;
-    const std::vector<Piece> pieces = splitPatches(view, scene, 0.f, nullptr, stats);
+    const PieceList pieces = splitPatches(view, scene, 0.f, nullptr, stats);
     std::vector<DicedVertex> out;
     const Projector& pr = view.projector;
     for (const Piece& piece : pieces) {

@@ -22,8 +22,8 @@ std::vector<PlacedQuadric> quadricsInSpace(const Scene& scene, const Mat4& toSpa
     return out;
 }
 
-std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
-                                const std::atomic<bool>* cancel, SplitStats& stats) {
+PieceList splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
+                       const std::atomic<bool>* cancel, SplitStats& stats) {
     const size_t n = scene.patches.size();
     // Every patch's micropolygon side, for the edges that displaced neighbours share (ReyesView::patchSide).
     std::vector<float> sides(n);
@@ -53,7 +53,7 @@ std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float
     });
     std::vector<size_t> offset(chunks + 1, 0);
     for (size_t c = 0; c < chunks; ++c) offset[c + 1] = offset[c] + perChunk[c].size();
-    std::vector<Piece> pieces(offset[chunks]);
+    PieceList pieces(offset[chunks]);  // not filled here: the copies below write every piece
     tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
         std::copy(perChunk[c].begin(), perChunk[c].end(), pieces.begin() + std::ptrdiff_t(offset[c]));
         std::vector<Piece>().swap(perChunk[c]);
@@ -64,7 +64,7 @@ std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float
     return pieces;
 }
 
-BucketedPieces binPieces(const std::vector<Piece>& pieces, const BucketLayout& layout, int marginX,
+BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layout, int marginX,
                          int marginY, int samplesPerPixel) {
     const int nb = layout.count();
     auto bucketRange = [&](const Piece& p, int& bx0, int& by0, int& bx1, int& by1) {

@@ -7,8 +7,10 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <vector>
 
+#include "core/buffer_allocator.h"
 #include "engine/tile_loop.h"
 #include "reyes/grid.h"
 #include "reyes/split.h"
@@ -34,8 +36,10 @@ struct SplitStats {
 // Split and cull every patch (view.patches, in the pass camera's space) into diceable pieces, in parallel,
 // kept in patch order for determinism. Micropolygons of about `shadingRateOverride` pixels of area when it
 // is > 0, else each patch's own ShadingRate. Stops splitting when `cancel` is set.
-std::vector<Piece> splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
-                                const std::atomic<bool>* cancel, SplitStats& stats);
+// The pieces of a frame (tens of megabytes on big scenes): filled in parallel, on huge pages.
+using PieceList = std::vector<Piece, DefaultInitAllocator<Piece>>;
+PieceList splitPatches(const ReyesView& view, const Scene& scene, float shadingRateOverride,
+                       const std::atomic<bool>* cancel, SplitStats& stats);
 
 // The pieces binned into the buckets their raster bound (grown by `marginX`, `marginY`: the filter radius
 // and a pixel) overlaps: CSR lists in piece order, and the work of each bucket for the progress (the
@@ -46,7 +50,7 @@ struct BucketedPieces {
     std::vector<int> spans;        // per piece: how many buckets need it
     std::vector<uint64_t> work;    // per bucket
 };
-BucketedPieces binPieces(const std::vector<Piece>& pieces, const BucketLayout& layout, int marginX,
+BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layout, int marginX,
                          int marginY, int samplesPerPixel);
 
 // A diced grid shared by the buckets its piece overlaps: diced by the first bucket that needs it, freed by

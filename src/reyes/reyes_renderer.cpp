@@ -169,7 +169,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     // Split: every patch into diceable pieces, in parallel, kept in patch order for determinism.
     const auto tSplit = EngineClock::now();
     SplitStats splitStats;
-    const std::vector<Piece> pieces = splitPatches(view, scene, 0.f, settings.cancel, splitStats);
+    const PieceList pieces = splitPatches(view, scene, 0.f, settings.cancel, splitStats);
     const double splitMs = msSince(tSplit);
 
     // Bucket the pieces by their raster bound (grown by the filter radius): CSR lists in piece order.

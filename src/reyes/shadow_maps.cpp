@@ -92,7 +92,7 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     view.cullX0 = -1.f, view.cullY0 = -1.f, view.cullX1 = float(width + 1), view.cullY1 = float(height + 1);
     // Split and bin, as the frame's pass does (no filter: a texel is one sample).
     SplitStats split;
-    const std::vector<Piece> pieces = splitPatches(view, scene, shadingRate, settings.cancel, split);
+    const PieceList pieces = splitPatches(view, scene, shadingRate, settings.cancel, split);
     const BucketLayout layout(Rect{0, 0, width, height}, 64);
     const BucketedPieces binned = binPieces(pieces, layout, 1, 1, 1);
     GridCache grids(binned);

@@ -39,32 +39,6 @@ struct alignas(16) LeafBasis {
     float mvSplat[4][4][4];  // mv[j][j'] in all four lanes (the SSE test multiplies whole rows by it)
 };
 
-// Allocator that default-initializes (no zeroing on resize): the build overwrites every element, in
-// parallel, so a serial memset of the whole array would only add time and memory traffic. Arrays of a
-// megabyte and more go on transparent huge pages (core/buffer_allocator.h): the forest's first touch was
-// one page fault per 4 KB, a tenth of the 24 Big Guys frame.
-template <class T>
-struct DefaultInitAllocator : BufferAllocator<T> {
-    template <class U>
-    struct rebind {
-        using other = DefaultInitAllocator<U>;
-    };
-    DefaultInitAllocator() = default;
-    template <class U>
-    DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
-    template <class U>
-    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-        // Plain aggregates of floats (Bounds3, whose default member initializers would otherwise fill
-        // the array serially) are left for the builder to write; other types are default-initialized.
-        if constexpr (!(std::is_aggregate_v<U> && std::is_trivially_copyable_v<U>))
-            ::new (static_cast<void*>(p)) U;
-    }
-    template <class U, class... Args>
-    void construct(U* p, Args&&... args) {
-        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-    }
-};
-
 // A tree's boxes are stored once: levels 2, 4, ... in its quads (what the wavefront traversal tests), the
 // root per tree, and for an odd depth the leaves (the level below the last quads). An odd inner level is
 // not stored: every inner box is the union of its children's, so nodeBox makes it from the two in the
