@@ -46,7 +46,7 @@ struct DicedVertex {
 std::vector<DicedVertex> diceAll(const Scene& scene, int maxGrid = 16) {
     RenderSettings rs;
     const FrameSetup frame(scene, rs);
-    std::vector<BezierPatch> patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
+    PatchArray patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
     weldSharedEdges(patches, defaultWeldTolerance(patches));
     ReyesView view(frame.camera);
     view.patches = patches.data();
@@ -179,7 +179,7 @@ TEST(Displacement, ConstantOffsetOfACurvedBicubicIsTheOffsetSurface) {
     Loaded l = load(orthoRib(
         256, "Displacement \"offset\" \"Km\" " + std::to_string(d) + "\nPatch \"bicubic\" \"P\" [" + P + "]",
         1.5f));
-    std::vector<BezierPatch> cam = patchesInCameraSpace(l.scene, l.scene.camera.cameraFromWorld);
+    PatchArray cam = patchesInCameraSpace(l.scene, l.scene.camera.cameraFromWorld);
     const std::vector<DicedVertex> vs = diceAll(l.scene);
     ASSERT_GT(vs.size(), 100u);
     float worst = 0;

@@ -93,7 +93,7 @@ class ReyesDisplacedDicer final : public DisplacedDicer {
   private:
     const Scene& scene_;
     std::shared_ptr<const Textures> textures_;  // what displacement_ looks up (kept past the FrameSetup)
-    std::vector<BezierPatch> patches_;
+    PatchArray patches_;
     std::vector<PlacedQuadric> quadrics_;
     std::vector<float> sides_;  // per patch, sqrt of its shading rate (ReyesView::patchSide)
     std::vector<uint8_t> moving_;

@@ -63,7 +63,7 @@ bool degenerateEdge(const BezierPatch& patch, int e) {
 }  // namespace
 
 DisplacementFrame makeDisplacementFrame(const Scene& scene, const Textures* textures,
-                                        const std::vector<BezierPatch>& patches, float cameraStretch) {
+                                        std::span<const BezierPatch> patches, float cameraStretch) {
     DisplacementFrame f;
     bool any = false;
     for (const PatchAttributes& a : scene.attributes)

@@ -15,6 +15,7 @@
 // piece and patch borders (no seams).
 #pragma once
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "core/bezier.h"
@@ -45,7 +46,7 @@ struct DisplacementFrame {
 // world-to-camera (bounds are stored in world units). Throws std::runtime_error for a bumpy texture that
 // cannot be read.
 DisplacementFrame makeDisplacementFrame(const Scene& scene, const Textures* textures,
-                                        const std::vector<BezierPatch>& patches, float cameraStretch);
+                                        std::span<const BezierPatch> patches, float cameraStretch);
 
 // A displaced grid vertex: its position and the displaced surface's unit normal (orientation applied).
 struct DisplacedVertex {

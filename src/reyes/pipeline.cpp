@@ -7,8 +7,8 @@
 
 namespace tessera {
 
-std::vector<BezierPatch> patchesInCameraSpace(const Scene& scene, const Mat4& cameraFromWorld) {
-    std::vector<BezierPatch> patches(scene.patches.size());
+PatchArray patchesInCameraSpace(const Scene& scene, const Mat4& cameraFromWorld) {
+    PatchArray patches(scene.patches.size());  // every patch written below
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t i) {
         for (int k = 0; k < 16; ++k) patches[i].cp[k] = cameraFromWorld.point(scene.patches[i].cp[k]);
     });
@@ -64,8 +64,8 @@ PieceList splitPatches(const ReyesView& view, const Scene& scene, float shadingR
     return pieces;
 }
 
-BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layout, int marginX,
-                         int marginY, int samplesPerPixel) {
+BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layout, int marginX, int marginY,
+                         int samplesPerPixel) {
     const int nb = layout.count();
     auto bucketRange = [&](const Piece& p, int& bx0, int& by0, int& bx1, int& by1) {
         layout.overlapped(p.x0 - marginX, p.y0 - marginY, p.x1 + marginX, p.y1 + marginY, bx0, by0, bx1, by1);

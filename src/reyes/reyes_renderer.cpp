@@ -106,7 +106,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     }
 
     // Bound: patches to camera space (affine: transform the control points).
-    std::vector<BezierPatch> patches = patchesInCameraSpace(scene, cam.cameraFromWorld);
+    PatchArray patches = patchesInCameraSpace(scene, cam.cameraFromWorld);
     // Shared edges must be bit-identical for crack-free dicing: weld what matches only up to rounding.
     const auto tWeld = EngineClock::now();
     const FrameMotion& motion = frame.motion;
@@ -118,12 +118,12 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     const WeldResult weld = weldSharedEdges(patches, weldTolerance, motion.blurred() ? &weldPlan : nullptr);
     // Blurred frames: the patches at every other knot of the shutter timeline, with the same control points
     // identified as at knot 0 (so shared edges are bit-identical at every knot, and cheaply).
-    std::vector<std::vector<BezierPatch>> knotArrays;
+    std::vector<PatchArray> knotArrays;
     uint64_t movingPatches = 0;
     if (motion.blurred()) {
         knotArrays.resize(motion.knotCount() - 1);
         tbb::parallel_for(1, motion.knotCount(), [&](int k) {
-            std::vector<BezierPatch>& arr = knotArrays[k - 1];
+            PatchArray& arr = knotArrays[k - 1];
             arr = patches;
             for (size_t i = 0; i < patches.size(); ++i)
                 if (motion.moving(i)) arr[i] = motion.patchKeys(i)[k];

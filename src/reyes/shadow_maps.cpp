@@ -73,7 +73,7 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     const auto t0 = EngineClock::now();
     const int width = lightCamera.width, height = lightCamera.height;
     // Bound: the patches in the light's space, shared edges welded (cracks would be light leaks).
-    std::vector<BezierPatch> patches = patchesInCameraSpace(scene, lightCamera.cameraFromWorld);
+    PatchArray patches = patchesInCameraSpace(scene, lightCamera.cameraFromWorld);
     weldSharedEdges(patches, defaultWeldTolerance(patches));
     const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, lightCamera.cameraFromWorld);
     ReyesView view(lightCamera);

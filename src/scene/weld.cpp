@@ -64,7 +64,7 @@ bool near(Vec3 a, Vec3 b, float tol) {
 
 }  // namespace
 
-float defaultWeldTolerance(const std::vector<BezierPatch>& patches) {
+float defaultWeldTolerance(std::span<const BezierPatch> patches) {
     Bounds3 b;
     for (const auto& p : patches) b.extend(hullBounds(p));
     if (b.empty()) return 0.f;
@@ -72,11 +72,11 @@ float defaultWeldTolerance(const std::vector<BezierPatch>& patches) {
     return std::isfinite(d) ? d * 1e-5f : 0.f;
 }
 
-void applyWeldPlan(const WeldPlan& plan, std::vector<BezierPatch>& patches) {
+void applyWeldPlan(const WeldPlan& plan, std::span<BezierPatch> patches) {
     for (const WeldCopy& c : plan) patches[c.dstPatch].cp[c.dstCp] = patches[c.srcPatch].cp[c.srcCp];
 }
 
-WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tol, WeldPlan* plan) {
+WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* plan) {
     WeldResult result;
     if (!(tol > 0.f)) return result;
     const float cell = tol * 4.f;

@@ -5,6 +5,7 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "core/bezier.h"
@@ -28,12 +29,12 @@ using WeldPlan = std::vector<WeldCopy>;
 // Corners closer than `tolerance` are unified; then every boundary curve whose two end corners and two
 // inner control points match another patch's curve (in either direction) within `tolerance` takes that
 // curve's exact control points. Deterministic: the first patch in order provides the values.
-WeldResult weldSharedEdges(std::vector<BezierPatch>& patches, float tolerance, WeldPlan* plan = nullptr);
+WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tolerance, WeldPlan* plan = nullptr);
 
 // Replays a weld's identifications (the patches must be the same ones, e.g. at another motion knot).
-void applyWeldPlan(const WeldPlan& plan, std::vector<BezierPatch>& patches);
+void applyWeldPlan(const WeldPlan& plan, std::span<BezierPatch> patches);
 
 // A tolerance relative to the size of the model: 1e-5 of the bounding box diagonal.
-float defaultWeldTolerance(const std::vector<BezierPatch>& patches);
+float defaultWeldTolerance(std::span<const BezierPatch> patches);
 
 }  // namespace tessera
