@@ -1,5 +1,6 @@
 #include "scene/weld.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
@@ -93,7 +94,47 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     };
     static const int kCorners[4] = {0, 3, 12, 15};
     // That pass over corners `ids` (patch * 4 + corner, ascending) with its own table of representatives.
+    // A block of a few corners (24 Big Guys: 73 K closed blocks of 4 on average) is searched linearly: a
+    // hash table per block cost more in allocation than the search and did not scale with threads. The
+    // representative taken is the one the table's search finds first: in the point's own cell, else in the
+    // first neighbour cell of its (dx, dy, dz) loop; within a cell the earliest made.
+    constexpr size_t kLinearCorners = 32;
+    auto snapFew = [&](const uint32_t* ids, size_t count, WeldPlan* out) {
+        size_t moved = 0;
+        struct CellRep {
+            Rep rep;
+            CellKey key;
+        };
+        CellRep reps[kLinearCorners];
+        size_t nReps = 0;
+        for (size_t n = 0; n < count; ++n) {
+            const uint32_t pi = ids[n] / 4;
+            const int c = kCorners[ids[n] % 4];
+            Vec3& p = patches[pi].cp[c];
+            const CellKey k = keyOf(p);
+            const Rep* found = nullptr;
+            int bestRank = 27;
+            for (size_t r = 0; r < nReps; ++r) {
+                const CellKey& rk = reps[r].key;
+                const int64_t dx = rk.x - k.x, dy = rk.y - k.y, dz = rk.z - k.z;
+                if (dx < -1 || dx > 1 || dy < -1 || dy > 1 || dz < -1 || dz > 1) continue;
+                const int rank = (dx || dy || dz) ? int((dx + 1) * 9 + (dy + 1) * 3 + (dz + 1)) : -1;
+                if (rank < bestRank && near(reps[r].rep.p, p, tol)) bestRank = rank, found = &reps[r].rep;
+            }
+            if (found) {
+                if (out) out->push_back({pi, found->patch, uint8_t(c), found->cp});
+                if (!(found->p == p)) {
+                    p = found->p;
+                    ++moved;
+                }
+            } else {
+                reps[nReps++] = {{p, pi, uint8_t(c)}, k};
+            }
+        }
+        return moved;
+    };
     auto snapCorners = [&](const uint32_t* ids, size_t count, WeldPlan* out) {
+        if (count <= kLinearCorners) return snapFew(ids, count, out);
         size_t moved = 0;
         std::unordered_map<CellKey, std::vector<Rep>, CellHash> reps;
         reps.reserve(count);
@@ -156,8 +197,9 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
         }
     };
     // Scratch arrays of several MB: on huge pages (core/buffer_allocator.h), else their first touch, one
-    // page fault per 4 KB, costs more than the pass (24 Big Guys: 55 of 95 ms in the edge keys).
-    std::vector<CornerItem, BufferAllocator<CornerItem>> corners(patches.size() * 4);
+    // page fault per 4 KB, costs more than the pass (24 Big Guys: 55 of 95 ms in the edge keys); the items
+    // are not zero-filled first (only those flagged in `finite` / `valid`, all written, are kept).
+    std::vector<CornerItem, DefaultInitAllocator<CornerItem>> corners(patches.size() * 4);
     std::vector<uint8_t, BufferAllocator<uint8_t>> finite(corners.size(), 0);
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
         for (int ci = 0; ci < 4; ++ci) {
@@ -178,7 +220,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     });
     keepAndSort(corners, finite);
     std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
-    std::vector<uint32_t, BufferAllocator<uint32_t>> ids(corners.size());
+    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> ids(corners.size());
     std::vector<uint32_t> rest;
     for (size_t i = 0; i < corners.size(); ++i) {
         ids[i] = corners[i].id;
@@ -197,11 +239,17 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     std::sort(rest.begin(), rest.end());
     std::vector<WeldPlan> blockPlans(plan ? closedBlocks.size() : 0);
     std::atomic<size_t> cornersMoved{0};
-    tbb::parallel_for(size_t(0), closedBlocks.size(), [&](size_t b) {
-        const size_t g = closedBlocks[b];
-        cornersMoved += snapCorners(ids.data() + blockStart[g], blockStart[g + 1] - blockStart[g],
-                                    plan ? &blockPlans[b] : nullptr);
-    });
+    // One atomic add per range, not per block (an add per block of 4 corners kept the pass from scaling).
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, closedBlocks.size()), [&](const tbb::blocked_range<size_t>& r) {
+            size_t moved = 0;
+            for (size_t b = r.begin(); b != r.end(); ++b) {
+                const size_t g = closedBlocks[b];
+                moved += snapCorners(ids.data() + blockStart[g], blockStart[g + 1] - blockStart[g],
+                                     plan ? &blockPlans[b] : nullptr);
+            }
+            cornersMoved += moved;
+        });
     cornersMoved += snapCorners(rest.data(), rest.size(), plan);
     if (plan)
         for (const WeldPlan& p : blockPlans) plan->insert(plan->end(), p.begin(), p.end());
@@ -228,7 +276,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
         }
         bool sameKey(const EdgeItem& o) const { return a == o.a && b == o.b; }
     };
-    std::vector<EdgeItem, BufferAllocator<EdgeItem>> items(patches.size() * 4);
+    std::vector<EdgeItem, DefaultInitAllocator<EdgeItem>> items(patches.size() * 4);
     std::vector<uint8_t, BufferAllocator<uint8_t>> valid(items.size(), 0);
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
         for (int e = 0; e < 4; ++e) {
@@ -247,46 +295,50 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     groups.push_back(items.size());
     std::vector<WeldPlan> groupPlans(plan ? groups.size() - 1 : 0);
     std::atomic<size_t> edgesWelded{0};
-    tbb::parallel_for(size_t(0), groups.size() - 1, [&](size_t g) {
-        std::vector<const EdgeItem*> list;  // the group's edges that did not weld, in patch order
-        size_t welds = 0;
-        for (size_t i = groups[g]; i < groups[g + 1]; ++i) {
-            const uint32_t pi = items[i].patch;
-            const int e = items[i].edge;
-            BezierPatch& patch = patches[pi];
-            bool welded = false;
-            for (const EdgeItem* other : list) {
-                const BezierPatch& q = patches[other->patch];
-                Vec3 qa = q.cp[edgeIndex(other->edge, 0)], qd = q.cp[edgeIndex(other->edge, 3)];
-                Vec3 pa = patch.cp[edgeIndex(e, 0)], pd = patch.cp[edgeIndex(e, 3)];
-                bool same = qa == pa && qd == pd, reversed = qa == pd && qd == pa;
-                for (int dir = 0; dir < 2 && !welded; ++dir) {
-                    if (!(dir == 0 ? same : reversed)) continue;
-                    bool match = true;
-                    for (int k = 1; k <= 2 && match; ++k)
-                        match = near(patch.cp[edgeIndex(e, k)],
-                                     q.cp[edgeIndex(other->edge, dir == 0 ? k : 3 - k)], tol);
-                    if (!match) continue;
-                    bool changed = false;
-                    for (int k = 1; k <= 2; ++k) {
-                        const int srcCp = edgeIndex(other->edge, dir == 0 ? k : 3 - k);
-                        if (plan)
-                            groupPlans[g].push_back(
-                                {pi, other->patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
-                        Vec3 src = q.cp[srcCp];
-                        Vec3& dst = patch.cp[edgeIndex(e, k)];
-                        changed |= !(dst == src);
-                        dst = src;
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, groups.size() - 1), [&](const tbb::blocked_range<size_t>& range) {
+            std::vector<const EdgeItem*> list;  // the group's edges that did not weld, in patch order
+            size_t welds = 0;
+            for (size_t g = range.begin(); g != range.end(); ++g) {
+                list.clear();
+                for (size_t i = groups[g]; i < groups[g + 1]; ++i) {
+                    const uint32_t pi = items[i].patch;
+                    const int e = items[i].edge;
+                    BezierPatch& patch = patches[pi];
+                    bool welded = false;
+                    for (const EdgeItem* other : list) {
+                        const BezierPatch& q = patches[other->patch];
+                        Vec3 qa = q.cp[edgeIndex(other->edge, 0)], qd = q.cp[edgeIndex(other->edge, 3)];
+                        Vec3 pa = patch.cp[edgeIndex(e, 0)], pd = patch.cp[edgeIndex(e, 3)];
+                        bool same = qa == pa && qd == pd, reversed = qa == pd && qd == pa;
+                        for (int dir = 0; dir < 2 && !welded; ++dir) {
+                            if (!(dir == 0 ? same : reversed)) continue;
+                            bool match = true;
+                            for (int k = 1; k <= 2 && match; ++k)
+                                match = near(patch.cp[edgeIndex(e, k)],
+                                             q.cp[edgeIndex(other->edge, dir == 0 ? k : 3 - k)], tol);
+                            if (!match) continue;
+                            bool changed = false;
+                            for (int k = 1; k <= 2; ++k) {
+                                const int srcCp = edgeIndex(other->edge, dir == 0 ? k : 3 - k);
+                                if (plan)
+                                    groupPlans[g].push_back(
+                                        {pi, other->patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
+                                Vec3 src = q.cp[srcCp];
+                                Vec3& dst = patch.cp[edgeIndex(e, k)];
+                                changed |= !(dst == src);
+                                dst = src;
+                            }
+                            if (changed) ++welds;
+                            welded = true;
+                        }
+                        if (welded) break;
                     }
-                    if (changed) ++welds;
-                    welded = true;
+                    if (!welded) list.push_back(&items[i]);
                 }
-                if (welded) break;
             }
-            if (!welded) list.push_back(&items[i]);
-        }
-        edgesWelded += welds;
-    });
+            edgesWelded += welds;
+        });
     result.edgesWelded = edgesWelded.load();
     if (plan)
         for (const WeldPlan& p : groupPlans) plan->insert(plan->end(), p.begin(), p.end());
