@@ -67,9 +67,8 @@ Camera perspectiveFace(const ShadowMapParams& p, const Mat4& cameraFromWorld, fl
 
 }  // namespace
 
-std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera, float shadingRate,
-                                  const RenderSettings& settings, DepthPassStats& stats,
-                                  const Textures* textures) {
+DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float shadingRate,
+                           const RenderSettings& settings, DepthPassStats& stats, const Textures* textures) {
     const auto t0 = EngineClock::now();
     const int width = lightCamera.width, height = lightCamera.height;
     // Bound: the patches in the light's space, shared edges welded (cracks would be light leaks).
@@ -96,7 +95,7 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     const BucketLayout layout(Rect{0, 0, width, height}, 64);
     const BucketedPieces binned = binPieces(pieces, layout, 1, 1, 1);
     GridCache grids(binned);
-    std::vector<float> depth(size_t(width) * size_t(height), kInf);
+    DepthBuffer depth(size_t(width) * size_t(height));  // every bucket writes its texels below
 
     struct Worker {
         SampleTile tile;
@@ -105,10 +104,14 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
     tbb::enumerable_thread_specific<Worker> workers;
     RenderSettings pass = settings;
     pass.progress = nullptr;  // the frame's progress counts the frame's buckets only
-    runTileLoop(layout, binned.work, pass, workers, [&](int b, Worker& w) {
+    const TileLoopResult loop = runTileLoop(layout, binned.work, pass, workers, [&](int b, Worker& w) {
         const uint32_t begin = binned.start[b], end = binned.start[b + 1];
-        if (begin == end) return;
         const Rect t = layout.target(b);
+        if (begin == end) {
+            for (int py = t.y0; py < t.y1; ++py)
+                std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
+            return;
+        }
         w.tile.reset(t, 1, 1, 0, kInf, SamplerKind::Jittered);
         // One sample at each texel's centre: the lookups read the depth there.
         size_t i = 0;
@@ -137,6 +140,8 @@ std::vector<float> renderDepthMap(const Scene& scene, const Camera& lightCamera,
         for (int py = t.y0; py < t.y1; ++py)
             for (int px = t.x0; px < t.x1; ++px, ++i) depth[size_t(py) * width + px] = w.tile.z[i];
     });
+    // A cancelled loop skips buckets: their texels were never written.
+    if (loop.cancelled) std::fill(depth.begin(), depth.end(), kInf);
     stats.pieces = pieces.size();
     for (const Worker& w : workers) {
         stats.grids += w.grids;
@@ -161,7 +166,7 @@ std::filesystem::path cacheFile(const std::string& dir, uint64_t key) {
 }
 
 // The map of `key` if the folder has a whole one of that size; nullopt otherwise (a miss).
-std::optional<std::vector<float>> readCachedMap(const std::filesystem::path& file, int width, int height) {
+std::optional<DepthBuffer> readCachedMap(const std::filesystem::path& file, int width, int height) {
     std::ifstream f(file, std::ios::binary);
     if (!f) return std::nullopt;
     char magic[4];
@@ -174,15 +179,14 @@ std::optional<std::vector<float>> readCachedMap(const std::filesystem::path& fil
     if (!f || std::memcmp(magic, kCacheMagic, 4) != 0 || version != kCacheVersion || w != width ||
         h != height)
         return std::nullopt;
-    std::vector<float> depth(size_t(w) * size_t(h));
+    DepthBuffer depth(size_t(w) * size_t(h));
     f.read(reinterpret_cast<char*>(depth.data()), std::streamsize(depth.size() * sizeof(float)));
     if (!f || f.peek() != std::char_traits<char>::eof()) return std::nullopt;
     return depth;
 }
 
 // Written to a temporary name and renamed: concurrent tiles writing the same map leave one whole file.
-bool writeCachedMap(const std::filesystem::path& file, const std::vector<float>& depth, int width,
-                    int height) {
+bool writeCachedMap(const std::filesystem::path& file, std::span<const float> depth, int width, int height) {
     std::error_code ec;
     std::filesystem::create_directories(file.parent_path(), ec);
     std::string tmpName(1, '.');  // appended piecewise: "." + string trips g++ 12's -Wrestrict
@@ -306,7 +310,7 @@ ShadowMaps::ShadowMaps(const Scene& scene, const RenderSettings& settings, const
         }
         for (const Camera& c : faces) {
             DepthPassStats st;
-            std::optional<std::vector<float>> cached;
+            std::optional<DepthBuffer> cached;
             std::filesystem::path file;
             if (!cacheDir_.empty()) {
                 file = cacheFile(cacheDir_, faceCacheKey(sceneKey, c, p.shadingRate));
