@@ -287,6 +287,38 @@ TEST(Weld, AGridOfJitteredPatchesTakesEachSharedPointFromItsFirstPatch) {
     EXPECT_GT(moved, w.cornersMoved);  // the edges' inner points moved too
 }
 
+// A corner within tol of two representatives snaps onto the one the cell search finds first: the one in
+// its own cell, even when the other (in a neighbour cell) was made earlier. Both ways of searching must
+// agree: the linear search of a small block and the cell table (the corners near a block side, here more
+// than 32 of them).
+TEST(Weld, ACornerNearTwoRepresentativesTakesTheOneInItsOwnCell) {
+    const float tol = 0.01f;                 // cells of 4 tol = 0.04, blocks of 16 cells = 0.64
+    auto patchAt = [](Vec3 c0, float far) {  // corner 0 at c0, the other three far apart
+        BezierPatch p;
+        const Vec3 c[4] = {c0, {far, 100.f, 0.f}, {far, 200.f, 0.f}, {far, 300.f, 0.f}};
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) {
+                const float u = float(i) / 3.f, v = float(j) / 3.f;
+                p.cp[j * 4 + i] =
+                    c[0] * ((1 - u) * (1 - v)) + c[1] * (u * (1 - v)) + c[2] * ((1 - u) * v) + c[3] * (u * v);
+            }
+        return p;
+    };
+    for (float shift : {0.f, 0.64f - 0.0405f}) {  // inside a block; the trio near a block's upper side
+        // A in cell 0 (made first), B in cell 1, 0.0159 from A (> tol: its own representative); P in cell
+        // 1, 0.0065 from A and 0.0094 from B.
+        const Vec3 A{0.039f + shift, 0.02f, 0.02f}, B{0.0549f + shift, 0.02f, 0.02f},
+            P{0.0455f + shift, 0.02f, 0.02f};
+        std::vector<BezierPatch> ps = {patchAt(A, 1000.f), patchAt(B, 2000.f), patchAt(P, 3000.f)};
+        if (shift > 0.f)  // 40 more corners near block sides: the rest takes the table
+            for (int k = 0; k < 40; ++k)
+                ps.push_back(patchAt({0.64f * float(k + 3) + 0.001f, 5.f * k, 0.f}, 4000.f + k));
+        weldSharedEdges(ps, tol);
+        EXPECT_TRUE(ps[2].cp[0] == B) << "shift " << shift;
+        EXPECT_TRUE(ps[0].cp[0] == A && ps[1].cp[0] == B) << "shift " << shift;
+    }
+}
+
 TEST(ReyesSides, OneSidedSurfacesFacingAwayAreCulled) {
     // flatSquare has dP/du x dP/dv = +z, pointing away from the eye: back-facing unless flipped.
     Scene s = cameraSpaceScene(64, 64, 40.f);
