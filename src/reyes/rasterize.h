@@ -11,7 +11,11 @@ namespace tessera {
 // Point-in-triangle tests use exact 64-bit integer edge functions on the fixed-point grid with the
 // top-left fill rule, so a sample on an edge shared by two micropolygons belongs to exactly one of them.
 // Returns the number of sample tests performed.
+// On x86-64 CPUs with AVX2 the inside tests run 8 samples at a time (same samples, same results).
 uint64_t rasterizeGrid(const Grid& grid, SampleTile& tile, float nearZ);
+// Whether rasterizeGrid may use its AVX2 path (on by default; the tests compare both); returns whether it
+// will.
+bool reyesUseAvx2(bool allow);
 
 // Paper 000's nearest-neighbour sampler (sec. 3.2): "only the pixel center, which is nearest to the middle
 // point of a micropolygon is considered". Per micropolygon, one sample is tested (inside, then depth):
