@@ -32,8 +32,9 @@ struct InstancePlacement {
 
 // Scene prepared for tracing in one space (the renderer uses camera space: eye at the origin).
 struct RtAccel {
-    std::vector<BezierPatch> patches;
-    std::vector<PatchSoa> patchSoa;  // the same patches, for the wavefront's Newton stage
+    // Tens of MB on big scenes, written in parallel by the build: on huge pages, not zero-filled first.
+    std::vector<BezierPatch, DefaultInitAllocator<BezierPatch>> patches;
+    std::vector<PatchSoa, DefaultInitAllocator<PatchSoa>> patchSoa;  // the same, for the Newton stage
     std::vector<uint8_t> flip, twoSided;
     std::vector<uint32_t> material;
     // Quadric surfaces (their kinds' closed form, core/quadric.h): per surface its index in `quadrics`
