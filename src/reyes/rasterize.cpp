@@ -44,54 +44,96 @@ inline bool shadeSampleIfInside(const TriangleSetup& t, const Grid& g, int64_t s
     return true;
 }
 
+// Samples are stratified: sample (sxi, syi) of pixel (px, py) lies in stratum (px*nx+sxi, py*ny+syi) of a
+// global nx-by-ny-per-pixel lattice. A micropolygon's bounding box therefore names exactly the strata, hence
+// the samples, that can fall inside it.
+struct StrataLattice {
+    Rect reg;
+    int nx, ny, spp, tw;
+    int64_t sx0, sx1, sy0, sy1;  // the tile's strata
+    explicit StrataLattice(const SampleTile& tile)
+        : reg(tile.region),
+          nx(tile.nx),
+          ny(tile.ny),
+          spp(tile.spp),
+          tw(tile.region.width()),
+          sx0(int64_t(reg.x0) * nx),
+          sx1(int64_t(reg.x1) * nx - 1),
+          sy0(int64_t(reg.y0) * ny),
+          sy1(int64_t(reg.y1) * ny - 1) {}
+};
+
+// One micropolygon (grid quad a, b = a + 1, c = a + stride + 1, d = a + stride): its bound, the strata the
+// bound overlaps and its two triangles.
+struct Micropolygon {
+    int64_t minX, maxX, minY, maxY, qx0, qx1, qy0, qy1;
+    TriangleSetup t0, t1;
+    size_t strata() const { return size_t(qx1 - qx0 + 1) * size_t(qy1 - qy0 + 1); }
+};
+
+// false when the micropolygon faces away (one-sided grid), overlaps no stratum of the tile or is degenerate.
+[[gnu::always_inline]] inline bool setupMicropolygon(const Grid& g, int a, int stride, const StrataLattice& s,
+                                                     Micropolygon& m) {
+    const int b = a + 1, c = a + stride + 1, d = a + stride;
+    if (!g.twoSided && !(g.front[a] | g.front[b] | g.front[c] | g.front[d])) return false;
+    m.minX = std::min({g.X[a], g.X[b], g.X[c], g.X[d]});
+    m.maxX = std::max({g.X[a], g.X[b], g.X[c], g.X[d]});
+    m.minY = std::min({g.Y[a], g.Y[b], g.Y[c], g.Y[d]});
+    m.maxY = std::max({g.Y[a], g.Y[b], g.Y[c], g.Y[d]});
+    // Strata overlapped by the bounding box (floor division of fixed point by the stratum size).
+    m.qx0 = std::max(s.sx0, (m.minX * s.nx) >> kSubpixelBits);
+    m.qx1 = std::min(s.sx1, (m.maxX * s.nx) >> kSubpixelBits);
+    m.qy0 = std::max(s.sy0, (m.minY * s.ny) >> kSubpixelBits);
+    m.qy1 = std::min(s.sy1, (m.maxY * s.ny) >> kSubpixelBits);
+    if (m.qx0 > m.qx1 || m.qy0 > m.qy1) return false;
+    m.t0 = setupTriangle(g, a, b, c);
+    m.t1 = setupTriangle(g, a, c, d);
+    return m.t0.valid || m.t1.valid;
+}
+
+// visit(pixel, sample index) for the sample of each stratum the micropolygon's bound overlaps, in rows.
+template <class Visit>
+[[gnu::always_inline]] inline void forEachStratum(const Micropolygon& m, const StrataLattice& s,
+                                                  Visit&& visit) {
+    const int pxStart = int(m.qx0 / s.nx), sxiStart = int(m.qx0 - int64_t(pxStart) * s.nx);
+    for (int64_t qy = m.qy0; qy <= m.qy1; ++qy) {
+        const int py = int(qy / s.ny), syi = int(qy - int64_t(py) * s.ny);
+        const size_t rowPix = size_t(py - s.reg.y0) * s.tw - s.reg.x0;
+        int px = pxStart, sxi = sxiStart;
+        for (int64_t qx = m.qx0; qx <= m.qx1; ++qx) {
+            const size_t pix = rowPix + px;
+            visit(pix, pix * s.spp + size_t(syi * s.nx + sxi));
+            if (++sxi == s.nx) sxi = 0, ++px;
+        }
+    }
+}
+
+// The scalar test of sample si (of pixel pix) against the micropolygon: in its bound, then in a triangle
+// (the first one first), then the depth test and the write.
+template <bool kAttributes>
+[[gnu::always_inline]] inline void testSample(const Micropolygon& m, const Grid& g, size_t pix, size_t si,
+                                              SampleTile& tile, float nearZ) {
+    const int64_t sx = tile.sx[si], sy = tile.sy[si];
+    if (sx < m.minX || sx > m.maxX || sy < m.minY || sy > m.maxY) return;
+    const bool hit = (m.t0.valid && shadeSampleIfInside<kAttributes>(m.t0, g, sx, sy, si, tile, nearZ)) ||
+                     (m.t1.valid && shadeSampleIfInside<kAttributes>(m.t1, g, sx, sy, si, tile, nearZ));
+    if (hit) tile.pixelHit[pix] = 1;
+}
+
 template <bool kAttributes>
 uint64_t rasterizeGridImpl(const Grid& g, SampleTile& tile, float nearZ) {
     uint64_t tests = 0;
-    const Rect& reg = tile.region;
+    const StrataLattice lattice(tile);
     const int stride = g.nu + 1;
-    const int nx = tile.nx, ny = tile.ny, spp = tile.spp, tw = reg.width();
-    // Samples are stratified: sample (sxi, syi) of pixel (px, py) lies in stratum (px*nx+sxi, py*ny+syi) of
-    // a global nx-by-ny-per-pixel lattice. A micropolygon's bounding box therefore names exactly the strata,
-    // hence the samples, that can fall inside it.
-    const int64_t sx0 = int64_t(reg.x0) * nx, sx1 = int64_t(reg.x1) * nx - 1;
-    const int64_t sy0 = int64_t(reg.y0) * ny, sy1 = int64_t(reg.y1) * ny - 1;
-    for (int j = 0; j < g.nv; ++j) {
+    Micropolygon m;
+    for (int j = 0; j < g.nv; ++j)
         for (int i = 0; i < g.nu; ++i) {
-            const int a = j * stride + i, b = a + 1, c = a + stride + 1, d = a + stride;
-            if (!g.twoSided && !(g.front[a] | g.front[b] | g.front[c] | g.front[d])) continue;
-            const int64_t minX = std::min({g.X[a], g.X[b], g.X[c], g.X[d]});
-            const int64_t maxX = std::max({g.X[a], g.X[b], g.X[c], g.X[d]});
-            const int64_t minY = std::min({g.Y[a], g.Y[b], g.Y[c], g.Y[d]});
-            const int64_t maxY = std::max({g.Y[a], g.Y[b], g.Y[c], g.Y[d]});
-            // Strata overlapped by the bounding box (floor division of fixed point by the stratum size).
-            int64_t qx0 = std::max(sx0, (minX * nx) >> kSubpixelBits);
-            int64_t qx1 = std::min(sx1, (maxX * nx) >> kSubpixelBits);
-            int64_t qy0 = std::max(sy0, (minY * ny) >> kSubpixelBits);
-            int64_t qy1 = std::min(sy1, (maxY * ny) >> kSubpixelBits);
-            if (qx0 > qx1 || qy0 > qy1) continue;
-            const TriangleSetup t0 = setupTriangle(g, a, b, c);
-            const TriangleSetup t1 = setupTriangle(g, a, c, d);
-            if (!t0.valid && !t1.valid) continue;
-            const int pxStart = int(qx0 / nx), sxiStart = int(qx0 - int64_t(pxStart) * nx);
-            for (int64_t qy = qy0; qy <= qy1; ++qy) {
-                const int py = int(qy / ny), syi = int(qy - int64_t(py) * ny);
-                const size_t rowPix = size_t(py - reg.y0) * tw - reg.x0;
-                int px = pxStart, sxi = sxiStart;
-                for (int64_t qx = qx0; qx <= qx1; ++qx) {
-                    const size_t pix = rowPix + px;
-                    const size_t si = pix * spp + size_t(syi * nx + sxi);
-                    if (++sxi == nx) sxi = 0, ++px;
-                    const int64_t sx = tile.sx[si], sy = tile.sy[si];
-                    ++tests;
-                    if (sx < minX || sx > maxX || sy < minY || sy > maxY) continue;
-                    bool hit =
-                        (t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ)) ||
-                        (t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ));
-                    if (hit) tile.pixelHit[pix] = 1;
-                }
-            }
+            if (!setupMicropolygon(g, j * stride + i, stride, lattice, m)) continue;
+            tests += m.strata();
+            forEachStratum(m, lattice, [&](size_t pix, size_t si) {
+                testSample<kAttributes>(m, g, pix, si, tile, nearZ);
+            });
         }
-    }
     return tests;
 }
 
@@ -138,73 +180,35 @@ __attribute__((target("avx2"))) inline __m256i insideLanes(const EdgeLanes& e, _
 template <bool kAttributes>
 __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, SampleTile& tile, float nearZ) {
     uint64_t tests = 0;
-    const Rect& reg = tile.region;
+    const StrataLattice lattice(tile);
     const int stride = g.nu + 1;
-    const int nx = tile.nx, ny = tile.ny, spp = tile.spp, tw = reg.width();
-    const int64_t sx0 = int64_t(reg.x0) * nx, sx1 = int64_t(reg.x1) * nx - 1;
-    const int64_t sy0 = int64_t(reg.y0) * ny, sy1 = int64_t(reg.y1) * ny - 1;
-    std::vector<int32_t> index;  // the candidate samples of one micropolygon, row by row
+    std::vector<int32_t> index;  // the candidate samples of one micropolygon, in the scalar loop's order
     std::vector<uint32_t> pixelOf;
+    Micropolygon m;
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
-            const int a = j * stride + i, b = a + 1, c = a + stride + 1, d = a + stride;
-            if (!g.twoSided && !(g.front[a] | g.front[b] | g.front[c] | g.front[d])) continue;
-            const int64_t minX = std::min({g.X[a], g.X[b], g.X[c], g.X[d]});
-            const int64_t maxX = std::max({g.X[a], g.X[b], g.X[c], g.X[d]});
-            const int64_t minY = std::min({g.Y[a], g.Y[b], g.Y[c], g.Y[d]});
-            const int64_t maxY = std::max({g.Y[a], g.Y[b], g.Y[c], g.Y[d]});
-            int64_t qx0 = std::max(sx0, (minX * nx) >> kSubpixelBits);
-            int64_t qx1 = std::min(sx1, (maxX * nx) >> kSubpixelBits);
-            int64_t qy0 = std::max(sy0, (minY * ny) >> kSubpixelBits);
-            int64_t qy1 = std::min(sy1, (maxY * ny) >> kSubpixelBits);
-            if (qx0 > qx1 || qy0 > qy1) continue;
-            const TriangleSetup t0 = setupTriangle(g, a, b, c);
-            const TriangleSetup t1 = setupTriangle(g, a, c, d);
-            if (!t0.valid && !t1.valid) continue;
-            const int pxStart = int(qx0 / nx), sxiStart = int(qx0 - int64_t(pxStart) * nx);
-            const size_t count = size_t(qx1 - qx0 + 1) * size_t(qy1 - qy0 + 1);
+            if (!setupMicropolygon(g, j * stride + i, stride, lattice, m)) continue;
+            const size_t count = m.strata();
             tests += count;
-            if (maxX - minX >= kAvx2Span || maxY - minY >= kAvx2Span) {
-                // A large micropolygon: the scalar loop of rasterizeGridImpl.
-                for (int64_t qy = qy0; qy <= qy1; ++qy) {
-                    const int py = int(qy / ny), syi = int(qy - int64_t(py) * ny);
-                    const size_t rowPix = size_t(py - reg.y0) * tw - reg.x0;
-                    int px = pxStart, sxi = sxiStart;
-                    for (int64_t qx = qx0; qx <= qx1; ++qx) {
-                        const size_t pix = rowPix + px;
-                        const size_t si = pix * spp + size_t(syi * nx + sxi);
-                        if (++sxi == nx) sxi = 0, ++px;
-                        const int64_t sx = tile.sx[si], sy = tile.sy[si];
-                        if (sx < minX || sx > maxX || sy < minY || sy > maxY) continue;
-                        bool hit =
-                            (t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ)) ||
-                            (t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ));
-                        if (hit) tile.pixelHit[pix] = 1;
-                    }
-                }
+            if (m.maxX - m.minX >= kAvx2Span || m.maxY - m.minY >= kAvx2Span) {
+                forEachStratum(m, lattice, [&](size_t pix, size_t si) {
+                    testSample<kAttributes>(m, g, pix, si, tile, nearZ);
+                });
                 continue;
             }
-            // The candidates in the scalar loop's order (rows of strata), padded to a multiple of 8 with
-            // the first one (its lanes are masked off).
+            // Padded to a multiple of 8 with the first candidate (its extra lanes are masked off).
             index.resize((count + 7) & ~size_t(7));
             pixelOf.resize(index.size());
             size_t n = 0;
-            for (int64_t qy = qy0; qy <= qy1; ++qy) {
-                const int py = int(qy / ny), syi = int(qy - int64_t(py) * ny);
-                const size_t rowPix = size_t(py - reg.y0) * tw - reg.x0;
-                int px = pxStart, sxi = sxiStart;
-                for (int64_t qx = qx0; qx <= qx1; ++qx, ++n) {
-                    const size_t pix = rowPix + px;
-                    index[n] = int32_t(pix * spp + size_t(syi * nx + sxi));
-                    pixelOf[n] = uint32_t(pix);
-                    if (++sxi == nx) sxi = 0, ++px;
-                }
-            }
+            forEachStratum(m, lattice, [&](size_t pix, size_t si) {
+                index[n] = int32_t(si);
+                pixelOf[n++] = uint32_t(pix);
+            });
             for (size_t k = n; k < index.size(); ++k) index[k] = index[0];
-            const EdgeLanes e0 = edgeLanes(t0, minX, minY), e1 = edgeLanes(t1, minX, minY);
-            const __m256i ox = _mm256_set1_epi32(int32_t(minX)), oy = _mm256_set1_epi32(int32_t(minY));
-            const __m256i spanX = _mm256_set1_epi32(int32_t(maxX - minX)),
-                          spanY = _mm256_set1_epi32(int32_t(maxY - minY));
+            const EdgeLanes e0 = edgeLanes(m.t0, m.minX, m.minY), e1 = edgeLanes(m.t1, m.minX, m.minY);
+            const __m256i ox = _mm256_set1_epi32(int32_t(m.minX)), oy = _mm256_set1_epi32(int32_t(m.minY));
+            const __m256i spanX = _mm256_set1_epi32(int32_t(m.maxX - m.minX)),
+                          spanY = _mm256_set1_epi32(int32_t(m.maxY - m.minY));
             const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
             for (size_t k = 0; k < n; k += 8) {
                 const __m256i idx = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&index[k]));
@@ -212,7 +216,7 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                     _mm256_i32gather_epi32(reinterpret_cast<const int*>(tile.sx.data()), idx, 4), ox);
                 const __m256i dy = _mm256_sub_epi32(
                     _mm256_i32gather_epi32(reinterpret_cast<const int*>(tile.sy.data()), idx, 4), oy);
-                // In the bound: 0 <= d <= span (as the scalar loop's minX <= sx <= maxX).
+                // In the bound: 0 <= d <= span (as the scalar test's minX <= sx <= maxX).
                 const __m256i out =
                     _mm256_or_si256(_mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dx),
                                                     _mm256_cmpgt_epi32(dx, spanX)),
@@ -222,15 +226,10 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                 const __m256i in = _mm256_or_si256(insideLanes(e0, dx, dy), insideLanes(e1, dx, dy));
                 // Sign bits: inside either triangle, a real candidate, in the bound.
                 const __m256i hitLanes = _mm256_andnot_si256(out, _mm256_and_si256(live, in));
-                unsigned mask = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(hitLanes)));
-                for (; mask; mask &= mask - 1) {
-                    const size_t m = k + size_t(__builtin_ctz(mask));
-                    const size_t si = size_t(index[m]);
-                    const int64_t sx = tile.sx[si], sy = tile.sy[si];
-                    bool hit =
-                        (t0.valid && shadeSampleIfInside<kAttributes>(t0, g, sx, sy, si, tile, nearZ)) ||
-                        (t1.valid && shadeSampleIfInside<kAttributes>(t1, g, sx, sy, si, tile, nearZ));
-                    if (hit) tile.pixelHit[pixelOf[m]] = 1;
+                for (unsigned mask = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(hitLanes))); mask;
+                     mask &= mask - 1) {
+                    const size_t c = k + size_t(__builtin_ctz(mask));
+                    testSample<kAttributes>(m, g, pixelOf[c], size_t(index[c]), tile, nearZ);
                 }
             }
         }

@@ -94,6 +94,13 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     };
     static const int kCorners[4] = {0, 3, 12, 15};
     // That pass over corners `ids` (patch * 4 + corner, ascending) with its own table of representatives.
+    // Corner c of patch pi (at p) takes representative r: recorded in the plan; 1 when p moved.
+    auto snapOnto = [](const Rep& r, uint32_t pi, int c, Vec3& p, WeldPlan* out) -> size_t {
+        if (out) out->push_back({pi, r.patch, uint8_t(c), r.cp});
+        if (r.p == p) return 0;
+        p = r.p;
+        return 1;
+    };
     // A block of a few corners (24 Big Guys: 73 K closed blocks of 4 on average) is searched linearly: a
     // hash table per block cost more in allocation than the search and did not scale with threads. The
     // representative taken is the one the table's search finds first: in the point's own cell, else in the
@@ -121,15 +128,10 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 const int rank = (dx || dy || dz) ? int((dx + 1) * 9 + (dy + 1) * 3 + (dz + 1)) : -1;
                 if (rank < bestRank && near(reps[r].rep.p, p, tol)) bestRank = rank, found = &reps[r].rep;
             }
-            if (found) {
-                if (out) out->push_back({pi, found->patch, uint8_t(c), found->cp});
-                if (!(found->p == p)) {
-                    p = found->p;
-                    ++moved;
-                }
-            } else {
+            if (found)
+                moved += snapOnto(*found, pi, c, p, out);
+            else
                 reps[nReps++] = {{p, pi, uint8_t(c)}, k};
-            }
         }
         return moved;
     };
@@ -171,15 +173,10 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 for (int64_t dy = y0; dy <= y1 && !found; ++dy)
                     for (int64_t dz = z0; dz <= z1 && !found; ++dz)
                         if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
-            if (found) {
-                if (out) out->push_back({pi, found->patch, uint8_t(c), found->cp});
-                if (!(found->p == p)) {
-                    p = found->p;
-                    ++moved;
-                }
-            } else {
+            if (found)
+                moved += snapOnto(*found, pi, c, p, out);
+            else
                 reps[k].push_back({p, pi, uint8_t(c)});
-            }
         }
         return moved;
     };
