@@ -15,6 +15,7 @@
 #include "io/scene_loader.h"
 #include "render/render.h"
 #include "reyes/grid.h"
+#include "reyes/rasterize.h"
 #include "reyes/split.h"
 #include "test_util.h"
 
@@ -318,6 +319,49 @@ TEST(MotionBlur, StrataBoundsChangeNoSampleOnlyTheTestCount) {
         const RenderResult rc = render(sc, cut), rw = render(sc, whole);
         EXPECT_EQ(rc.image.rgba, rw.image.rgba) << "lens " << lensOn;
         EXPECT_LT(rc.stats["sample_tests"].get<uint64_t>(), rw.stats["sample_tests"].get<uint64_t>() / 2);
+    }
+}
+
+// The candidate filters eight at a time (AVX2, writing the passing entries out branch-free) against the
+// four-wide SSE2 filters: the same image, attribute planes and sample-test count for motion, a lens, both,
+// and the interleaved scheme through the strata.
+TEST(MotionBlur, Avx2FiltersEqualTheFourWideFilters) {
+    struct Case {
+        const char* scene;
+        bool lens, motion;
+        BlurSampling scheme;
+    };
+    for (const Case& c : {Case{"motion_teapot", false, true, BlurSampling::BoundingBox},
+                          Case{"dof_teapot", true, false, BlurSampling::BoundingBox},
+                          Case{"motion_teapot", true, true, BlurSampling::BoundingBox},
+                          Case{"dof_teapot", true, false, BlurSampling::Interleaved}}) {
+        Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + c.scene + ".rib",
+                            [](const std::string&) {});
+        s.camera.width = 200;
+        s.camera.height = 150;
+        if (c.lens && s.camera.lensRadius() == 0.f) {  // the teapot's lens of dof_teapot.rib
+            s.camera.fStop = 0.8f, s.camera.focalLength = 1.f, s.camera.focalDistance = 11.f;
+        }
+        RenderSettings rs = settingsFor("reyes", c.scheme);
+        rs.output.channels = kAllFilmChannels;
+        const bool avx2 = reyesUseAvx2(true);
+        const RenderResult a = render(s, rs);
+        reyesUseAvx2(false);
+        const RenderResult b = render(s, rs);
+        reyesUseAvx2(true);
+        const uint64_t tests = a.stats["sample_tests"].get<uint64_t>();
+        std::printf("%s lens %d scheme %s: AVX2 path %s, %llu sample tests\n", c.scene, int(c.lens),
+                    blurSamplingName(c.scheme), avx2 ? "on" : "off", (unsigned long long)tests);
+        EXPECT_TRUE(a.image.rgba == b.image.rgba) << c.scene;
+        ASSERT_EQ(a.image.planes.size(), b.image.planes.size());
+        for (size_t p = 0; p < a.image.planes.size(); ++p) {
+            EXPECT_TRUE(a.image.planes[p].values == b.image.planes[p].values) << a.image.planes[p].name;
+            EXPECT_TRUE(a.image.planes[p].ids == b.image.planes[p].ids) << a.image.planes[p].name;
+        }
+        EXPECT_EQ(a.stats["sample_tests"], b.stats["sample_tests"]);
+        EXPECT_GT(tests, 100000u);
+        EXPECT_EQ(a.stats["blur"]["lens"].get<bool>(), c.lens);
+        EXPECT_EQ(a.stats["blur"]["motion"].get<bool>(), c.motion);
     }
 }
 

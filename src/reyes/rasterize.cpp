@@ -297,11 +297,19 @@ uint64_t rasterizeGridNearest(const Grid& g, SampleTile& tile, float nearZ) {
 
 uint64_t rasterizeGrid(const Grid& g, SampleTile& tile, float nearZ) {
 #if TESSERA_REYES_AVX2
-    if (cpuHasAvx2() && gReyesAvx2Allowed.load(std::memory_order_relaxed))
+    if (reyesAvx2Active())
         return tile.channels ? rasterizeGridAvx2<true>(g, tile, nearZ)
                              : rasterizeGridAvx2<false>(g, tile, nearZ);
 #endif
     return tile.channels ? rasterizeGridImpl<true>(g, tile, nearZ) : rasterizeGridImpl<false>(g, tile, nearZ);
+}
+
+bool reyesAvx2Active() {
+#if TESSERA_REYES_AVX2
+    return cpuHasAvx2() && gReyesAvx2Allowed.load(std::memory_order_relaxed);
+#else
+    return false;
+#endif
 }
 
 bool reyesUseAvx2(bool allow) {

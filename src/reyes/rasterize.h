@@ -16,6 +16,9 @@ uint64_t rasterizeGrid(const Grid& grid, SampleTile& tile, float nearZ);
 // Whether rasterizeGrid may use its AVX2 path (on by default; the tests compare both); returns whether it
 // will.
 bool reyesUseAvx2(bool allow);
+// Whether the AVX2 paths run now (the CPU has AVX2 and reyesUseAvx2 allows it): rasterizeGrid's and the
+// blurred rasterizer's candidate filters (rasterize_blur.cpp).
+bool reyesAvx2Active();
 
 // Paper 000's nearest-neighbour sampler (sec. 3.2): "only the pixel center, which is nearest to the middle
 // point of a micropolygon is considered". Per micropolygon, one sample is tested (inside, then depth):

@@ -34,8 +34,8 @@ struct BlurStrata {
     // entries [start[base + a], start[base + b + 1]), base = (row * cells() + cell) * (cols + 1).
     std::vector<uint32_t> start;
     // Structure of arrays, padded with kRunPadding entries past the last so that the candidate filters
-    // can read four at a time past a run's end (the lanes past it are masked off).
-    static constexpr size_t kRunPadding = 4;
+    // can read four (SSE2) or eight (AVX2) at a time past a run's end (the lanes past it are masked off).
+    static constexpr size_t kRunPadding = 8;
     std::vector<float> fx, fy, time;  // raster position in pixels, normalised shutter time
     std::vector<float> lensX, lensY;  // lens point
     std::vector<uint32_t> sample;     // index in the tile
