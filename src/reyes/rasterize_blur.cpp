@@ -536,6 +536,172 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterSegmentAvx2(const Candidat
     }
     return n;
 }
+
+// The exact test of eight samples against one micropolygon at once (each sample at its own time and lens
+// point): testAt's moveQuad, facesCamera and testMovedSampleOnce, lane by lane, with the same results.
+// The corners are moved by the SSE2 moveQuad's float operations (timeline segment 0: the grid has at
+// most one linear motion, w = the sample's time clamped to [0, 1] as timelineSegment gives it). The
+// integer edge functions are evaluated relative to the sample: with corner offsets d = X - sx below 2^14
+// the edge function (xb - xa)(sy - ya) - (yb - ya)(sx - xa) equals the cross product dxa dyb - dxb dya
+// exactly and fits 32 bits, and the doubled area is the sum of the three edges' cross products; a lane
+// with a larger offset (a micropolygon wider than 64 pixels at that sample) goes to `scalar`. A hit's
+// weights and depth are computed as the scalar test computes them, from the same integers.
+struct EdgeLanes8 {
+    __m256i cross;           // dxa dyb - dxb dya of the edge a -> b
+    __m256i biasAB, biasBA;  // fillBias of a -> b and of b -> a (0 or 1)
+};
+__attribute__((target("avx2"))) inline EdgeLanes8 edgeLanes8(__m256i dxa, __m256i dya, __m256i dxb,
+                                                             __m256i dyb) {
+    EdgeLanes8 e;
+    e.cross = _mm256_sub_epi32(_mm256_mullo_epi32(dxa, dyb), _mm256_mullo_epi32(dxb, dya));
+    const __m256i zero = _mm256_setzero_si256(), one = _mm256_set1_epi32(1);
+    const __m256i dy = _mm256_sub_epi32(dyb, dya), dx = _mm256_sub_epi32(dxb, dxa);
+    const __m256i dyZero = _mm256_cmpeq_epi32(dy, zero);
+    // fillBias(a, b) = 0 when dy > 0 or (dy == 0 and dx < 0), else 1; b -> a negates dy and dx.
+    const __m256i ownsAB =
+        _mm256_or_si256(_mm256_cmpgt_epi32(dy, zero), _mm256_and_si256(dyZero, _mm256_cmpgt_epi32(zero, dx)));
+    const __m256i ownsBA =
+        _mm256_or_si256(_mm256_cmpgt_epi32(zero, dy), _mm256_and_si256(dyZero, _mm256_cmpgt_epi32(dx, zero)));
+    e.biasAB = _mm256_add_epi32(one, ownsAB);  // mask -1 -> 0, 0 -> 1
+    e.biasBA = _mm256_add_epi32(one, ownsBA);
+    return e;
+}
+
+// One triangle of the quad over eight lanes: inside mask, and per lane the oriented weights w1, w2 (of the
+// oriented corners 1 and 2), the positive doubled area and whether corners 1 and 2 were swapped (as
+// testMovedSampleOnce orients the triangle counter-clockwise). Edges given as e12 (corner 1 -> 2),
+// e20 (2 -> 0), e01 (0 -> 1).
+struct TriangleLanes8 {
+    __m256i inside, w1, w2, area, swapped;
+};
+__attribute__((target("avx2"))) inline TriangleLanes8 triangleLanes8(const EdgeLanes8& e12,
+                                                                     const EdgeLanes8& e20,
+                                                                     const EdgeLanes8& e01) {
+    TriangleLanes8 t;
+    const __m256i zero = _mm256_setzero_si256();
+    const __m256i area = _mm256_add_epi32(_mm256_add_epi32(e01.cross, e12.cross), e20.cross);
+    t.swapped = _mm256_cmpgt_epi32(zero, area);
+    // Counter-clockwise: w0 = E12, w1 = E20, w2 = E01. Swapped (corners 0, 2, 1): w0 = E21, w1 = E10,
+    // w2 = E02, with E_ba = -E_ab and b -> a's own bias.
+    const __m256i w0 =
+        _mm256_blendv_epi8(_mm256_sub_epi32(e12.cross, e12.biasAB),
+                           _mm256_sub_epi32(_mm256_sub_epi32(zero, e12.cross), e12.biasBA), t.swapped);
+    t.w1 = _mm256_blendv_epi8(_mm256_sub_epi32(e20.cross, e20.biasAB),
+                              _mm256_sub_epi32(_mm256_sub_epi32(zero, e01.cross), e01.biasBA), t.swapped);
+    t.w2 = _mm256_blendv_epi8(_mm256_sub_epi32(e01.cross, e01.biasAB),
+                              _mm256_sub_epi32(_mm256_sub_epi32(zero, e20.cross), e20.biasBA), t.swapped);
+    t.area = _mm256_abs_epi32(area);
+    const __m256i anyNegative = _mm256_or_si256(_mm256_or_si256(w0, t.w1), t.w2);
+    t.inside = _mm256_andnot_si256(
+        _mm256_or_si256(_mm256_cmpeq_epi32(area, zero), _mm256_cmpgt_epi32(zero, anyNegative)),
+        _mm256_set1_epi32(-1));
+    return t;
+}
+
+// blurredToFixed over eight lanes as moveQuad's SSE2 form computes it (clamp as max then min, rounding
+// offset +-0.5 from the sign, truncating conversion).
+__attribute__((target("avx2"))) inline __m256i toFixed8(__m256 v) {
+    const __m256 limit = _mm256_set1_ps(float(1 << 20) * kSubpixelScale);
+    const __m256 f = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(v, _mm256_set1_ps(kSubpixelScale)),
+                                                 _mm256_sub_ps(_mm256_setzero_ps(), limit)),
+                                   limit);
+    return _mm256_cvttps_epi32(
+        _mm256_add_ps(f, _mm256_or_ps(_mm256_set1_ps(0.5f), _mm256_and_ps(f, _mm256_set1_ps(-0.f)))));
+}
+
+template <bool kAttributes, class Scalar>
+__attribute__((target("avx2,popcnt"))) void testEntriesAvx2(const Grid& g, const int vid[4],
+                                                            const CornerSegment& s, bool twoSided,
+                                                            bool frontIfPositive, const CandidateView& v,
+                                                            const uint32_t* list, uint32_t n, bool lensOn,
+                                                            const Projector& pr, SampleTile& tile,
+                                                            float nearZ, Scalar&& scalar) {
+    const bool moving = g.knots == 2;
+    const __m256i reach = _mm256_set1_epi32((1 << 14) - 1);
+    const int spp = tile.spp;
+    for (uint32_t b = 0; b < n; b += 8) {
+        const uint32_t count = std::min(8u, n - b);
+        alignas(32) float time[8], lensX[8], lensY[8];
+        alignas(32) int32_t sx[8], sy[8];
+        uint32_t sample[8], entry[8];
+        for (uint32_t l = 0; l < 8; ++l) {  // lanes past count repeat the last entry (and are masked off)
+            const uint32_t e = list[b + std::min(l, count - 1)];
+            entry[l] = e, sample[l] = v.sample[e];
+            time[l] = v.time[e], lensX[l] = v.lensX[e], lensY[l] = v.lensY[e];
+            sx[l] = tile.sx[sample[l]], sy[l] = tile.sy[sample[l]];
+        }
+        // timelineSegment's w: 0 for one knot; for two, the time clamped to [0, 1].
+        __m256 w = _mm256_setzero_ps();
+        if (moving) {
+            const __m256 u = _mm256_load_ps(time);
+            w = _mm256_blendv_ps(u, _mm256_set1_ps(1.f), _mm256_cmp_ps(u, _mm256_set1_ps(1.f), _CMP_GE_OQ));
+            w = _mm256_blendv_ps(w, _mm256_setzero_ps(), _mm256_cmp_ps(u, _mm256_setzero_ps(), _CMP_LE_OQ));
+        }
+        const __m256 lx = _mm256_load_ps(lensX), ly = _mm256_load_ps(lensY);
+        const __m256i sxv = _mm256_load_si256(reinterpret_cast<const __m256i*>(sx)),
+                      syv = _mm256_load_si256(reinterpret_cast<const __m256i*>(sy));
+        __m256i dx[4], dy[4];
+        __m256i far = _mm256_setzero_si256();
+        for (int c = 0; c < 4; ++c) {
+            __m256 x = _mm256_add_ps(_mm256_set1_ps(s.x[c]), _mm256_mul_ps(w, _mm256_set1_ps(s.dx[c])));
+            __m256 y = _mm256_add_ps(_mm256_set1_ps(s.y[c]), _mm256_mul_ps(w, _mm256_set1_ps(s.dy[c])));
+            if (lensOn) {
+                const __m256 cc =
+                    _mm256_add_ps(_mm256_set1_ps(s.c[c]), _mm256_mul_ps(w, _mm256_set1_ps(s.dc[c])));
+                x = _mm256_add_ps(x, _mm256_mul_ps(_mm256_mul_ps(lx, cc), _mm256_set1_ps(pr.sx)));
+                y = _mm256_add_ps(y, _mm256_mul_ps(_mm256_mul_ps(ly, cc), _mm256_set1_ps(pr.sy)));
+            }
+            dx[c] = _mm256_sub_epi32(toFixed8(x), sxv);
+            dy[c] = _mm256_sub_epi32(toFixed8(y), syv);
+            far = _mm256_or_si256(far, _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_abs_epi32(dx[c]), reach),
+                                                       _mm256_cmpgt_epi32(_mm256_abs_epi32(dy[c]), reach)));
+        }
+        const EdgeLanes8 e01 = edgeLanes8(dx[0], dy[0], dx[1], dy[1]),
+                         e12 = edgeLanes8(dx[1], dy[1], dx[2], dy[2]),
+                         e20 = edgeLanes8(dx[2], dy[2], dx[0], dy[0]),
+                         e23 = edgeLanes8(dx[2], dy[2], dx[3], dy[3]),
+                         e30 = edgeLanes8(dx[3], dy[3], dx[0], dy[0]);
+        // Edge 0 -> 2 of the second triangle (0, 2, 3) is edge 2 -> 0 walked the other way.
+        const EdgeLanes8 e02{_mm256_sub_epi32(_mm256_setzero_si256(), e20.cross), e20.biasBA, e20.biasAB};
+        const TriangleLanes8 t0 = triangleLanes8(e12, e20, e01), t1 = triangleLanes8(e23, e30, e02);
+        const unsigned lanes = (1u << count) - 1u;
+        const unsigned farMask = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(far))) & lanes;
+        unsigned faces = lanes & ~farMask;
+        if (!twoSided) {  // facesCamera: the signed area of corners (0, 1, 2) against the shutter-open facing
+            const __m256i area0 = _mm256_add_epi32(_mm256_add_epi32(e01.cross, e12.cross), e20.cross);
+            const unsigned positive = unsigned(
+                _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(area0, _mm256_setzero_si256()))));
+            faces &= frontIfPositive ? positive : ~positive;
+        }
+        const unsigned in0 = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(t0.inside))) & faces;
+        const unsigned in1 = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(t1.inside))) & faces & ~in0;
+        if (in0 | in1) {
+            alignas(32) int32_t w1[2][8], w2[2][8], area[2][8], swapped[2][8];
+            alignas(32) float ws[8];
+            _mm256_store_si256(reinterpret_cast<__m256i*>(w1[0]), t0.w1),
+                _mm256_store_si256(reinterpret_cast<__m256i*>(w1[1]), t1.w1);
+            _mm256_store_si256(reinterpret_cast<__m256i*>(w2[0]), t0.w2),
+                _mm256_store_si256(reinterpret_cast<__m256i*>(w2[1]), t1.w2);
+            _mm256_store_si256(reinterpret_cast<__m256i*>(area[0]), t0.area),
+                _mm256_store_si256(reinterpret_cast<__m256i*>(area[1]), t1.area);
+            _mm256_store_si256(reinterpret_cast<__m256i*>(swapped[0]), t0.swapped),
+                _mm256_store_si256(reinterpret_cast<__m256i*>(swapped[1]), t1.swapped);
+            _mm256_store_ps(ws, w);
+            for (unsigned hit = in0 | in1; hit; hit &= hit - 1) {
+                const int l = __builtin_ctz(hit), tri = (in0 >> l) & 1u ? 0 : 1;
+                // testMovedSampleOnce's weights and moveQuad's depths, from the same integers and floats.
+                const float invArea = 1.f / float(area[tri][l]);
+                float l1 = float(w1[tri][l]) * invArea, l2 = float(w2[tri][l]) * invArea;
+                if (swapped[tri][l]) std::swap(l1, l2);
+                MovedQuad q;
+                for (int c = 0; c < 4; ++c) q.Z[c] = s.z[c] + ws[l] * s.dz[c];
+                writeMovedHit<kAttributes>(g, vid, q, tri, l1, l2, sample[l], tile, nearZ);
+                tile.pixelHit[sample[l] / size_t(spp)] = 1;
+            }
+        }
+        for (unsigned f = farMask; f; f &= f - 1) scalar(entry[__builtin_ctz(f)]);
+    }
+}
 #endif
 
 // Whether sample point (fx, fy) (pixels) can be inside the micropolygon at the sample's time (segment k,
@@ -642,8 +808,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     const CandidateView entries = viewOf(strata);
 #if TESSERA_BLUR_AVX2
     const bool avx2 = reyesAvx2Active();
-    thread_local std::vector<uint32_t> passed;  // the entries a filter passed (AVX2 filters)
 #endif
+    thread_local std::vector<uint32_t> passed;  // the entries a filter passed
     // Cost model: a group costs a bound and a run lookup per row and fine stratum, and the samples in its
     // bound number about spp (1 + motion / groups) per covered pixel, so the total is least near
     // groups = sqrt(spp * motion / 2).
@@ -703,9 +869,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         m.corners.k = -1;
         return true;
     };
-    // Sample si at its time and lens point: moved corners, then the exact test.
+    // Sample si at its time and lens point: moved corners, then the exact test (counted by the callers).
     auto testAt = [&](Micropolygon& m, size_t si, int k, float w, Vec2 lens) {
-        ++tests;
         if (k != m.corners.k) loadCorners(g, m.vid, k, m.corners);
         const MovedQuad q =
             lensOn ? moveQuad<true>(m.corners, w, lens, pr) : moveQuad<false>(m.corners, w, lens, pr);
@@ -743,6 +908,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                     int k;
                     float w;
                     timelineSegment(knots.data(), g.knots, tile.time[si], k, w);
+                    ++tests;
                     testAt(m, si, k, w, tile.lens[si]);
                 }
     };
@@ -781,31 +947,33 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         sb.sx = pr.sx, sb.sy = pr.sy;
         return b;
     };
-    // hit(e) for each entry e of [first, end) of `v` inside bound b at the entry's own (t, lens).
+    // The entries of [first, end) of `v` inside bound b at the entry's own (t, lens), in order, as one list:
+    // hits(list, count).
     auto filterEntries = [&](const StratumBound& b, const CandidateView& v, uint32_t first, uint32_t end,
-                             auto&& hit) {
+                             auto&& hits) {
+        if (passed.size() < size_t(end - first) + 8) passed.resize(2 * (size_t(end - first) + 8));
+        uint32_t* out = passed.data();
+        uint32_t n = 0;
+        auto hit = [&](uint32_t e) { out[n++] = e; };
 #if TESSERA_BLUR_AVX2
         if (avx2 && b.kind != StratumBound::PerSample) {
-            if (passed.size() < size_t(end - first) + 8) passed.resize(2 * (size_t(end - first) + 8));
-            uint32_t* out = passed.data();
-            const uint32_t n = b.kind == StratumBound::Still
-                                   ? filterStillLensAvx2(v, first, end, b.still, out)
-                               : lensOn ? filterSegmentAvx2<true>(v, first, end, b.segment, out)
-                                        : filterSegmentAvx2<false>(v, first, end, b.segment, out);
-            for (uint32_t i = 0; i < n; ++i) hit(out[i]);
+            n = b.kind == StratumBound::Still ? filterStillLensAvx2(v, first, end, b.still, out)
+                : lensOn                      ? filterSegmentAvx2<true>(v, first, end, b.segment, out)
+                                              : filterSegmentAvx2<false>(v, first, end, b.segment, out);
+            if (n) hits(static_cast<const uint32_t*>(out), n);
             return;
         }
 #endif
         switch (b.kind) {
             case StratumBound::Still:
                 filterStillLens(v, first, end, b.still, hit);
-                return;
+                break;
             case StratumBound::Segment:
                 if (lensOn)
                     filterSegment<true>(v, first, end, b.segment, hit);
                 else
                     filterSegment<false>(v, first, end, b.segment, hit);
-                return;
+                break;
             case StratumBound::PerSample:
                 for (uint32_t e = first; e < end; ++e) {
                     int k;
@@ -816,8 +984,9 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                         continue;
                     hit(e);
                 }
-                return;
+                break;
         }
+        if (n) hits(static_cast<const uint32_t*>(out), n);
     };
     // Entry e of `v` tested exactly against micropolygon m at the entry's own time and lens point.
     auto testEntry = [&](Micropolygon& m, const CandidateView& v, uint32_t e) {
@@ -826,11 +995,26 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         timelineSegment(knots.data(), g.knots, v.time[e], k, w);
         testAt(m, v.sample[e], k, w, Vec2{v.lensX[e], v.lensY[e]});
     };
+    // The entries of a list tested exactly against micropolygon m: eight at a time with AVX2 when the grid
+    // has at most one linear motion (every sample in timeline segment 0), else one by one.
+    auto testEntries = [&](Micropolygon& m, const CandidateView& v, const uint32_t* list, uint32_t n) {
+        tests += n;
+#if TESSERA_BLUR_AVX2
+        if (avx2 && g.knots <= 2) {
+            if (m.corners.k != 0) loadCorners(g, m.vid, 0, m.corners);
+            if (!m.corners.valid) return;
+            testEntriesAvx2<kAttributes>(g, m.vid, m.corners, g.twoSided, m.front0 == (m.sign0 > 0), v, list,
+                                         n, lensOn, pr, tile, nearZ, [&](uint32_t e) { testEntry(m, v, e); });
+            return;
+        }
+#endif
+        for (uint32_t i = 0; i < n; ++i) testEntry(m, v, list[i]);
+    };
 
     // The strata that a bound (knot boxes knotBox, `all` over every knot) meets: per time group and lens
     // cell, the runs of the rows under the group's bound over the cell; per stratum of the group, each
-    // run's entries inside the bound at their own (t, lens) go to hit(e), then done(tb, cx, cy).
-    auto walkStrata = [&](const KnotBox* knotBox, const KnotBox& all, auto&& reserve, auto&& hit,
+    // run's entries inside the bound at their own (t, lens) go to hits(list, count), then done(tb, cx, cy).
+    auto walkStrata = [&](const KnotBox* knotBox, const KnotBox& all, auto&& reserve, auto&& hits,
                           auto&& done) {
         // One linear motion (two knots, so w = t): only the groups whose times can bring the bound to the
         // tile, with one stratum to spare on each side for the bounds' rounding. A micropolygon that
@@ -881,7 +1065,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                         const uint32_t first = strata.start[base + c0], end = strata.start[base + c1];
                         if (first == end) continue;
                         reserve(end - first);
-                        filterEntries(b, entries, first, end, hit);
+                        filterEntries(b, entries, first, end, hits);
                     }
                     done(tb, cx, cy);
                 }
@@ -891,7 +1075,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     auto rasterizeOne = [&](Micropolygon& m) {
         if (!cut) return rasterizeUncut(m);
         walkStrata(
-            m.knotBox, m.all, [](uint32_t) {}, [&](uint32_t e) { testEntry(m, entries, e); },
+            m.knotBox, m.all, [](uint32_t) {},
+            [&](const uint32_t* list, uint32_t n) { testEntries(m, entries, list, n); },
             [](int, int, int) {});
     };
 
@@ -935,13 +1120,17 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
             candidates.count = 0;
             walkStrata(
                 blockBoxes.data(), blockAll, [&](uint32_t more) { candidates.reserve(more); },
-                [&](uint32_t e) { candidates.add(entries, e); },
+                [&](const uint32_t* list, uint32_t n) {
+                    for (uint32_t i = 0; i < n; ++i) candidates.add(entries, list[i]);
+                },
                 [&](int tb, int cx, int cy) {
                     if (candidates.count == 0) return;
                     const CandidateView gathered = candidates.view();
                     for (int m = 0; m < n; ++m)
                         filterEntries(stratumBound(ms[m].knotBox, tb, cx, cy), gathered, 0, candidates.count,
-                                      [&](uint32_t e) { testEntry(ms[m], gathered, e); });
+                                      [&](const uint32_t* list, uint32_t count) {
+                                          testEntries(ms[m], gathered, list, count);
+                                      });
                     candidates.count = 0;
                 });
         }
