@@ -537,6 +537,26 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterSegmentAvx2(const Candidat
     return n;
 }
 
+// The samples waiting for their exact test against one micropolygon (the AVX2 test takes eight at a
+// time, and one stratum's list is often shorter): sample index, time and lens point, padded by eight.
+struct PendingTests {
+    std::vector<uint32_t> sample;
+    std::vector<float> time, lensX, lensY;
+    uint32_t count = 0;
+    void add(const CandidateView& v, const uint32_t* list, uint32_t n) {
+        const size_t need = size_t(count) + n + 8;
+        if (need > sample.size()) {
+            const size_t size = std::max(need, 2 * sample.size());
+            sample.resize(size), time.resize(size), lensX.resize(size), lensY.resize(size);
+        }
+        for (uint32_t i = 0; i < n; ++i, ++count) {
+            const uint32_t e = list[i];
+            sample[count] = v.sample[e], time[count] = v.time[e];
+            lensX[count] = v.lensX[e], lensY[count] = v.lensY[e];
+        }
+    }
+};
+
 // The exact test of eight samples against one micropolygon at once (each sample at its own time and lens
 // point): testAt's moveQuad, facesCamera and testMovedSampleOnce, lane by lane, with the same results.
 // The corners are moved by the SSE2 moveQuad's float operations (timeline segment 0: the grid has at
@@ -612,32 +632,29 @@ __attribute__((target("avx2"))) inline __m256i toFixed8(__m256 v) {
 template <bool kAttributes, class Scalar>
 __attribute__((target("avx2,popcnt"))) void testEntriesAvx2(const Grid& g, const int vid[4],
                                                             const CornerSegment& s, bool twoSided,
-                                                            bool frontIfPositive, const CandidateView& v,
-                                                            const uint32_t* list, uint32_t n, bool lensOn,
-                                                            const Projector& pr, SampleTile& tile,
-                                                            float nearZ, Scalar&& scalar) {
+                                                            bool frontIfPositive, const PendingTests& p,
+                                                            bool lensOn, const Projector& pr,
+                                                            SampleTile& tile, float nearZ, Scalar&& scalar) {
     const bool moving = g.knots == 2;
     const __m256i reach = _mm256_set1_epi32((1 << 14) - 1);
     const int spp = tile.spp;
+    const uint32_t n = p.count;
     for (uint32_t b = 0; b < n; b += 8) {
         const uint32_t count = std::min(8u, n - b);
-        alignas(32) float time[8], lensX[8], lensY[8];
         alignas(32) int32_t sx[8], sy[8];
-        uint32_t sample[8], entry[8];
-        for (uint32_t l = 0; l < 8; ++l) {  // lanes past count repeat the last entry (and are masked off)
-            const uint32_t e = list[b + std::min(l, count - 1)];
-            entry[l] = e, sample[l] = v.sample[e];
-            time[l] = v.time[e], lensX[l] = v.lensX[e], lensY[l] = v.lensY[e];
+        uint32_t sample[8];
+        for (uint32_t l = 0; l < 8; ++l) {  // lanes past count repeat the last sample (and are masked off)
+            sample[l] = p.sample[b + std::min(l, count - 1)];
             sx[l] = tile.sx[sample[l]], sy[l] = tile.sy[sample[l]];
         }
         // timelineSegment's w: 0 for one knot; for two, the time clamped to [0, 1].
         __m256 w = _mm256_setzero_ps();
         if (moving) {
-            const __m256 u = _mm256_load_ps(time);
+            const __m256 u = _mm256_loadu_ps(&p.time[b]);
             w = _mm256_blendv_ps(u, _mm256_set1_ps(1.f), _mm256_cmp_ps(u, _mm256_set1_ps(1.f), _CMP_GE_OQ));
             w = _mm256_blendv_ps(w, _mm256_setzero_ps(), _mm256_cmp_ps(u, _mm256_setzero_ps(), _CMP_LE_OQ));
         }
-        const __m256 lx = _mm256_load_ps(lensX), ly = _mm256_load_ps(lensY);
+        const __m256 lx = _mm256_loadu_ps(&p.lensX[b]), ly = _mm256_loadu_ps(&p.lensY[b]);
         const __m256i sxv = _mm256_load_si256(reinterpret_cast<const __m256i*>(sx)),
                       syv = _mm256_load_si256(reinterpret_cast<const __m256i*>(sy));
         __m256i dx[4], dy[4];
@@ -699,7 +716,7 @@ __attribute__((target("avx2,popcnt"))) void testEntriesAvx2(const Grid& g, const
                 tile.pixelHit[sample[l] / size_t(spp)] = 1;
             }
         }
-        for (unsigned f = farMask; f; f &= f - 1) scalar(entry[__builtin_ctz(f)]);
+        for (unsigned f = farMask; f; f &= f - 1) scalar(b + uint32_t(__builtin_ctz(f)));
     }
 }
 #endif
@@ -808,6 +825,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     const CandidateView entries = viewOf(strata);
 #if TESSERA_BLUR_AVX2
     const bool avx2 = reyesAvx2Active();
+    const bool deferTests = avx2 && g.knots <= 2;
+    thread_local std::array<PendingTests, kBlockSide * kBlockSide> pending;
 #endif
     thread_local std::vector<uint32_t> passed;  // the entries a filter passed
     // Cost model: a group costs a bound and a run lookup per row and fine stratum, and the samples in its
@@ -831,6 +850,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     // timeline segment its last sample met.
     struct Micropolygon {
         int vid[4];
+        int slot;  // in the block (knot boxes, pending tests)
         const KnotBox* knotBox;
         KnotBox all;  // over every knot
         bool front0;
@@ -847,6 +867,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         m.vid[0] = a, m.vid[1] = a + 1, m.vid[2] = a + stride + 1, m.vid[3] = a + stride;
         KnotBox* knotBox = &knotBoxes[size_t(slot) * size_t(g.knots)];
         m.knotBox = knotBox;
+        m.slot = slot;
         m.all = kEmptyBox;
         for (int kn = 0; kn < g.knots; ++kn) {
             KnotBox kb = kEmptyBox;
@@ -995,20 +1016,38 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         timelineSegment(knots.data(), g.knots, v.time[e], k, w);
         testAt(m, v.sample[e], k, w, Vec2{v.lensX[e], v.lensY[e]});
     };
-    // The entries of a list tested exactly against micropolygon m: eight at a time with AVX2 when the grid
-    // has at most one linear motion (every sample in timeline segment 0), else one by one.
+    // The entries of a list tested exactly against micropolygon m. With AVX2, when the grid has at most one
+    // linear motion (every sample in timeline segment 0), they wait in m's PendingTests and are tested
+    // eight at a time by flush: a sample meets a micropolygon at most once (it lies in one stratum), and
+    // the micropolygons of a block are flushed in the block's order, so each sample still meets them in
+    // that order (the same depth-test winners). Otherwise one by one, now.
     auto testEntries = [&](Micropolygon& m, const CandidateView& v, const uint32_t* list, uint32_t n) {
         tests += n;
 #if TESSERA_BLUR_AVX2
-        if (avx2 && g.knots <= 2) {
-            if (m.corners.k != 0) loadCorners(g, m.vid, 0, m.corners);
-            if (!m.corners.valid) return;
-            testEntriesAvx2<kAttributes>(g, m.vid, m.corners, g.twoSided, m.front0 == (m.sign0 > 0), v, list,
-                                         n, lensOn, pr, tile, nearZ, [&](uint32_t e) { testEntry(m, v, e); });
+        if (deferTests) {
+            pending[size_t(m.slot)].add(v, list, n);
             return;
         }
 #endif
         for (uint32_t i = 0; i < n; ++i) testEntry(m, v, list[i]);
+    };
+    auto flush = [&](Micropolygon& m) {
+#if TESSERA_BLUR_AVX2
+        PendingTests& p = pending[size_t(m.slot)];
+        if (p.count == 0) return;
+        if (m.corners.k != 0) loadCorners(g, m.vid, 0, m.corners);
+        if (m.corners.valid)
+            testEntriesAvx2<kAttributes>(g, m.vid, m.corners, g.twoSided, m.front0 == (m.sign0 > 0), p,
+                                         lensOn, pr, tile, nearZ, [&](uint32_t i) {
+                                             int k;
+                                             float w;
+                                             timelineSegment(knots.data(), g.knots, p.time[i], k, w);
+                                             testAt(m, p.sample[i], k, w, Vec2{p.lensX[i], p.lensY[i]});
+                                         });
+        p.count = 0;
+#else
+        (void)m;
+#endif
     };
 
     // The strata that a bound (knot boxes knotBox, `all` over every knot) meets: per time group and lens
@@ -1078,6 +1117,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
             m.knotBox, m.all, [](uint32_t) {},
             [&](const uint32_t* list, uint32_t n) { testEntries(m, entries, list, n); },
             [](int, int, int) {});
+        flush(m);
     };
 
     // Blocks of micropolygons (kBlockSide) for blurred grids sampled through the strata. A block's
@@ -1133,6 +1173,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                                       });
                     candidates.count = 0;
                 });
+            for (int m = 0; m < n; ++m) flush(ms[m]);
         }
     return tests;
 }
