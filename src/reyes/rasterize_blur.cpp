@@ -383,6 +383,45 @@ inline void filterStillLens(const CandidateView& s, uint32_t first, uint32_t end
 #endif
 }
 
+// The bound of a still micropolygon at any lens point l (depth of field only): its box grown by the least
+// and the greatest of l.x c0 sx and l.x c1 sx (likewise for y), [c0, c1] its lens coefficients. One bound
+// for every lens cell (the block path's per-micropolygon filter, over candidates of all cells).
+struct StillBound {
+    float x0, x1, y0, y1, ax, bx, ay, by;  // ax = c0 sx, bx = c1 sx, ay = c0 sy, by = c1 sy
+};
+
+// Calls hit(e) for each entry e of [first, end) whose position lies in `b` at its own lens point, in order;
+// four entries at a time as filterStillLens.
+template <class Hit>
+inline void filterStill(const CandidateView& s, uint32_t first, uint32_t end, const StillBound& b,
+                        Hit&& hit) {
+#if defined(__SSE2__)
+    const __m128 x0 = _mm_set1_ps(b.x0), x1 = _mm_set1_ps(b.x1), y0 = _mm_set1_ps(b.y0),
+                 y1 = _mm_set1_ps(b.y1), ax = _mm_set1_ps(b.ax), bx = _mm_set1_ps(b.bx),
+                 ay = _mm_set1_ps(b.ay), by = _mm_set1_ps(b.by);
+    for (uint32_t e = first; e < end; e += 4) {  // reads up to 3 entries past end: the padding
+        const __m128 lx = _mm_loadu_ps(&s.lensX[e]), ly = _mm_loadu_ps(&s.lensY[e]);
+        const __m128 fx = _mm_loadu_ps(&s.fx[e]), fy = _mm_loadu_ps(&s.fy[e]);
+        const __m128 xa = _mm_mul_ps(lx, ax), xb = _mm_mul_ps(lx, bx), ya = _mm_mul_ps(ly, ay),
+                     yb = _mm_mul_ps(ly, by);
+        __m128 out = _mm_or_ps(_mm_cmplt_ps(fx, _mm_add_ps(x0, _mm_min_ps(xa, xb))),
+                               _mm_cmpgt_ps(fx, _mm_add_ps(x1, _mm_max_ps(xa, xb))));
+        out = _mm_or_ps(out, _mm_or_ps(_mm_cmplt_ps(fy, _mm_add_ps(y0, _mm_min_ps(ya, yb))),
+                                       _mm_cmpgt_ps(fy, _mm_add_ps(y1, _mm_max_ps(ya, yb)))));
+        forEachInside(out, e, end, hit);
+    }
+#else
+    for (uint32_t e = first; e < end; ++e) {
+        const float lx = s.lensX[e], ly = s.lensY[e], fx = s.fx[e], fy = s.fy[e];
+        const float xa = lx * b.ax, xb = lx * b.bx, ya = ly * b.ay, yb = ly * b.by;
+        if (fx < b.x0 + std::min(xa, xb) || fx > b.x1 + std::max(xa, xb) || fy < b.y0 + std::min(ya, yb) ||
+            fy > b.y1 + std::max(ya, yb))
+            continue;
+        hit(e);
+    }
+#endif
+}
+
 // The bound of a micropolygon over one segment of the knot timeline: its box at the segment's knots p and
 // q (equal for a grid that does not move), lerped at w = (t - t0) invDt, then grown by the lens point
 // times the lerped lens-coefficient range (inBoundAt's bound, for a sample of that segment).
@@ -492,6 +531,29 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterStillLensAvx2(const Candid
         out8 = _mm256_or_ps(
             out8, _mm256_or_ps(_mm256_cmp_ps(fy, _mm256_add_ps(y0, _mm256_mul_ps(ly, loY)), _CMP_LT_OQ),
                                _mm256_cmp_ps(fy, _mm256_add_ps(y1, _mm256_mul_ps(ly, hiY)), _CMP_GT_OQ)));
+        n += compactLanes(out8, e, end, out + n);
+    }
+    return n;
+}
+
+// filterStill, eight at a time, as filterStillLensAvx2.
+__attribute__((target("avx2,popcnt"))) uint32_t filterStillAvx2(const CandidateView& s, uint32_t first,
+                                                                uint32_t end, const StillBound& b,
+                                                                uint32_t* out) {
+    const __m256 x0 = _mm256_set1_ps(b.x0), x1 = _mm256_set1_ps(b.x1), y0 = _mm256_set1_ps(b.y0),
+                 y1 = _mm256_set1_ps(b.y1), ax = _mm256_set1_ps(b.ax), bx = _mm256_set1_ps(b.bx),
+                 ay = _mm256_set1_ps(b.ay), by = _mm256_set1_ps(b.by);
+    uint32_t n = 0;
+    for (uint32_t e = first; e < end; e += 8) {  // reads up to 7 entries past end: the padding
+        const __m256 lx = _mm256_loadu_ps(&s.lensX[e]), ly = _mm256_loadu_ps(&s.lensY[e]);
+        const __m256 fx = _mm256_loadu_ps(&s.fx[e]), fy = _mm256_loadu_ps(&s.fy[e]);
+        const __m256 xa = _mm256_mul_ps(lx, ax), xb = _mm256_mul_ps(lx, bx), ya = _mm256_mul_ps(ly, ay),
+                     yb = _mm256_mul_ps(ly, by);
+        __m256 out8 = _mm256_or_ps(_mm256_cmp_ps(fx, _mm256_add_ps(x0, _mm256_min_ps(xa, xb)), _CMP_LT_OQ),
+                                   _mm256_cmp_ps(fx, _mm256_add_ps(x1, _mm256_max_ps(xa, xb)), _CMP_GT_OQ));
+        out8 = _mm256_or_ps(
+            out8, _mm256_or_ps(_mm256_cmp_ps(fy, _mm256_add_ps(y0, _mm256_min_ps(ya, yb)), _CMP_LT_OQ),
+                               _mm256_cmp_ps(fy, _mm256_add_ps(y1, _mm256_max_ps(ya, yb)), _CMP_GT_OQ)));
         n += compactLanes(out8, e, end, out + n);
     }
     return n;
@@ -938,8 +1000,9 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     // knotBox: for a still box over a one-signed cell (StillLensBound), for a stratum that one linear
     // motion holds whole (SegmentBound), else per sample (inBoundAt).
     struct StratumBound {
-        enum Kind { Still, Segment, PerSample } kind;
+        enum Kind { Still, StillAnyCell, Segment, PerSample } kind;
         StillLensBound still;
+        StillBound stillAnyCell;
         SegmentBound segment;
         const KnotBox* knotBox;
     };
@@ -952,6 +1015,14 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         // and sample.
         if (perCell && still && lensOn && stillLensBound(knotBox[0], cx, cy, L, pr, b.still)) {
             b.kind = StratumBound::Still;
+            return b;
+        }
+        if (!perCell && still && lensOn) {  // every cell at once: the shift's ends per sample (StillBound)
+            const KnotBox& k = knotBox[0];
+            b.kind = StratumBound::StillAnyCell;
+            b.stillAnyCell =
+                StillBound{k.x0 - kBoundSlack, k.x1 + kBoundSlack, k.y0 - kBoundSlack, k.y1 + kBoundSlack,
+                           k.c0 * pr.sx,       k.c1 * pr.sx,       k.c0 * pr.sy,       k.c1 * pr.sy};
             return b;
         }
         const int seg = g.knots == 1 ? 0 : strata.stratumSegment[size_t(tb)];
@@ -978,9 +1049,10 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         auto hit = [&](uint32_t e) { out[n++] = e; };
 #if TESSERA_BLUR_AVX2
         if (avx2 && b.kind != StratumBound::PerSample) {
-            n = b.kind == StratumBound::Still ? filterStillLensAvx2(v, first, end, b.still, out)
-                : lensOn                      ? filterSegmentAvx2<true>(v, first, end, b.segment, out)
-                                              : filterSegmentAvx2<false>(v, first, end, b.segment, out);
+            n = b.kind == StratumBound::Still          ? filterStillLensAvx2(v, first, end, b.still, out)
+                : b.kind == StratumBound::StillAnyCell ? filterStillAvx2(v, first, end, b.stillAnyCell, out)
+                : lensOn ? filterSegmentAvx2<true>(v, first, end, b.segment, out)
+                         : filterSegmentAvx2<false>(v, first, end, b.segment, out);
             if (n) hits(static_cast<const uint32_t*>(out), n);
             return;
         }
@@ -988,6 +1060,9 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         switch (b.kind) {
             case StratumBound::Still:
                 filterStillLens(v, first, end, b.still, hit);
+                break;
+            case StratumBound::StillAnyCell:
+                filterStill(v, first, end, b.stillAnyCell, hit);
                 break;
             case StratumBound::Segment:
                 if (lensOn)
@@ -1134,9 +1209,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     // lens cell (the segment bound, evaluated at each sample's own time and lens point): each
     // micropolygon then filters everything its block gathered once, instead of once per stratum and lens
     // cell (16 strata at 16 spp, 4 cells). Each sample lies in one stratum and cell, so it still meets each
-    // micropolygon once. (For a still grid the per-cell bound, StillLensBound, rounds differently from
-    // the segment bound's l sx c: a sample within rounding of a bound may be tested by one and not the
-    // other, outside the micropolygon either way; dof_teapot: 8,977,984 exact tests instead of 8,977,985.)
+    // micropolygon once. (A still grid's bound over every cell, StillBound, takes the ends of l c sx per
+    // sample: the same products as the per-cell StillLensBound, so the same samples pass.)
     const bool oneBound = g.knots <= 2;
     thread_local BlockCandidates candidates;
     thread_local std::vector<KnotBox> blockBoxes;
