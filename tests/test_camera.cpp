@@ -2,7 +2,10 @@
 // points meet on the focal plane, and the circle of confusion is the spread of a point's images.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <numbers>
 
 #include "scene/camera.h"
 
@@ -19,7 +22,9 @@ Camera lensCamera() {
     c.focalDistance = 5.f;
     return c;
 }
-Vec3 atDepth(const CameraRay& r, float z) { return r.origin + r.direction * ((z - r.origin.z) / r.direction.z); }
+Vec3 atDepth(const CameraRay& r, float z) {
+    return r.origin + r.direction * ((z - r.origin.z) / r.direction.z);
+}
 }  // namespace
 
 TEST(Camera, LensRadiusAndShutterFollowRi) {
@@ -72,6 +77,29 @@ TEST(Camera, ThinLensRaysMeetOnTheFocalPlaneAndSpreadByTheCircleOfConfusion) {
     EXPECT_NEAR(spread, p.circleOfConfusion(zNear), 1e-2f);
     EXPECT_NEAR(p.circleOfConfusion(5.f), 0.f, 1e-6f);  // in focus
     EXPECT_GT(p.circleOfConfusion(50.f), 0.f);
+}
+
+TEST(Camera, ConcentricDiskMapMatchesTheTrigonometricForm) {
+    // squareToDisk's polynomial sine and cosine against the map written with std::cos and std::sin in
+    // double precision, over a dense grid of the square and its edges and axes.
+    double worst = 0;
+    for (int i = 0; i <= 512; ++i)
+        for (int j = 0; j <= 512; ++j) {
+            const float u = std::min(float(i) / 512.f, 0.99999994f),
+                        v = std::min(float(j) / 512.f, 0.99999994f);
+            const double a = 2.0 * u - 1.0, b = 2.0 * v - 1.0;
+            double x = 0, y = 0;
+            if (a != 0 || b != 0) {
+                const double pi4 = std::numbers::pi / 4;
+                const double r = std::abs(a) > std::abs(b) ? a : b;
+                const double phi = std::abs(a) > std::abs(b) ? pi4 * (b / a) : 2 * pi4 - pi4 * (a / b);
+                x = r * std::cos(phi), y = r * std::sin(phi);
+            }
+            const Vec2 d = squareToDisk(u, v);
+            worst = std::max({worst, std::abs(d.x - x), std::abs(d.y - y)});
+        }
+    std::printf("largest difference from the trigonometric map: %.3g\n", worst);
+    EXPECT_LT(worst, 4e-7);
 }
 
 TEST(Camera, ConcentricDiskMapStaysInTheDisk) {

@@ -8,6 +8,7 @@
 #include <numbers>
 #include <string>
 
+#include "core/hash.h"
 #include "core/motion_transform.h"
 #include "film/blur_pattern.h"
 #include "film/image_compare.h"
@@ -559,6 +560,35 @@ TEST(BlurPattern, PreparedTimeAndLensSeedsMatchTheSampler) {
             lensBits(seeds, i, u, v);
             EXPECT_EQ(u, sampleBits(ps, i, kDimLensU));
             EXPECT_EQ(v, sampleBits(ps, i, kDimLensV));
+        }
+    }
+}
+
+TEST(BlurPattern, PixelSamplesEightAtATimeEqualOneByOne) {
+    // SampleTile::setBlur's batch (AVX2 where the CPU has it) against pixelSampleAt, bit for bit, for time
+    // alone, lens alone and both, over counts that leave partial groups of eight and sample indices up to
+    // 2^16 (the film's Sobol' indices need not be the slots).
+    for (int kind = 0; kind < 3; ++kind) {
+        const BlurPattern p =
+            makeBlurPattern(BlurSampling::BoundingBox, kind != 1, kind != 0, 16, 64, 4, 64, 7);
+        for (int px = 0; px < 30; ++px) {
+            const TimeLensSeeds seeds = timeLensSeeds(pixelSeed(px, 3 * px % 17, p.seed));
+            for (int n : {1, 7, 8, 13, 16, 64}) {
+                std::vector<uint32_t> indices(static_cast<size_t>(n));
+                for (int i = 0; i < n; ++i)
+                    indices[size_t(i)] = px % 2 ? uint32_t(i) : hash32(uint32_t(i + px)) & 0xffffu;
+                std::vector<float> t(size_t(n), -1.f);
+                std::vector<Vec2> lens(size_t(n), Vec2{-2.f, -2.f});
+                p.pixelSamplesAt(seeds, indices.data(), n, t.data(), lens.data());
+                for (int i = 0; i < n; ++i) {
+                    float t1;
+                    Vec2 l1;
+                    p.pixelSampleAt(seeds, indices[size_t(i)], t1, l1);
+                    ASSERT_EQ(t[size_t(i)], t1) << kind << " " << px << " " << i;
+                    ASSERT_EQ(lens[size_t(i)].x, l1.x) << kind << " " << px << " " << i;
+                    ASSERT_EQ(lens[size_t(i)].y, l1.y) << kind << " " << px << " " << i;
+                }
+            }
         }
     }
 }

@@ -54,6 +54,10 @@ struct BlurPattern {
     // BoundingBox: the same for a sample of the pixel whose seeds are `seeds`
     // (timeLensSeeds(pixelSeed(px, py, seed)), prepared once per pixel by the film).
     void pixelSampleAt(const TimeLensSeeds& seeds, uint32_t sampleIndex, float& t, Vec2& lensOut) const;
+    // pixelSampleAt for n samples of one pixel (sample indices `index`), eight at a time with AVX2 when the
+    // CPU has it (the same bits: integer hashing, and squareToDisk's float operations lane by lane).
+    void pixelSamplesAt(const TimeLensSeeds& seeds, const uint32_t* index, int n, float* t,
+                        Vec2* lensOut) const;
 };
 
 // `motion` / `lens`: whether the frame blurs in time / has a lens. Interleaved needs spp K^2 <= 65536.

@@ -87,8 +87,8 @@ void SampleTile::setBlur(const BlurPattern* pattern) {
         for (int py = region.y0; py < region.y1; ++py)
             for (int px = region.x0; px < region.x1; ++px) {
                 const TimeLensSeeds seeds = timeLensSeeds(pixelSeed(px, py, blur->seed));
-                for (int s = 0; s < spp; ++s, ++i)
-                    blur->pixelSampleAt(seeds, sampleIndex[i], time[i], lens[i]);
+                blur->pixelSamplesAt(seeds, &sampleIndex[i], spp, &time[i], &lens[i]);
+                i += size_t(spp);
             }
         return;
     }

@@ -8,6 +8,7 @@
 #include <immintrin.h>
 #endif
 
+#include "core/cpu.h"
 #include "reyes/edge_functions.h"
 
 namespace tessera {
@@ -239,13 +240,6 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
 
 std::atomic<bool> gReyesAvx2Allowed{true};
 
-bool cpuHasAvx2() {
-    static const bool has = [] {
-        __builtin_cpu_init();
-        return bool(__builtin_cpu_supports("avx2"));
-    }();
-    return has;
-}
 #else
 #define TESSERA_REYES_AVX2 0
 #endif

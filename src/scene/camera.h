@@ -129,21 +129,29 @@ inline CameraRay generateRay(const Projector& p, Vec2 raster, Vec2 lensDisk) {
     return r;
 }
 
+// sin x and cos x for |x| <= pi/4 by the minimax polynomials of Cephes' sinf and cosf (within about one ulp
+// there). The concentric map's angle never leaves that range, and these plain multiply-adds run lane by
+// lane in the blurred film's AVX2 path (BlurPattern::pixelSamplesAt) with the same bits, which libm's sincosf
+// would not give.
+TESSERA_HD void sinCosQuarterTurn(float x, float& s, float& c) {
+    const float z = x * x;
+    s = x + x * z * (-1.6666654611e-1f + z * (8.3321608736e-3f + z * -1.9515295891e-4f));
+    c = 1.f - 0.5f * z +
+        z * z * (4.166664568298827e-2f + z * (-1.388731625493765e-3f + z * 2.443315711809948e-5f));
+}
+
 // Concentric map of [0,1)^2 onto the unit disk (Shirley and Chiu 1997): keeps the sampler's
-// stratification on the lens.
+// stratification on the lens. With the major axis a (|a| > |b|) the point is a (cos phi, sin phi),
+// phi = pi/4 b/a; with b major, phi = pi/2 - pi/4 a/b, i.e. b (sin x, cos x) with x = pi/4 a/b.
 TESSERA_HD Vec2 squareToDisk(float u, float v) {
     const float a = 2.f * u - 1.f, b = 2.f * v - 1.f;
     if (a == 0.f && b == 0.f) return {0.f, 0.f};
     constexpr float kPi4 = 0.78539816f;
-    float r, phi;
-    if (std::abs(a) > std::abs(b)) {
-        r = a;
-        phi = kPi4 * (b / a);
-    } else {
-        r = b;
-        phi = 2.f * kPi4 - kPi4 * (a / b);
-    }
-    return {r * std::cos(phi), r * std::sin(phi)};
+    const bool aMajor = std::abs(a) > std::abs(b);
+    const float r = aMajor ? a : b, x = kPi4 * (aMajor ? b / a : a / b);
+    float s, c;
+    sinCosQuarterTurn(x, s, c);
+    return aMajor ? Vec2{r * c, r * s} : Vec2{r * s, r * c};
 }
 
 }  // namespace tessera
