@@ -29,7 +29,7 @@ struct ThreadCounters {
     uint64_t displacedMicropolygons = 0;
     double displacedSideSum = 0;
     float displacedSideMax = 0.f;
-    double diceMs = 0, sampleMs = 0, filterMs = 0;
+    double setupMs = 0, diceMs = 0, sampleMs = 0, filterMs = 0;  // per thread, summed
     SampleTile tile;
     BlurStrata strata;
 };
@@ -185,11 +185,13 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         const uint32_t begin = binned.start[b], end = binned.start[b + 1];
         if (begin == end) return;  // nothing here: the image is already transparent black
         const Rect target = layout.target(b);
+        const auto tt = EngineClock::now();
         frame.resetTile(tc.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
         if (useStrata) {
             tc.strata.configure(frame.blur, motion.knots);
             tc.strata.build(tc.tile);
         }
+        tc.setupMs += msSince(tt);
         for (uint32_t k = begin; k < end; ++k) {
             const uint32_t pi = binned.pieces[k];
             const Grid& grid = grids.acquire(pi, [&](Grid& g) {
@@ -257,6 +259,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         total.displacedSideSum += tc.displacedSideSum;
         total.displacedSideMax = std::max(total.displacedSideMax, tc.displacedSideMax);
         total.sampleTests += tc.sampleTests;
+        total.setupMs += tc.setupMs;
         total.diceMs += tc.diceMs;
         total.sampleMs += tc.sampleMs;
         total.filterMs += tc.filterMs;
@@ -302,6 +305,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                      {"weld", weldMs},
                      {"split", splitMs},
                      {"buckets_wall", loop.wallMs},
+                     {"tile_setup_cpu", total.setupMs},
                      {"dice_shade_cpu", total.diceMs},
                      {"sample_cpu", total.sampleMs},
                      {"filter_cpu", total.filterMs}};
