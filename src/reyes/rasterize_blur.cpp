@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <type_traits>
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -504,21 +505,51 @@ constexpr std::array<uint32_t, 256> makeLaneLists() {
 }
 inline constexpr std::array<uint32_t, 256> kLaneLists = makeLaneLists();
 
+// Where the AVX2 filters put the entries that pass: their indices (IndexSink), or, for a block gathering its
+// candidates, the entries themselves (CopySink: each array's passing lanes permuted to the front). Both
+// write eight lanes per group, so they need room for eight past the last entry.
+struct IndexSink {
+    uint32_t* index;
+};
+struct CopySink {
+    float *fx, *fy, *time, *lensX, *lensY;
+    uint32_t* sample;
+};
+
+__attribute__((target("avx2"))) inline void packLanes(const float* from, float* to, __m256i lanes) {
+    _mm256_storeu_ps(to, _mm256_permutevar8x32_ps(_mm256_loadu_ps(from), lanes));
+}
+
+// The passing lanes of entries e .. e + 7 (those `out` does not mark, before end) written at position n of
+// the sink, in order; returns how many.
+template <class Sink>
 __attribute__((target("avx2,popcnt"))) inline uint32_t compactLanes(__m256 out, uint32_t e, uint32_t end,
-                                                                    uint32_t* dst) {
+                                                                    const CandidateView& s, const Sink& sink,
+                                                                    uint32_t n) {
     const uint32_t left = std::min(end - e, 8u);
     const unsigned in = ~unsigned(_mm256_movemask_ps(out)) & ((1u << left) - 1u);
     const __m256i lanes = _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(int(kLaneLists[in])),
                                                              _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28)),
                                            _mm256_set1_epi32(15));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(dst), _mm256_add_epi32(_mm256_set1_epi32(int(e)), lanes));
+    if constexpr (std::is_same_v<Sink, IndexSink>) {
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(sink.index + n),
+                            _mm256_add_epi32(_mm256_set1_epi32(int(e)), lanes));
+    } else {
+        packLanes(s.fx + e, sink.fx + n, lanes), packLanes(s.fy + e, sink.fy + n, lanes);
+        packLanes(s.time + e, sink.time + n, lanes);
+        packLanes(s.lensX + e, sink.lensX + n, lanes), packLanes(s.lensY + e, sink.lensY + n, lanes);
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(sink.sample + n),
+                            _mm256_permutevar8x32_epi32(
+                                _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.sample + e)), lanes));
+    }
     return uint32_t(__builtin_popcount(in));
 }
 
 // filterStillLens, eight at a time: the passing entries of [first, end) into out; returns their count.
+template <class Sink>
 __attribute__((target("avx2,popcnt"))) uint32_t filterStillLensAvx2(const CandidateView& s, uint32_t first,
                                                                     uint32_t end, const StillLensBound& b,
-                                                                    uint32_t* out) {
+                                                                    const Sink& sink) {
     const __m256 x0 = _mm256_set1_ps(b.x0), x1 = _mm256_set1_ps(b.x1), y0 = _mm256_set1_ps(b.y0),
                  y1 = _mm256_set1_ps(b.y1), loX = _mm256_set1_ps(b.loX), hiX = _mm256_set1_ps(b.hiX),
                  loY = _mm256_set1_ps(b.loY), hiY = _mm256_set1_ps(b.hiY);
@@ -531,15 +562,16 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterStillLensAvx2(const Candid
         out8 = _mm256_or_ps(
             out8, _mm256_or_ps(_mm256_cmp_ps(fy, _mm256_add_ps(y0, _mm256_mul_ps(ly, loY)), _CMP_LT_OQ),
                                _mm256_cmp_ps(fy, _mm256_add_ps(y1, _mm256_mul_ps(ly, hiY)), _CMP_GT_OQ)));
-        n += compactLanes(out8, e, end, out + n);
+        n += compactLanes(out8, e, end, s, sink, n);
     }
     return n;
 }
 
 // filterStill, eight at a time, as filterStillLensAvx2.
+template <class Sink>
 __attribute__((target("avx2,popcnt"))) uint32_t filterStillAvx2(const CandidateView& s, uint32_t first,
                                                                 uint32_t end, const StillBound& b,
-                                                                uint32_t* out) {
+                                                                const Sink& sink) {
     const __m256 x0 = _mm256_set1_ps(b.x0), x1 = _mm256_set1_ps(b.x1), y0 = _mm256_set1_ps(b.y0),
                  y1 = _mm256_set1_ps(b.y1), ax = _mm256_set1_ps(b.ax), bx = _mm256_set1_ps(b.bx),
                  ay = _mm256_set1_ps(b.ay), by = _mm256_set1_ps(b.by);
@@ -554,16 +586,16 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterStillAvx2(const CandidateV
         out8 = _mm256_or_ps(
             out8, _mm256_or_ps(_mm256_cmp_ps(fy, _mm256_add_ps(y0, _mm256_min_ps(ya, yb)), _CMP_LT_OQ),
                                _mm256_cmp_ps(fy, _mm256_add_ps(y1, _mm256_max_ps(ya, yb)), _CMP_GT_OQ)));
-        n += compactLanes(out8, e, end, out + n);
+        n += compactLanes(out8, e, end, s, sink, n);
     }
     return n;
 }
 
 // filterSegment, eight at a time, as filterStillLensAvx2.
-template <bool kLens>
+template <bool kLens, class Sink>
 __attribute__((target("avx2,popcnt"))) uint32_t filterSegmentAvx2(const CandidateView& s, uint32_t first,
                                                                   uint32_t end, const SegmentBound& b,
-                                                                  uint32_t* out) {
+                                                                  const Sink& sink) {
     const __m256 slack = _mm256_set1_ps(kBoundSlack), t0 = _mm256_set1_ps(b.t0),
                  invDt = _mm256_set1_ps(b.invDt);
     const __m256 px0 = _mm256_set1_ps(b.p.x0), dx0 = _mm256_set1_ps(b.q.x0 - b.p.x0);
@@ -594,7 +626,7 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterSegmentAvx2(const Candidat
         const __m256 out8 =
             _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(fx, x0, _CMP_LT_OQ), _mm256_cmp_ps(fx, x1, _CMP_GT_OQ)),
                          _mm256_or_ps(_mm256_cmp_ps(fy, y0, _CMP_LT_OQ), _mm256_cmp_ps(fy, y1, _CMP_GT_OQ)));
-        n += compactLanes(out8, e, end, out + n);
+        n += compactLanes(out8, e, end, s, sink, n);
     }
     return n;
 }
@@ -1039,6 +1071,22 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         sb.sx = pr.sx, sb.sy = pr.sy;
         return b;
     };
+#if TESSERA_BLUR_AVX2
+    // The AVX2 filter of a bound's kind (not PerSample) over [first, end) of `v`, into `sink`; returns the
+    // count that passed.
+    auto filterAvx2 = [&](const StratumBound& b, const CandidateView& v, uint32_t first, uint32_t end,
+                          const auto& sink) -> uint32_t {
+        switch (b.kind) {
+            case StratumBound::Still:
+                return filterStillLensAvx2(v, first, end, b.still, sink);
+            case StratumBound::StillAnyCell:
+                return filterStillAvx2(v, first, end, b.stillAnyCell, sink);
+            default:
+                return lensOn ? filterSegmentAvx2<true>(v, first, end, b.segment, sink)
+                              : filterSegmentAvx2<false>(v, first, end, b.segment, sink);
+        }
+    };
+#endif
     // The entries of [first, end) of `v` inside bound b at the entry's own (t, lens), in order, as one list:
     // hits(list, count).
     auto filterEntries = [&](const StratumBound& b, const CandidateView& v, uint32_t first, uint32_t end,
@@ -1049,10 +1097,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         auto hit = [&](uint32_t e) { out[n++] = e; };
 #if TESSERA_BLUR_AVX2
         if (avx2 && b.kind != StratumBound::PerSample) {
-            n = b.kind == StratumBound::Still          ? filterStillLensAvx2(v, first, end, b.still, out)
-                : b.kind == StratumBound::StillAnyCell ? filterStillAvx2(v, first, end, b.stillAnyCell, out)
-                : lensOn ? filterSegmentAvx2<true>(v, first, end, b.segment, out)
-                         : filterSegmentAvx2<false>(v, first, end, b.segment, out);
+            n = filterAvx2(b, v, first, end, IndexSink{out});
             if (n) hits(static_cast<const uint32_t*>(out), n);
             return;
         }
@@ -1126,10 +1171,10 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     };
 
     // The strata that a bound (knot boxes knotBox, `all` over every knot) meets: per time group and lens
-    // cell, the runs of the rows under the group's bound over the cell; per stratum of the group, each
-    // run's entries inside the bound at their own (t, lens) go to hits(list, count), then done(tb, cx, cy).
-    auto walkStrata = [&](const KnotBox* knotBox, const KnotBox& all, auto&& reserve, auto&& hits,
-                          auto&& done) {
+    // cell, the runs of the rows under the group's bound over the cell; per stratum of the group, each run
+    // goes to visit(bound, first, end) (which filters its entries with the stratum's bound at their own
+    // t and lens), then done(tb, cx, cy).
+    auto walkStrata = [&](const KnotBox* knotBox, const KnotBox& all, auto&& visit, auto&& done) {
         // One linear motion (two knots, so w = t): only the groups whose times can bring the bound to the
         // tile, with one stratum to spare on each side for the bounds' rounding. A micropolygon that
         // sweeps across several buckets meets each in a part of the shutter (motion_teapot: about half).
@@ -1178,8 +1223,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                         const size_t base = strata.runBase(py, tb * LL + lc);
                         const uint32_t first = strata.start[base + c0], end = strata.start[base + c1];
                         if (first == end) continue;
-                        reserve(end - first);
-                        filterEntries(b, entries, first, end, hits);
+                        visit(b, first, end);
                     }
                     done(tb, cx, cy);
                 }
@@ -1189,8 +1233,11 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     auto rasterizeOne = [&](Micropolygon& m) {
         if (!cut) return rasterizeUncut(m);
         walkStrata(
-            m.knotBox, m.all, [](uint32_t) {},
-            [&](const uint32_t* list, uint32_t n) { testEntries(m, entries, list, n); },
+            m.knotBox, m.all,
+            [&](const StratumBound& b, uint32_t first, uint32_t end) {
+                filterEntries(b, entries, first, end,
+                              [&](const uint32_t* list, uint32_t n) { testEntries(m, entries, list, n); });
+            },
             [](int, int, int) {});
         flush(m);
     };
@@ -1241,9 +1288,23 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
             }
             candidates.count = 0;
             walkStrata(
-                blockBoxes.data(), blockAll, [&](uint32_t more) { candidates.reserve(more); },
-                [&](const uint32_t* list, uint32_t n) {
-                    for (uint32_t i = 0; i < n; ++i) candidates.add(entries, list[i]);
+                blockBoxes.data(), blockAll,
+                [&](const StratumBound& b, uint32_t first, uint32_t end) {
+                    candidates.reserve(end - first);
+#if TESSERA_BLUR_AVX2
+                    if (avx2 && b.kind != StratumBound::PerSample) {  // the entries packed in place
+                        BlockCandidates& c = candidates;
+                        const uint32_t at = c.count;
+                        c.count += filterAvx2(
+                            b, entries, first, end,
+                            CopySink{c.fx.data() + at, c.fy.data() + at, c.time.data() + at,
+                                     c.lensX.data() + at, c.lensY.data() + at, c.sample.data() + at});
+                        return;
+                    }
+#endif
+                    filterEntries(b, entries, first, end, [&](const uint32_t* list, uint32_t n) {
+                        for (uint32_t i = 0; i < n; ++i) candidates.add(entries, list[i]);
+                    });
                 },
                 [&](int tb, int cx, int cy) {
                     if (candidates.count == 0 || oneBound) return;
