@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "film/film.h"
+#include "io/scene_loader.h"
 #include "render/render.h"
 #include "test_util.h"
 
@@ -171,6 +172,38 @@ TEST(Film, ARegionRendersTheSamePixelsAsTheWholeImage) {
 // The image buffer's allocator (core/buffer_allocator.h): large buffers come 2 MB-aligned for huge pages,
 // small ones from operator new; both behave as ordinary vectors (zeroed, copied, grown across the
 // threshold, compared).
+// The film's AVX2 paths (reconstruction summing eight samples at a time; a blurred pixel's times and lens
+// points eight at a time) against the scalar ones: the same image, bit for bit, for sample counts whose rows
+// are whole groups of eight (16 spp), leave a partial group (9 spp) or hold fewer than eight (2 spp), with
+// and without a lens, and with a wide filter (width 4: five pixels of samples per row).
+TEST(Film, Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths) {
+    Scene base =
+        loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/dof_teapot.rib", [](const std::string&) {});
+    base.camera.width = 160;
+    base.camera.height = 120;
+    for (int spp : {4, 3, 1})
+        for (bool lens : {false, true})
+            for (float width : {2.f, 4.f}) {
+                Scene s = base;
+                s.image.pixelSamplesX = s.image.pixelSamplesY = spp;
+                s.image.filterWidthX = s.image.filterWidthY = width;
+                if (!lens) s.camera.fStop = INFINITY;
+                RenderSettings rs;
+                rs.engine = "reyes";
+                rs.threads = 2;
+                const bool avx2 = filmUseAvx2(true);
+                const RenderResult a = render(s, rs);
+                filmUseAvx2(false);
+                const RenderResult b = render(s, rs);
+                filmUseAvx2(true);
+                EXPECT_TRUE(a.image.rgba == b.image.rgba) << "spp " << spp * spp << " lens " << lens
+                                                          << " width " << width << " (AVX2 " << avx2 << ")";
+                double covered = 0;
+                for (size_t i = 3; i < a.image.rgba.size(); i += 4) covered += a.image.rgba[i];
+                EXPECT_GT(covered, 1000.0);
+            }
+}
+
 TEST(BufferAllocator, LargeAndSmallBuffersBehaveAsVectors) {
     const size_t big = size_t(1024) * 1024 * 4;  // a 1024 x 1024 RGBA float image: 16 MB
     Image image(Rect{0, 0, 1024, 1024});

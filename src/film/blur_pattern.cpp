@@ -263,7 +263,7 @@ __attribute__((target("avx2"))) void pixelSamplesAvx2(const TimeLensSeeds& seeds
 void BlurPattern::pixelSamplesAt(const TimeLensSeeds& seeds, const uint32_t* index, int n, float* t,
                                  Vec2* lensOut) const {
 #if TESSERA_FILM_AVX2
-    if (cpuHasAvx2()) {
+    if (filmAvx2Active()) {
         pixelSamplesAvx2(seeds, index, n, motion, lens, t, lensOut);
         return;
     }

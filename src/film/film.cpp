@@ -1,9 +1,16 @@
 #include "film/film.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <utility>
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <immintrin.h>
+#define TESSERA_FILM_AVX2 1
+#endif
+
+#include "core/cpu.h"
 
 namespace tessera {
 
@@ -240,6 +247,107 @@ void reconstructPlanes(const SampleTile& tile, const PixelFilter& filter, Rect t
 
 }  // namespace
 
+namespace {
+
+std::atomic<bool> gFilmAvx2Allowed{true};
+
+// A pixel's filtered colour, coverage and weight: sums[0..4] = sum of w r, w g, w b, w a and w over the
+// samples in reach (forEachSampleInReach's window, w its filter weight). Summed in eight lanes, lane j taking
+// the samples j, j + 8, ... of each row of the window, and the lanes then added as (0+4, 1+5, 2+6, 3+7),
+// (0+2, 1+3), 0+1: the order the AVX2 path adds in, so both give the same bits.
+struct LaneSums {
+    float v[5][8] = {};
+};
+inline void reduceLanes(const LaneSums& l, float sums[5]) {
+    for (int c = 0; c < 5; ++c) {
+        const float* x = l.v[c];
+        const float a0 = x[0] + x[4], a1 = x[1] + x[5], a2 = x[2] + x[6], a3 = x[3] + x[7];
+        sums[c] = (a0 + a2) + (a1 + a3);
+    }
+}
+inline void addSample(LaneSums& l, int lane, float w, const SampleTile& tile, size_t i) {
+    l.v[0][lane] += w * tile.r[i];
+    l.v[1][lane] += w * tile.g[i];
+    l.v[2][lane] += w * tile.b[i];
+    l.v[3][lane] += w * tile.a[i];
+    l.v[4][lane] += w;
+}
+
+void pixelSumsScalar(const SampleTile& tile, const PixelFilter& filter, int rx, int ry, int px, int py,
+                     float sums[5]) {
+    const int tw = tile.region.width(), spp = tile.spp;
+    const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
+    const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
+    const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    LaneSums l;
+    for (int qy = qy0; qy <= qy1; ++qy) {
+        const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
+        const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+        for (size_t i = begin; i < end; ++i)
+            addSample(l, int((i - begin) & 7u),
+                      filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy), tile, i);
+    }
+    reduceLanes(l, sums);
+}
+
+#if TESSERA_FILM_AVX2
+// pixelSumsScalar eight samples at a time: the weights by table gathers, the lanes' sums as the scalar
+// loop's (a row's last, partial group of eight by the scalar step on the same lanes).
+__attribute__((target("avx2"))) void pixelSumsAvx2(const SampleTile& tile, const PixelFilter& filter, int rx,
+                                                   int ry, int px, int py, float sums[5]) {
+    const int tw = tile.region.width(), spp = tile.spp;
+    const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
+    const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
+    const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const __m256i biasX = _mm256_set1_epi32(filter.tableBiasX - cx),
+                  biasY = _mm256_set1_epi32(filter.tableBiasY - cy);
+    __m256 acc[5] = {_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(),
+                     _mm256_setzero_ps()};
+    LaneSums tail;
+    for (int qy = qy0; qy <= qy1; ++qy) {
+        const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
+        const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+        size_t i = begin;
+        for (; i + 8 <= end; i += 8) {
+            const __m256i ox =
+                _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(&tile.sx[i])), biasX);
+            const __m256i oy =
+                _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(&tile.sy[i])), biasY);
+            const __m256 w = _mm256_mul_ps(_mm256_i32gather_ps(filter.tableX.data(), ox, 4),
+                                           _mm256_i32gather_ps(filter.tableY.data(), oy, 4));
+            acc[0] = _mm256_add_ps(acc[0], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.r[i])));
+            acc[1] = _mm256_add_ps(acc[1], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.g[i])));
+            acc[2] = _mm256_add_ps(acc[2], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.b[i])));
+            acc[3] = _mm256_add_ps(acc[3], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.a[i])));
+            acc[4] = _mm256_add_ps(acc[4], w);
+        }
+        if (i < end) {  // the row's last samples on lanes 0 .. end - i - 1, as the scalar loop adds them
+            for (int c = 0; c < 5; ++c) _mm256_storeu_ps(tail.v[c], acc[c]);
+            for (int lane = 0; i < end; ++i, ++lane)
+                addSample(tail, lane, filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy),
+                          tile, i);
+            for (int c = 0; c < 5; ++c) acc[c] = _mm256_loadu_ps(tail.v[c]);
+        }
+    }
+    LaneSums l;
+    for (int c = 0; c < 5; ++c) _mm256_storeu_ps(l.v[c], acc[c]);
+    reduceLanes(l, sums);
+}
+#endif
+
+}  // namespace
+
+bool filmAvx2Active() {
+    return cpuHasAvx2() && gFilmAvx2Allowed.load(std::memory_order_relaxed);
+}
+
+bool filmUseAvx2(bool allow) {
+    gFilmAvx2Allowed.store(allow, std::memory_order_relaxed);
+    return allow && cpuHasAvx2();
+}
+
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
     if (!out.planes.empty()) reconstructPlanes(tile, filter, target, out);
     const int rx = filter.radiusX(), ry = filter.radiusY();
@@ -267,6 +375,7 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
             for (int x = 0; x < tw; ++x) dst[x] |= src[x];
         }
     }
+    const bool avx2 = filmAvx2Active();
     for (int py = target.y0; py < target.y1; ++py) {
         for (int px = target.x0; px < target.x1; ++px) {
             float* o = out.pixel(px, py);
@@ -274,19 +383,18 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
                 o[0] = o[1] = o[2] = o[3] = 0.f;
                 continue;
             }
-            float sr = 0, sg = 0, sb = 0, sa = 0, sw = 0;
-            forEachSampleInReach(tile, filter, rx, ry, px, py, [&](size_t i, float w) {
-                sr += w * tile.r[i];
-                sg += w * tile.g[i];
-                sb += w * tile.b[i];
-                sa += w * tile.a[i];
-                sw += w;
-            });
-            const float k = sw != 0.f ? 1.f / sw : 0.f;
-            o[0] = sr * k;
-            o[1] = sg * k;
-            o[2] = sb * k;
-            o[3] = std::clamp(sa * k, 0.f, 1.f);
+            float sums[5];
+#if TESSERA_FILM_AVX2
+            if (avx2)
+                pixelSumsAvx2(tile, filter, rx, ry, px, py, sums);
+            else
+#endif
+                pixelSumsScalar(tile, filter, rx, ry, px, py, sums);
+            const float k = sums[4] != 0.f ? 1.f / sums[4] : 0.f;
+            o[0] = sums[0] * k;
+            o[1] = sums[1] * k;
+            o[2] = sums[2] * k;
+            o[3] = std::clamp(sums[3] * k, 0.f, 1.f);
         }
     }
 }

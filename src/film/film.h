@@ -159,7 +159,13 @@ struct SampleTile {
 
 // Filter the tile's samples into the pixels of `out` inside `target` (which must lie inside the tile's
 // region shrunk by the filter radius, or touch the image border), and fill the image's planes.
+// The colour and coverage are summed in eight lanes (AVX2 where the CPU has it, else the same sums one by
+// one: the same bits either way).
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out);
+// Whether the film's AVX2 paths (reconstruct, BlurPattern::pixelSamplesAt) may run (on by default; the tests
+// compare both); returns whether they will.
+bool filmUseAvx2(bool allow);
+bool filmAvx2Active();
 
 // Index of the sample of pixel (px, py) of the tile nearest the pixel centre (ties: the lower index).
 size_t nearestSampleToCentre(const SampleTile& tile, int px, int py);
