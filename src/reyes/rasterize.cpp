@@ -167,15 +167,31 @@ __attribute__((target("avx2"))) inline EdgeLanes edgeLanes(const TriangleSetup& 
 }
 
 // The lanes whose sample (dx, dy) lies inside the triangle (all three edge functions >= 0), as set sign
-// bits (none for an invalid triangle).
-__attribute__((target("avx2"))) inline __m256i insideLanes(const EdgeLanes& e, __m256i dx, __m256i dy) {
-    __m256i any = _mm256_setzero_si256();
-    for (int k = 0; k < 3; ++k) {
-        const __m256i w = _mm256_add_epi32(
+// bits (none for an invalid triangle); w1, w2: the edge functions of edges 1 and 2 (the weights of oriented
+// vertices 1 and 2 times the doubled area, as insideTriangle computes them).
+__attribute__((target("avx2"))) inline __m256i insideLanes(const EdgeLanes& e, __m256i dx, __m256i dy,
+                                                           __m256i& w1, __m256i& w2) {
+    __m256i w[3];
+    for (int k = 0; k < 3; ++k)
+        w[k] = _mm256_add_epi32(
             _mm256_add_epi32(_mm256_mullo_epi32(e.A[k], dx), _mm256_mullo_epi32(e.B[k], dy)), e.C[k]);
-        any = _mm256_or_si256(any, w);
-    }
+    w1 = w[1], w2 = w[2];
+    const __m256i any = _mm256_or_si256(_mm256_or_si256(w[0], w[1]), w[2]);
     return _mm256_andnot_si256(any, _mm256_set1_epi32(e.valid ? -1 : 0));  // sign clear: inside
+}
+
+// A sample inside triangle t with edge values w1, w2 (insideTriangle's, from the AVX2 lanes): the weights,
+// depth test and write as shadeSampleIfInside does them.
+template <bool kAttributes>
+[[gnu::always_inline]] inline void shadeInsideSample(const TriangleSetup& t, const Grid& g, int64_t w1,
+                                                     int64_t w2, size_t i, size_t pix, SampleTile& tile,
+                                                     float nearZ) {
+    const float l1 = float(w1) * t.e.invArea, l2 = float(w2) * t.e.invArea, l0 = 1.f - l1 - l2;
+    const int a = t.v[0], b = t.v[1], c = t.v[2];
+    const float z = l0 * g.Z[a] + l1 * g.Z[b] + l2 * g.Z[c];
+    tile.pixelHit[pix] = 1;
+    if (!(z < tile.z[i]) || z < nearZ) return;
+    writeSampleHit<kAttributes>(g, a, b, c, l0, l1, l2, z, i, tile);
 }
 
 template <bool kAttributes>
@@ -223,14 +239,27 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                                                     _mm256_cmpgt_epi32(dx, spanX)),
                                     _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dy),
                                                     _mm256_cmpgt_epi32(dy, spanY)));
-                const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(int32_t(n - k)), lane);
-                const __m256i in = _mm256_or_si256(insideLanes(e0, dx, dy), insideLanes(e1, dx, dy));
-                // Sign bits: inside either triangle, a real candidate, in the bound.
-                const __m256i hitLanes = _mm256_andnot_si256(out, _mm256_and_si256(live, in));
-                for (unsigned mask = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(hitLanes))); mask;
-                     mask &= mask - 1) {
-                    const size_t c = k + size_t(__builtin_ctz(mask));
-                    testSample<kAttributes>(m, g, pixelOf[c], size_t(index[c]), tile, nearZ);
+                const __m256i live =
+                    _mm256_andnot_si256(out, _mm256_cmpgt_epi32(_mm256_set1_epi32(int32_t(n - k)), lane));
+                __m256i w[2][2];
+                const __m256i in0 = insideLanes(e0, dx, dy, w[0][0], w[0][1]);
+                const __m256i in1 = insideLanes(e1, dx, dy, w[1][0], w[1][1]);
+                // Sign bits: a real candidate in the bound, inside the first triangle, else the second (the
+                // scalar test's order).
+                const unsigned first =
+                    unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in0))));
+                const unsigned second =
+                    unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in1)))) & ~first;
+                if (!(first | second)) continue;
+                alignas(32) int32_t wv[2][2][8];
+                for (int t = 0; t < 2; ++t)
+                    for (int q = 0; q < 2; ++q)
+                        _mm256_store_si256(reinterpret_cast<__m256i*>(wv[t][q]), w[t][q]);
+                for (unsigned mask = first | second; mask; mask &= mask - 1) {
+                    const int l = __builtin_ctz(mask), t = (first >> l) & 1u ? 0 : 1;
+                    const size_t c = k + size_t(l);
+                    shadeInsideSample<kAttributes>(t ? m.t1 : m.t0, g, wv[t][0][l], wv[t][1][l],
+                                                   size_t(index[c]), pixelOf[c], tile, nearZ);
                 }
             }
         }
