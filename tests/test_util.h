@@ -1,5 +1,7 @@
 // Helpers shared by the tests: small hand-made scenes with known answers.
 #pragma once
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -7,6 +9,7 @@
 #include <vector>
 
 #include "render/render.h"
+#include "reyes/rasterize.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
 #include "shading/registry.h"
@@ -187,6 +190,33 @@ inline std::vector<double> exactCoverage(const Scene& s, const std::function<boo
             cov[size_t(y) * w + x] = n / 256.0;
         }
     return cov;
+}
+
+// A scene rendered with the Reyes AVX2 paths allowed and not (reyesUseAvx2); `avx2`: whether they ran.
+struct Avx2Renders {
+    RenderResult with, without;
+    bool avx2 = false;
+};
+inline Avx2Renders renderWithAndWithoutReyesAvx2(const Scene& s, const RenderSettings& rs) {
+    Avx2Renders r;
+    r.avx2 = reyesUseAvx2(true);
+    r.with = render(s, rs);
+    reyesUseAvx2(false);
+    r.without = render(s, rs);
+    reyesUseAvx2(true);
+    return r;
+}
+
+// Two renders the same bit for bit: colour, every plane (values and ids) and the count of sample tests.
+inline void expectSameRender(const RenderResult& a, const RenderResult& b, const std::string& what) {
+    EXPECT_TRUE(a.image.rgba == b.image.rgba) << what;
+    ASSERT_EQ(a.image.planes.size(), b.image.planes.size()) << what;
+    for (size_t p = 0; p < a.image.planes.size(); ++p) {
+        EXPECT_TRUE(a.image.planes[p].values == b.image.planes[p].values)
+            << what << " " << a.image.planes[p].name;
+        EXPECT_TRUE(a.image.planes[p].ids == b.image.planes[p].ids) << what << " " << a.image.planes[p].name;
+    }
+    EXPECT_EQ(a.stats["sample_tests"], b.stats["sample_tests"]) << what;
 }
 
 }  // namespace tessera::test

@@ -545,6 +545,13 @@ __attribute__((target("avx2,popcnt"))) inline uint32_t compactLanes(__m256 out, 
     return uint32_t(__builtin_popcount(in));
 }
 
+// The lanes whose point (fx, fy) lies outside [x0, x1] x [y0, y1] (the filters' last step).
+__attribute__((target("avx2"))) inline __m256 outsideBox8(__m256 fx, __m256 fy, __m256 x0, __m256 x1,
+                                                          __m256 y0, __m256 y1) {
+    return _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(fx, x0, _CMP_LT_OQ), _mm256_cmp_ps(fx, x1, _CMP_GT_OQ)),
+                        _mm256_or_ps(_mm256_cmp_ps(fy, y0, _CMP_LT_OQ), _mm256_cmp_ps(fy, y1, _CMP_GT_OQ)));
+}
+
 // filterStillLens, eight at a time: the passing entries of [first, end) into out; returns their count.
 template <class Sink>
 __attribute__((target("avx2,popcnt"))) uint32_t filterStillLensAvx2(const CandidateView& s, uint32_t first,
@@ -557,11 +564,9 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterStillLensAvx2(const Candid
     for (uint32_t e = first; e < end; e += 8) {  // reads up to 7 entries past end: the padding
         const __m256 lx = _mm256_loadu_ps(&s.lensX[e]), ly = _mm256_loadu_ps(&s.lensY[e]);
         const __m256 fx = _mm256_loadu_ps(&s.fx[e]), fy = _mm256_loadu_ps(&s.fy[e]);
-        __m256 out8 = _mm256_or_ps(_mm256_cmp_ps(fx, _mm256_add_ps(x0, _mm256_mul_ps(lx, loX)), _CMP_LT_OQ),
-                                   _mm256_cmp_ps(fx, _mm256_add_ps(x1, _mm256_mul_ps(lx, hiX)), _CMP_GT_OQ));
-        out8 = _mm256_or_ps(
-            out8, _mm256_or_ps(_mm256_cmp_ps(fy, _mm256_add_ps(y0, _mm256_mul_ps(ly, loY)), _CMP_LT_OQ),
-                               _mm256_cmp_ps(fy, _mm256_add_ps(y1, _mm256_mul_ps(ly, hiY)), _CMP_GT_OQ)));
+        const __m256 out8 = outsideBox8(
+            fx, fy, _mm256_add_ps(x0, _mm256_mul_ps(lx, loX)), _mm256_add_ps(x1, _mm256_mul_ps(lx, hiX)),
+            _mm256_add_ps(y0, _mm256_mul_ps(ly, loY)), _mm256_add_ps(y1, _mm256_mul_ps(ly, hiY)));
         n += compactLanes(out8, e, end, s, sink, n);
     }
     return n;
@@ -581,11 +586,9 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterStillAvx2(const CandidateV
         const __m256 fx = _mm256_loadu_ps(&s.fx[e]), fy = _mm256_loadu_ps(&s.fy[e]);
         const __m256 xa = _mm256_mul_ps(lx, ax), xb = _mm256_mul_ps(lx, bx), ya = _mm256_mul_ps(ly, ay),
                      yb = _mm256_mul_ps(ly, by);
-        __m256 out8 = _mm256_or_ps(_mm256_cmp_ps(fx, _mm256_add_ps(x0, _mm256_min_ps(xa, xb)), _CMP_LT_OQ),
-                                   _mm256_cmp_ps(fx, _mm256_add_ps(x1, _mm256_max_ps(xa, xb)), _CMP_GT_OQ));
-        out8 = _mm256_or_ps(
-            out8, _mm256_or_ps(_mm256_cmp_ps(fy, _mm256_add_ps(y0, _mm256_min_ps(ya, yb)), _CMP_LT_OQ),
-                               _mm256_cmp_ps(fy, _mm256_add_ps(y1, _mm256_max_ps(ya, yb)), _CMP_GT_OQ)));
+        const __m256 out8 = outsideBox8(
+            fx, fy, _mm256_add_ps(x0, _mm256_min_ps(xa, xb)), _mm256_add_ps(x1, _mm256_max_ps(xa, xb)),
+            _mm256_add_ps(y0, _mm256_min_ps(ya, yb)), _mm256_add_ps(y1, _mm256_max_ps(ya, yb)));
         n += compactLanes(out8, e, end, s, sink, n);
     }
     return n;
@@ -622,10 +625,7 @@ __attribute__((target("avx2,popcnt"))) uint32_t filterSegmentAvx2(const Candidat
             x0 = _mm256_add_ps(x0, _mm256_min_ps(xa, xb)), x1 = _mm256_add_ps(x1, _mm256_max_ps(xa, xb));
             y0 = _mm256_add_ps(y0, _mm256_min_ps(ya, yb)), y1 = _mm256_add_ps(y1, _mm256_max_ps(ya, yb));
         }
-        const __m256 fx = _mm256_loadu_ps(&s.fx[e]), fy = _mm256_loadu_ps(&s.fy[e]);
-        const __m256 out8 =
-            _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(fx, x0, _CMP_LT_OQ), _mm256_cmp_ps(fx, x1, _CMP_GT_OQ)),
-                         _mm256_or_ps(_mm256_cmp_ps(fy, y0, _CMP_LT_OQ), _mm256_cmp_ps(fy, y1, _CMP_GT_OQ)));
+        const __m256 out8 = outsideBox8(_mm256_loadu_ps(&s.fx[e]), _mm256_loadu_ps(&s.fy[e]), x0, x1, y0, y1);
         n += compactLanes(out8, e, end, s, sink, n);
     }
     return n;
