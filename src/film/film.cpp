@@ -157,23 +157,37 @@ size_t nearestSampleToCentre(const SampleTile& tile, int px, int py) {
 
 namespace {
 
-// Calls visit(i, w) for every sample i of the tile within the pixel filter's reach (radii rx, ry, which the
-// callers take from the filter once per tile) of pixel (px, py), w its tabulated filter weight: the window
+// The samples within the pixel filter's reach (radii rx, ry, which the callers take from the filter once
+// per tile) of pixel (px, py): `rows` rows of `length` contiguous samples, the first starting at sample
+// `first` and each row `stride` after the one before; (cx, cy) the pixel centre in fixed point. The window
 // that colour and the filtered planes share.
+struct ReachWindow {
+    size_t first, length, stride;
+    int rows, cx, cy;
+};
+inline ReachWindow reachWindow(const SampleTile& tile, int rx, int ry, int px, int py) {
+    const Rect& reg = tile.region;
+    const int qx0 = std::max(px - rx, reg.x0), qx1 = std::min(px + rx, reg.x1 - 1);
+    const int qy0 = std::max(py - ry, reg.y0), qy1 = std::min(py + ry, reg.y1 - 1);
+    ReachWindow w;
+    w.stride = size_t(reg.width()) * size_t(tile.spp);
+    w.first = size_t(qy0 - reg.y0) * w.stride + size_t(qx0 - reg.x0) * size_t(tile.spp);
+    w.length = size_t(qx1 - qx0 + 1) * size_t(tile.spp);
+    w.rows = qy1 - qy0 + 1;
+    w.cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    w.cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    return w;
+}
+
+// Calls visit(i, w) for every sample i of the window, w its tabulated filter weight.
 template <class Visit>
 inline void forEachSampleInReach(const SampleTile& tile, const PixelFilter& filter, int rx, int ry, int px,
                                  int py, Visit&& visit) {
-    const int tw = tile.region.width(), spp = tile.spp;
-    const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
-    const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
-    const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-    const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-    for (int qy = qy0; qy <= qy1; ++qy) {
-        // The samples of one row of the window are contiguous: one loop over all of them.
-        const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
-        const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+    const ReachWindow win = reachWindow(tile, rx, ry, px, py);
+    for (int row = 0; row < win.rows; ++row) {
+        const size_t begin = win.first + size_t(row) * win.stride, end = begin + win.length;
         for (size_t i = begin; i < end; ++i)
-            visit(i, filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy));
+            visit(i, filter.tabulatedX(tile.sx[i] - win.cx) * filter.tabulatedY(tile.sy[i] - win.cy));
     }
 }
 
@@ -275,18 +289,14 @@ inline void addSample(LaneSums& l, int lane, float w, const SampleTile& tile, si
 
 void pixelSumsScalar(const SampleTile& tile, const PixelFilter& filter, int rx, int ry, int px, int py,
                      float sums[5]) {
-    const int tw = tile.region.width(), spp = tile.spp;
-    const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
-    const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
-    const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-    const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const ReachWindow win = reachWindow(tile, rx, ry, px, py);
     LaneSums l;
-    for (int qy = qy0; qy <= qy1; ++qy) {
-        const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
-        const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+    for (int row = 0; row < win.rows; ++row) {
+        const size_t begin = win.first + size_t(row) * win.stride, end = begin + win.length;
         for (size_t i = begin; i < end; ++i)
             addSample(l, int((i - begin) & 7u),
-                      filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy), tile, i);
+                      filter.tabulatedX(tile.sx[i] - win.cx) * filter.tabulatedY(tile.sy[i] - win.cy), tile,
+                      i);
     }
     reduceLanes(l, sums);
 }
@@ -296,19 +306,15 @@ void pixelSumsScalar(const SampleTile& tile, const PixelFilter& filter, int rx, 
 // loop's (a row's last, partial group of eight by the scalar step on the same lanes).
 __attribute__((target("avx2"))) void pixelSumsAvx2(const SampleTile& tile, const PixelFilter& filter, int rx,
                                                    int ry, int px, int py, float sums[5]) {
-    const int tw = tile.region.width(), spp = tile.spp;
-    const int qx0 = std::max(px - rx, tile.region.x0), qx1 = std::min(px + rx, tile.region.x1 - 1);
-    const int qy0 = std::max(py - ry, tile.region.y0), qy1 = std::min(py + ry, tile.region.y1 - 1);
-    const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-    const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+    const ReachWindow win = reachWindow(tile, rx, ry, px, py);
+    const int cx = win.cx, cy = win.cy;
     const __m256i biasX = _mm256_set1_epi32(filter.tableBiasX - cx),
                   biasY = _mm256_set1_epi32(filter.tableBiasY - cy);
     __m256 acc[5] = {_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(),
                      _mm256_setzero_ps()};
     LaneSums tail;
-    for (int qy = qy0; qy <= qy1; ++qy) {
-        const size_t begin = (size_t(qy - tile.region.y0) * tw + (qx0 - tile.region.x0)) * spp;
-        const size_t end = begin + size_t(qx1 - qx0 + 1) * spp;
+    for (int row = 0; row < win.rows; ++row) {
+        const size_t begin = win.first + size_t(row) * win.stride, end = begin + win.length;
         size_t i = begin;
         for (; i + 8 <= end; i += 8) {
             const __m256i ox =

@@ -491,8 +491,8 @@ inline void filterSegment(const CandidateView& s, uint32_t first, uint32_t end, 
 // reyesAvx2Active): the same float operations lane by lane as the four-wide and scalar filters (no fused
 // multiply-add: the target leaves FMA off), so the same entries pass. Instead of a branch per group with a
 // hit (taken for about a third of the groups, so mispredicted often), each group's passing entries are
-// written to `out` in order, branch-free: the lanes of the group's mask come from kLaneLists (four bits
-// per lane) and the count advances by the mask's population. `out` needs room for end - first + 8.
+// written to a sink in order, branch-free: the lanes of the group's mask come from kLaneLists (four bits
+// per lane) and the count advances by the mask's population. A sink needs room for end - first + 8.
 constexpr std::array<uint32_t, 256> makeLaneLists() {
     std::array<uint32_t, 256> t{};
     for (uint32_t m = 0; m < 256; ++m) {
@@ -552,7 +552,7 @@ __attribute__((target("avx2"))) inline __m256 outsideBox8(__m256 fx, __m256 fy, 
                         _mm256_or_ps(_mm256_cmp_ps(fy, y0, _CMP_LT_OQ), _mm256_cmp_ps(fy, y1, _CMP_GT_OQ)));
 }
 
-// filterStillLens, eight at a time: the passing entries of [first, end) into out; returns their count.
+// filterStillLens, eight at a time: the passing entries of [first, end) into the sink; returns their count.
 template <class Sink>
 __attribute__((target("avx2,popcnt"))) uint32_t filterStillLensAvx2(const CandidateView& s, uint32_t first,
                                                                     uint32_t end, const StillLensBound& b,
@@ -687,6 +687,7 @@ __attribute__((target("avx2"))) inline EdgeLanes8 edgeLanes8(__m256i dxa, __m256
 // e20 (2 -> 0), e01 (0 -> 1).
 struct TriangleLanes8 {
     __m256i inside, w1, w2, area, swapped;
+    __m256i signedArea;  // before orienting (its sign is facesCamera's for the first triangle)
 };
 __attribute__((target("avx2"))) inline TriangleLanes8 triangleLanes8(const EdgeLanes8& e12,
                                                                      const EdgeLanes8& e20,
@@ -694,6 +695,7 @@ __attribute__((target("avx2"))) inline TriangleLanes8 triangleLanes8(const EdgeL
     TriangleLanes8 t;
     const __m256i zero = _mm256_setzero_si256();
     const __m256i area = _mm256_add_epi32(_mm256_add_epi32(e01.cross, e12.cross), e20.cross);
+    t.signedArea = area;
     t.swapped = _mm256_cmpgt_epi32(zero, area);
     // Counter-clockwise: w0 = E12, w1 = E20, w2 = E01. Swapped (corners 0, 2, 1): w0 = E21, w1 = E10,
     // w2 = E02, with E_ba = -E_ab and b -> a's own bias.
@@ -779,9 +781,8 @@ __attribute__((target("avx2,popcnt"))) void testEntriesAvx2(const Grid& g, const
         const unsigned farMask = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(far))) & lanes;
         unsigned faces = lanes & ~farMask;
         if (!twoSided) {  // facesCamera: the signed area of corners (0, 1, 2) against the shutter-open facing
-            const __m256i area0 = _mm256_add_epi32(_mm256_add_epi32(e01.cross, e12.cross), e20.cross);
-            const unsigned positive = unsigned(
-                _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(area0, _mm256_setzero_si256()))));
+            const unsigned positive = unsigned(_mm256_movemask_ps(
+                _mm256_castsi256_ps(_mm256_cmpgt_epi32(t0.signedArea, _mm256_setzero_si256()))));
             faces &= frontIfPositive ? positive : ~positive;
         }
         const unsigned in0 = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(t0.inside))) & faces;
@@ -993,6 +994,13 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         if (testMovedSampleOnce<kAttributes>(g, m.vid, q, si, tile, nearZ))
             tile.pixelHit[si / size_t(spp)] = 1;
     };
+    // Sample si at normalised shutter time `time` and lens point `lens` (testAt at time's knot segment).
+    auto testAtTime = [&](Micropolygon& m, size_t si, float time, Vec2 lens) {
+        int k;
+        float w;
+        timelineSegment(knots.data(), g.knots, time, k, w);
+        testAt(m, si, k, w, lens);
+    };
     // The pixel span of a bound; every pixel of the tile when a corner is behind the near plane at some time.
     auto spanOf = [&](const CellBound& b) {
         return allValid ? pixelSpan(reg, int64_t(floorToInt(b.x0 - kBoundSlack)) << kSubpixelBits,
@@ -1020,11 +1028,8 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
                     if (allValid &&
                         (tile.sx[si] < bx0 || tile.sx[si] > bx1 || tile.sy[si] < by0 || tile.sy[si] > by1))
                         continue;
-                    int k;
-                    float w;
-                    timelineSegment(knots.data(), g.knots, tile.time[si], k, w);
                     ++tests;
-                    testAt(m, si, k, w, tile.lens[si]);
+                    testAtTime(m, si, tile.time[si], tile.lens[si]);
                 }
     };
 
@@ -1131,10 +1136,7 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
     };
     // Entry e of `v` tested exactly against micropolygon m at the entry's own time and lens point.
     auto testEntry = [&](Micropolygon& m, const CandidateView& v, uint32_t e) {
-        int k;
-        float w;
-        timelineSegment(knots.data(), g.knots, v.time[e], k, w);
-        testAt(m, v.sample[e], k, w, Vec2{v.lensX[e], v.lensY[e]});
+        testAtTime(m, v.sample[e], v.time[e], Vec2{v.lensX[e], v.lensY[e]});
     };
     // The entries of a list tested exactly against micropolygon m. With AVX2, when the grid has at most one
     // linear motion (every sample in timeline segment 0), they wait in m's PendingTests and are tested
@@ -1157,13 +1159,11 @@ uint64_t rasterizeBoundingBox(const Grid& g, SampleTile& tile, float nearZ, cons
         if (p.count == 0) return;
         if (m.corners.k != 0) loadCorners(g, m.vid, 0, m.corners);
         if (m.corners.valid)
-            testEntriesAvx2<kAttributes>(g, m.vid, m.corners, g.twoSided, m.front0 == (m.sign0 > 0), p,
-                                         lensOn, pr, tile, nearZ, [&](uint32_t i) {
-                                             int k;
-                                             float w;
-                                             timelineSegment(knots.data(), g.knots, p.time[i], k, w);
-                                             testAt(m, p.sample[i], k, w, Vec2{p.lensX[i], p.lensY[i]});
-                                         });
+            testEntriesAvx2<kAttributes>(
+                g, m.vid, m.corners, g.twoSided, m.front0 == (m.sign0 > 0), p, lensOn, pr, tile, nearZ,
+                [&](uint32_t i) {
+                    testAtTime(m, p.sample[i], p.time[i], Vec2{p.lensX[i], p.lensY[i]});
+                });
         p.count = 0;
 #else
         (void)m;
