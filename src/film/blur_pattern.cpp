@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <numeric>
+#include <stdexcept>
 #if defined(__GNUC__) && defined(__x86_64__)
 #include <immintrin.h>
 #define TESSERA_FILM_AVX2 1
 #endif
-#include <stdexcept>
 
 #include "core/cpu.h"
 #include "core/random.h"
@@ -202,25 +202,23 @@ __attribute__((target("avx2"))) inline void squareToDisk8(__m256 u, __m256 v, __
     const __m256 aMajor =
         _mm256_cmp_ps(_mm256_andnot_ps(signBit, a), _mm256_andnot_ps(signBit, b), _CMP_GT_OQ);
     const __m256 r = _mm256_blendv_ps(b, a, aMajor);
-    const __m256 x =
-        _mm256_mul_ps(_mm256_set1_ps(0.78539816f),
-                      _mm256_div_ps(_mm256_blendv_ps(a, b, aMajor), _mm256_blendv_ps(b, a, aMajor)));
+    const __m256 x = _mm256_mul_ps(_mm256_set1_ps(kQuarterPi), _mm256_div_ps(_mm256_blendv_ps(a, b, aMajor),
+                                                                             _mm256_blendv_ps(b, a, aMajor)));
+    // sinCosQuarterTurn, the same products and sums in the same order.
     const __m256 z = _mm256_mul_ps(x, x);
     const __m256 s = _mm256_add_ps(
         x, _mm256_mul_ps(
                _mm256_mul_ps(x, z),
-               _mm256_add_ps(
-                   _mm256_set1_ps(-1.6666654611e-1f),
-                   _mm256_mul_ps(z, _mm256_add_ps(_mm256_set1_ps(8.3321608736e-3f),
-                                                  _mm256_mul_ps(z, _mm256_set1_ps(-1.9515295891e-4f)))))));
+               _mm256_add_ps(_mm256_set1_ps(kSin3),
+                             _mm256_mul_ps(z, _mm256_add_ps(_mm256_set1_ps(kSin5),
+                                                            _mm256_mul_ps(z, _mm256_set1_ps(kSin7)))))));
     const __m256 c = _mm256_add_ps(
         _mm256_sub_ps(one, _mm256_mul_ps(_mm256_set1_ps(0.5f), z)),
         _mm256_mul_ps(
             _mm256_mul_ps(z, z),
-            _mm256_add_ps(
-                _mm256_set1_ps(4.166664568298827e-2f),
-                _mm256_mul_ps(z, _mm256_add_ps(_mm256_set1_ps(-1.388731625493765e-3f),
-                                               _mm256_mul_ps(z, _mm256_set1_ps(2.443315711809948e-5f)))))));
+            _mm256_add_ps(_mm256_set1_ps(kCos4),
+                          _mm256_mul_ps(z, _mm256_add_ps(_mm256_set1_ps(kCos6),
+                                                         _mm256_mul_ps(z, _mm256_set1_ps(kCos8)))))));
     const __m256 centre =
         _mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_EQ_OQ), _mm256_cmp_ps(b, zero, _CMP_EQ_OQ));
     dx = _mm256_blendv_ps(_mm256_blendv_ps(_mm256_mul_ps(r, s), _mm256_mul_ps(r, c), aMajor), zero, centre);

@@ -133,11 +133,14 @@ inline CameraRay generateRay(const Projector& p, Vec2 raster, Vec2 lensDisk) {
 // there). The concentric map's angle never leaves that range, and these plain multiply-adds run lane by
 // lane in the blurred film's AVX2 path (BlurPattern::pixelSamplesAt) with the same bits, which libm's sincosf
 // would not give.
+// The polynomials' coefficients (sin: x^3, x^5, x^7; cos: x^4, x^6, x^8), named once for both paths.
+constexpr float kSin3 = -1.6666654611e-1f, kSin5 = 8.3321608736e-3f, kSin7 = -1.9515295891e-4f;
+constexpr float kCos4 = 4.166664568298827e-2f, kCos6 = -1.388731625493765e-3f, kCos8 = 2.443315711809948e-5f;
+constexpr float kQuarterPi = 0.78539816f;
 TESSERA_HD void sinCosQuarterTurn(float x, float& s, float& c) {
     const float z = x * x;
-    s = x + x * z * (-1.6666654611e-1f + z * (8.3321608736e-3f + z * -1.9515295891e-4f));
-    c = 1.f - 0.5f * z +
-        z * z * (4.166664568298827e-2f + z * (-1.388731625493765e-3f + z * 2.443315711809948e-5f));
+    s = x + x * z * (kSin3 + z * (kSin5 + z * kSin7));
+    c = 1.f - 0.5f * z + z * z * (kCos4 + z * (kCos6 + z * kCos8));
 }
 
 // Concentric map of [0,1)^2 onto the unit disk (Shirley and Chiu 1997): keeps the sampler's
@@ -146,9 +149,8 @@ TESSERA_HD void sinCosQuarterTurn(float x, float& s, float& c) {
 TESSERA_HD Vec2 squareToDisk(float u, float v) {
     const float a = 2.f * u - 1.f, b = 2.f * v - 1.f;
     if (a == 0.f && b == 0.f) return {0.f, 0.f};
-    constexpr float kPi4 = 0.78539816f;
     const bool aMajor = std::abs(a) > std::abs(b);
-    const float r = aMajor ? a : b, x = kPi4 * (aMajor ? b / a : a / b);
+    const float r = aMajor ? a : b, x = kQuarterPi * (aMajor ? b / a : a / b);
     float s, c;
     sinCosQuarterTurn(x, s, c);
     return aMajor ? Vec2{r * c, r * s} : Vec2{r * s, r * c};
