@@ -40,8 +40,8 @@ def setup_ms(r):
     if "build_ms" in r:
         return fmt_ms(r["build_ms"])
     st = r.get("stage_ms", {})
-    if "split" in st:
-        return fmt_ms(st.get("split", 0) + st.get("weld", 0))
+    if "bin" in st or "split" in st:  # the up-front set-up: weld and bin (split before session 17)
+        return fmt_ms(st.get("bin", st.get("split", 0)) + st.get("weld", 0))
     return ""
 
 

@@ -37,8 +37,10 @@ Clipping {near} {far}
 WorldBegin
 """
 
+OUT_DIR = "scenes"  # bench/reyes_memory.sh writes its larger grids elsewhere (with an archives/ link)
+
 def write(name, what, w, h, fov, eye, target, up, near, far, body):
-    with open(f"scenes/{name}.rib", "w") as f:
+    with open(f"{OUT_DIR}/{name}.rib", "w") as f:
         f.write(HEADER.format(what=what, name=name, w=w, h=h, fov=fov, xform=look_at(eye, target, up),
                               near=near, far=far))
         f.write(body)

@@ -6,7 +6,10 @@
 #include <map>
 #include <numbers>
 
+#include "engine/frame.h"
 #include "io/scene_loader.h"
+#include "reyes/displace.h"
+#include "reyes/pipeline.h"
 #include "reyes/rasterize.h"
 #include "scene/weld.h"
 #include "test_support.h"
@@ -388,5 +391,91 @@ TEST(ReyesSplit, SurfacesReachingBehindTheEyeAreDicedForTheirPartInView) {
         std::cout << c.name << ": " << micropolygons << " micropolygons for " << pixels << " pixels\n";
         EXPECT_LT(micropolygons, 20.0 * pixels);
         EXPECT_GE(alphaSum(r.image), c.minCoverage * pixels - 1.0);  // and nothing in view went missing
+    }
+}
+
+// Splitting on demand (LazyPieces, reyes/pipeline.h) must hand each bucket exactly the pieces, in the same
+// order, that splitting every surface up front and binning the pieces gives (splitPatches + binPieces, the
+// engine's earlier path, kept as this oracle), with the same split counts; and it must free a surface's
+// pieces after its last bucket, so that fewer are alive at once than the frame makes.
+TEST(LazyPieces, BucketsSeeTheUpFrontSplitsPiecesInOrder) {
+    struct Case {
+        const char* name;
+        std::string path;
+        int bucketSize;
+        float shadingRate;  // > 0: a shadow map's override
+    } cases[] = {
+        {"teapot", std::string(TESSERA_SOURCE_DIR) + "/scenes/teapot.rib", 16, 0.f},
+        {"killeroo", std::string(TESSERA_SOURCE_DIR) + "/scenes/killeroo.rib", 32, 0.f},
+        {"quadrics", std::string(TESSERA_SOURCE_DIR) + "/scenes/quadrics.rib", 16, 0.f},
+        {"displaced teapot", std::string(TESSERA_SOURCE_DIR) + "/scenes/displaced_teapot.rib", 16, 0.f},
+        {"bigguy, coarse override", std::string(TESSERA_SOURCE_DIR) + "/scenes/bigguy.rib", 64, 4.f},
+        {"ground plane through the eye plane",
+         tessera::test::writeTestFile(
+             "ground.rib",
+             "Format 160 120 1\nPixelSamples 2 2\nProjection \"perspective\" \"fov\" [50]\nRotate -95 1 0 0\n"
+             "Translate 0 0 -1\nWorldBegin\nSurface \"constant\"\n"
+             "Patch \"bilinear\" \"P\" [-500 -500 0 500 -500 0 -500 500 0 500 500 0]\nWorldEnd\n"),
+         16, 0.f},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        Scene scene = loadScene(c.path, [](const std::string&) {});
+        RenderSettings rs;
+        const FrameSetup frame(scene, rs);
+        PatchArray patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
+        weldSharedEdges(patches, defaultWeldTolerance(patches));
+        const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, frame.camera.cameraFromWorld);
+        ReyesView view(frame.camera);
+        view.patches = patches.data();
+        view.quadrics = quadrics.data();
+        view.projector = frame.projector;
+        const DisplacementFrame disp =
+            makeDisplacementFrame(scene, frame.textures.get(), patches,
+                                  float(frame.camera.cameraFromWorld.maxStretch()));
+        if (disp.any()) view.displacement = &disp;
+        const Rect& region = frame.region;
+        view.cullX0 = float(region.x0 - 3), view.cullY0 = float(region.y0 - 3);
+        view.cullX1 = float(region.x1 + 3), view.cullY1 = float(region.y1 + 3);
+        const BucketLayout layout(region, c.bucketSize);
+
+        SplitStats upFrontStats;
+        const PieceList upFront = splitPatches(view, scene, c.shadingRate, nullptr, upFrontStats);
+        const BucketedPieces binned = binPieces(upFront, layout, 3, 3, 16);
+        LazyPieces lazy(view, scene, c.shadingRate, layout, 3, 3, 16);
+
+        uint64_t visits = 0, mismatches = 0;
+        for (int b = 0; b < layout.count(); ++b) {
+            uint32_t k = binned.start[b];
+            lazy.forEach(
+                b, [](const Piece&, Grid&) {},
+                [&](const Piece& p, const Grid&) {
+                    ++visits;
+                    if (k >= binned.start[b + 1]) {
+                        ++mismatches;
+                        return;
+                    }
+                    const Piece& q = upFront[binned.pieces[k++]];
+                    bool same = p.patch == q.patch && p.x0 == q.x0 && p.y0 == q.y0 && p.x1 == q.x1 &&
+                                p.y1 == q.y1 && pieceGridU(p) == pieceGridU(q) && pieceGridV(p) == pieceGridV(q);
+                    for (int i = 0; i < 4; ++i) same = same && p.uv[i].x == q.uv[i].x && p.uv[i].y == q.uv[i].y;
+                    mismatches += !same;
+                });
+            mismatches += binned.start[b + 1] - k;  // pieces the lazy bucket did not see
+        }
+        const SplitStats lazyStats = lazy.stats();
+        std::cout << c.name << ": " << upFront.size() << " pieces, " << visits << " bucket visits, at most "
+                  << lazy.peakPieces() << " alive at once\n";
+        EXPECT_GT(upFront.size(), 0u);
+        EXPECT_EQ(visits, binned.pieces.size());
+        EXPECT_EQ(mismatches, 0u);
+        EXPECT_EQ(lazy.pieceCount(), upFront.size());
+        EXPECT_EQ(lazyStats.splits, upFrontStats.splits);
+        EXPECT_EQ(lazyStats.pieceCulls, upFrontStats.pieceCulls);
+        EXPECT_EQ(lazyStats.patchesCulled, upFrontStats.patchesCulled);
+        EXPECT_EQ(lazy.piecesBeyondSurface(), 0u);
+        EXPECT_LE(lazy.peakPieces(), upFront.size());
+        // Killeroo covers many bucket rows: surfaces finished above the current row are freed.
+        if (std::string(c.name) == "killeroo") EXPECT_LT(lazy.peakPieces(), upFront.size() / 2);
     }
 }

@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 namespace tessera {
@@ -102,6 +103,121 @@ BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layo
         out.work[b] += uint64_t(t.width()) * t.height() * samplesPerPixel / 16 + 1;
     }
     return out;
+}
+
+
+LazyPieces::LazyPieces(const ReyesView& view, const Scene& scene, float shadingRateOverride,
+                       const BucketLayout& layout, int marginX, int marginY, int samplesPerPixel)
+    : view_(view), scene_(scene), layout_(layout), marginX_(marginX), marginY_(marginY) {
+    const size_t n = scene.patches.size();
+    sides_.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        const float rate = shadingRateOverride > 0.f ? shadingRateOverride : scene.attributes[i].shadingRate;
+        sides_[i] = std::sqrt(std::max(rate, 1e-4f));
+    }
+    view_.patchSide = sides_.data();
+    slots_ = std::make_unique<SurfaceSlot[]>(n);
+    // Each surface's buckets, from its root's bound grown by the margins (and by a rounding allowance, so
+    // that a piece's bound, computed from a sub-hull in floats, cannot reach a bucket its surface is not
+    // binned in; an extra bucket only looks at the surface's pieces and finds none).
+    const int nb = layout.count();
+    std::vector<uint64_t> share(n, 0);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        const SurfaceReach reach = surfaceReach(view_, scene.attributes[i], uint32_t(i));
+        SurfaceSlot& slot = slots_[i];
+        if (reach.kind == SurfaceReach::Culled) {
+            ++culled_, ++surfacesCulled_;
+            return;  // an empty span: binned nowhere
+        }
+        if (reach.kind == SurfaceReach::Anywhere) {
+            slot.span = {0, 0, layout.countX - 1, layout.countY - 1};
+            share[i] = 1;
+            return;
+        }
+        auto allowance = [](float x) { return 1e-3f + 1e-5f * std::abs(x); };
+        int bx0, by0, bx1, by1;
+        layout.overlapped(reach.x0 - marginX - allowance(reach.x0), reach.y0 - marginY - allowance(reach.y0),
+                          reach.x1 + marginX + allowance(reach.x1), reach.y1 + marginY + allowance(reach.y1),
+                          bx0, by0, bx1, by1);
+        slot.span = {bx0, by0, bx1, by1};
+        // Micropolygons the surface's visible bound asks for, shared among its buckets.
+        const Rect& r = layout.region;
+        const float w = std::clamp(reach.x1, float(r.x0), float(r.x1)) - std::clamp(reach.x0, float(r.x0), float(r.x1));
+        const float h = std::clamp(reach.y1, float(r.y0), float(r.y1)) - std::clamp(reach.y0, float(r.y0), float(r.y1));
+        const float micropolygons = std::min(1e7f, w * h / (sides_[i] * sides_[i]));
+        share[i] = uint64_t(micropolygons) / uint64_t((bx1 - bx0 + 1) * (by1 - by0 + 1)) + 1;
+    });
+    // CSR bins in surface order (the order every bucket must meet them in).
+    start_.assign(nb + 1, 0);
+    for (size_t i = 0; i < n; ++i) {
+        const BucketSpan& r = slots_[i].span;
+        for (int by = r.by0; by <= r.by1; ++by)
+            for (int bx = r.bx0; bx <= r.bx1; ++bx) ++start_[by * layout.countX + bx + 1];
+    }
+    for (int b = 0; b < nb; ++b) start_[b + 1] += start_[b];
+    surfaces_.resize(start_[nb]);
+    work_.assign(nb, 0);
+    std::vector<uint32_t> fill(start_.begin(), start_.end() - 1);
+    for (size_t i = 0; i < n; ++i) {
+        const BucketSpan& r = slots_[i].span;
+        for (int by = r.by0; by <= r.by1; ++by)
+            for (int bx = r.bx0; bx <= r.bx1; ++bx) {
+                const int b = by * layout.countX + bx;
+                surfaces_[fill[b]++] = uint32_t(i);
+                work_[b] += share[i];
+            }
+        slots_[i].refs.store((r.bx1 - r.bx0 + 1) * (r.by1 - r.by0 + 1), std::memory_order_relaxed);
+    }
+    for (int b = 0; b < nb; ++b) {
+        const Rect t = layout.target(b);
+        work_[b] += uint64_t(t.width()) * t.height() * samplesPerPixel / 16 + 1;
+    }
+}
+
+LazyPieces::~LazyPieces() = default;
+
+void LazyPieces::split(uint32_t surface, SurfaceSlot& slot) {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto sp = std::make_unique<SurfacePieces>();
+    SplitCounters counters;
+    splitSurface(view_, scene_.attributes[surface], surface, sides_[surface], sp->pieces, counters);
+    sp->pieces.shrink_to_fit();
+    const size_t count = sp->pieces.size();
+    sp->spans.resize(count);
+    sp->grids = std::make_unique<GridSlot[]>(count);
+    for (size_t i = 0; i < count; ++i) {
+        const Piece& p = sp->pieces[i];
+        BucketSpan& r = sp->spans[i];
+        layout_.overlapped(p.x0 - marginX_, p.y0 - marginY_, p.x1 + marginX_, p.y1 + marginY_, r.bx0, r.by0, r.bx1,
+                           r.by1);
+        sp->grids[i].refs.store((r.bx1 - r.bx0 + 1) * (r.by1 - r.by0 + 1), std::memory_order_relaxed);
+        if (r.bx0 < slot.span.bx0 || r.by0 < slot.span.by0 || r.bx1 > slot.span.bx1 || r.by1 > slot.span.by1)
+            ++beyond_;
+    }
+    splits_ += counters.splits;
+    culled_ += counters.culled;
+    surfacesCulled_ += counters.patchCulled;
+    pieces_ += count;
+    const uint64_t alive = alive_ += count;
+    uint64_t peak = peak_.load(std::memory_order_relaxed);
+    while (alive > peak && !peak_.compare_exchange_weak(peak, alive, std::memory_order_relaxed)) {
+    }
+    slot.pieces = std::move(sp);
+    splitNs_ += uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+}
+
+void LazyPieces::release(SurfaceSlot& slot) {
+    if (!slot.pieces) return;
+    alive_ -= slot.pieces->pieces.size();
+    slot.pieces.reset();
+}
+
+SplitStats LazyPieces::stats() const {
+    SplitStats s;
+    s.splits = splits_.load();
+    s.pieceCulls = culled_.load();
+    s.patchesCulled = surfacesCulled_.load();
+    return s;
 }
 
 }  // namespace tessera

@@ -54,55 +54,128 @@ struct BucketedPieces {
 BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layout, int marginX, int marginY,
                          int samplesPerPixel);
 
-// A diced grid shared by the buckets its piece overlaps: diced by the first bucket that needs it, freed by
-// the last one, so only grids near the buckets in flight are alive.
-class GridCache {
-  public:
-    explicit GridCache(const BucketedPieces& binned) : slots_(binned.spans.size()) {
-        for (size_t i = 0; i < slots_.size(); ++i)
-            slots_[i].refs.store(binned.spans[i], std::memory_order_relaxed);
-    }
-    // The grid of piece `pi`; the first caller fills it with dice(Grid&), the others wait for it (if
-    // dice throws, the next caller dices). The grid stays valid until this bucket's release(pi).
-    // A three-state flag, not std::call_once: its slow path (pthread_once) was 3% of 24 Big Guys.
-    template <class Dice>
-    const Grid& acquire(uint32_t pi, Dice&& dice) {
-        Slot& slot = slots_[pi];
-        uint8_t state = slot.state.load(std::memory_order_acquire);
-        while (state != kReady) {
-            if (state == kEmpty &&
-                slot.state.compare_exchange_strong(state, kDicing, std::memory_order_acquire)) {
-                try {
-                    slot.grid = std::make_unique<Grid>();
-                    dice(*slot.grid);
-                } catch (...) {
-                    slot.grid.reset();
-                    slot.state.store(kEmpty, std::memory_order_release);
-                    slot.state.notify_all();
-                    throw;
-                }
-                slot.state.store(kReady, std::memory_order_release);
-                slot.state.notify_all();
-                break;
+// Fills `slot` once for all callers: the first runs fill(), the others wait for it (if fill throws, the
+// next caller fills). A three-state flag, not std::call_once: its slow path (pthread_once) was 3% of 24 Big
+// Guys.
+namespace detail {
+constexpr uint8_t kSlotEmpty = 0, kSlotFilling = 1, kSlotReady = 2;
+template <class Fill>
+void fillOnce(std::atomic<uint8_t>& state, Fill&& fill) {
+    uint8_t s = state.load(std::memory_order_acquire);
+    while (s != kSlotReady) {
+        if (s == kSlotEmpty && state.compare_exchange_strong(s, kSlotFilling, std::memory_order_acquire)) {
+            try {
+                fill();
+            } catch (...) {
+                state.store(kSlotEmpty, std::memory_order_release);
+                state.notify_all();
+                throw;
             }
-            if (state == kDicing) slot.state.wait(kDicing, std::memory_order_acquire);
-            state = slot.state.load(std::memory_order_acquire);
+            state.store(kSlotReady, std::memory_order_release);
+            state.notify_all();
+            return;
         }
-        return *slot.grid;
+        if (s == kSlotFilling) state.wait(kSlotFilling, std::memory_order_acquire);
+        s = state.load(std::memory_order_acquire);
     }
-    void release(uint32_t pi) {
-        Slot& slot = slots_[pi];
-        if (slot.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) slot.grid.reset();
+}
+}  // namespace detail
+
+// The frame's surfaces binned by their root bound (surfaceReach) and split on demand: the first bucket that
+// needs a surface splits it, the last one frees its pieces and their grids (Aqsis splits per bucket
+// likewise). So the pieces alive at a time are those of the surfaces that overlap the buckets in flight (and
+// of those begun above them and not yet finished), not every piece of the frame: memory grows with the
+// scene's patches (their 16 control points) but not with its pieces and their 4 KB grids (issue 18).
+// A bucket sees the pieces that overlap it in piece order: surface order, then the split's own, exactly
+// as binning the up-front split (splitPatches + binPieces) orders them (test LazyPieces.*).
+class LazyPieces {
+  public:
+    // Pieces of about `shadingRateOverride` pixels of area when > 0, else each patch's ShadingRate; bins
+    // grown by `marginX`, `marginY` (the filter radius and a pixel); `samplesPerPixel` weighs the work.
+    LazyPieces(const ReyesView& view, const Scene& scene, float shadingRateOverride, const BucketLayout& layout,
+               int marginX, int marginY, int samplesPerPixel);
+    ~LazyPieces();
+    LazyPieces(const LazyPieces&) = delete;
+    LazyPieces& operator=(const LazyPieces&) = delete;
+
+    // Each bucket's estimated work, for the progress (its surfaces' micropolygons shared among the buckets
+    // they overlap, plus its samples).
+    std::span<const uint64_t> work() const { return work_; }
+
+    // For every piece overlapping bucket b, in piece order: the piece's grid, made by dice(piece, grid) the
+    // first time any bucket needs it, handed to visit(piece, grid). The grid is freed after its last bucket.
+    template <class Dice, class Visit>
+    void forEach(int b, Dice&& dice, Visit&& visit) {
+        const int bx = b % layout_.countX, by = b / layout_.countX;
+        for (uint32_t k = start_[b]; k < start_[b + 1]; ++k) {
+            const uint32_t surface = surfaces_[k];
+            SurfaceSlot& slot = slots_[surface];
+            detail::fillOnce(slot.state, [&] { split(surface, slot); });
+            SurfacePieces& sp = *slot.pieces;
+            for (size_t i = 0; i < sp.pieces.size(); ++i) {
+                const BucketSpan& r = sp.spans[i];
+                if (bx < r.bx0 || bx > r.bx1 || by < r.by0 || by > r.by1) continue;
+                GridSlot& g = sp.grids[i];
+                detail::fillOnce(g.state, [&] {
+                    g.grid = std::make_unique<Grid>();
+                    try {
+                        dice(sp.pieces[i], *g.grid);
+                    } catch (...) {
+                        g.grid.reset();
+                        throw;
+                    }
+                });
+                visit(static_cast<const Piece&>(sp.pieces[i]), static_cast<const Grid&>(*g.grid));
+                if (g.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) g.grid.reset();
+            }
+            if (slot.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) release(slot);
+        }
     }
 
+    // After the bucket loop: what splitting did (the culls of whole surfaces by their root included).
+    SplitStats stats() const;
+    uint64_t pieceCount() const { return pieces_.load(); }
+    // The most pieces alive at once, and the CPU time the buckets spent splitting.
+    uint64_t peakPieces() const { return peak_.load(); }
+    double splitCpuMs() const { return double(splitNs_.load()) * 1e-6; }
+    // Pieces whose buckets reach beyond their surface's (would be missed there; 0 unless rounding makes a
+    // sub-hull's bound poke out of the root's): a check the tests read.
+    uint64_t piecesBeyondSurface() const { return beyond_.load(); }
+
   private:
-    static constexpr uint8_t kEmpty = 0, kDicing = 1, kReady = 2;
-    struct Slot {
-        std::atomic<uint8_t> state{kEmpty};
-        std::unique_ptr<Grid> grid;
-        std::atomic<int> refs{0};
+    struct BucketSpan {
+        int32_t bx0 = 0, by0 = 0, bx1 = -1, by1 = -1;
     };
-    std::vector<Slot> slots_;
+    struct GridSlot {
+        std::atomic<uint8_t> state{detail::kSlotEmpty};
+        std::atomic<int> refs{0};
+        std::unique_ptr<Grid> grid;
+    };
+    struct SurfacePieces {
+        std::vector<Piece> pieces;
+        std::vector<BucketSpan> spans;
+        std::unique_ptr<GridSlot[]> grids;
+    };
+    struct SurfaceSlot {
+        std::atomic<uint8_t> state{detail::kSlotEmpty};
+        std::atomic<int> refs{0};
+        BucketSpan span;  // the buckets its bins hold it in
+        std::unique_ptr<SurfacePieces> pieces;
+    };
+    void split(uint32_t surface, SurfaceSlot& slot);
+    void release(SurfaceSlot& slot);
+
+    ReyesView view_;  // with patchSide = sides_
+    const Scene& scene_;
+    const BucketLayout layout_;
+    const int marginX_, marginY_;
+    std::vector<float> sides_;       // per surface: its micropolygon side (ReyesView::patchSide)
+    std::vector<uint32_t> start_;    // bucket b's surfaces: surfaces_[start_[b] .. start_[b + 1])
+    std::vector<uint32_t> surfaces_;
+    std::vector<uint64_t> work_;
+    std::unique_ptr<SurfaceSlot[]> slots_;
+    std::atomic<uint64_t> splits_{0}, culled_{0}, surfacesCulled_{0}, pieces_{0}, alive_{0}, peak_{0};
+    std::atomic<uint64_t> splitNs_{0}, beyond_{0};
 };
 
 }  // namespace tessera

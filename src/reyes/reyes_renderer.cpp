@@ -166,66 +166,62 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     view.cullX1 = float(region.x1 + rx + 1);
     view.cullY1 = float(region.y1 + ry + 1);
 
-    // Split: every patch into diceable pieces, in parallel, kept in patch order for determinism.
-    const auto tSplit = EngineClock::now();
-    SplitStats splitStats;
-    const PieceList pieces = splitPatches(view, scene, 0.f, settings.cancel, splitStats);
-    const double splitMs = msSince(tSplit);
-
-    // Bucket the pieces by their raster bound (grown by the filter radius): CSR lists in piece order.
+    // Bin every surface by its root bound; each is split when its first bucket comes up and freed after its
+    // last (LazyPieces), so only the pieces near the buckets in flight are alive.
+    const auto tBin = EngineClock::now();
     const BucketLayout layout(region, std::max(4, settings.bucketSize));
-    const BucketedPieces binned = binPieces(pieces, layout, rx + 1, ry + 1, frame.samplesPerPixel());
-    GridCache grids(binned);
+    LazyPieces pieces(view, scene, 0.f, layout, rx + 1, ry + 1, frame.samplesPerPixel());
+    const double binMs = msSince(tBin);
 
     const bool nearest = settings.micropolygonSampling == MicropolygonSampling::Nearest;
     // Dice, shade, sample and filter, bucket by bucket. Workers take buckets in scanline order so the
     // grids alive at any moment are those near one row of buckets.
     tbb::enumerable_thread_specific<ThreadCounters> counters;
     auto renderBucket = [&](int b, ThreadCounters& tc) {
-        const uint32_t begin = binned.start[b], end = binned.start[b + 1];
-        if (begin == end) return;  // nothing here: the image is already transparent black
         const Rect target = layout.target(b);
-        const auto tt = EngineClock::now();
-        frame.resetTile(tc.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
-        if (useStrata) {
-            tc.strata.configure(frame.blur, motion.knots);
-            tc.strata.build(tc.tile);
-        }
-        tc.setupMs += msSince(tt);
-        for (uint32_t k = begin; k < end; ++k) {
-            const uint32_t pi = binned.pieces[k];
-            const Grid& grid = grids.acquire(pi, [&](Grid& g) {
-                auto td = EngineClock::now();
-                const Piece& piece = pieces[pi];
-                const PatchAttributes& attr = scene.attributes[piece.patch];
-                ShadeInputs in{attr.kind,
-                               &scene.materials[attr.material],
-                               attr.twoSided,
-                               attr.flipNormal,
-                               frame.lights,
-                               attr.object,
-                               (settings.output.channels & kChannelNormal) != 0,
-                               visibility,
-                               false,
-                               (settings.output.channels & kChannelShadowCount) != 0,
-                               quadricOf(view, attr)};
-                in.wantSurfaceAovs = (settings.output.channels & kSurfaceAovChannels) != 0;
-                in.textures = frame.textures.get();
-                in.texCoords = texCoordsOf(scene, piece.patch);
-                if (attr.vertexValues >= 0) in.vertexValues = &vertexValues[size_t(attr.vertexValues)];
-                in.textureScale = std::max(1.f, std::sqrt(attr.shadingRate));
-                if (attr.areaLight >= 0 && size_t(attr.areaLight) < scene.lights.size())
-                    in.emission = scene.lights[size_t(attr.areaLight)].color;
-                diceAndShade(view, piece, in, g);
-                ++tc.grids;
-                tc.micropolygons += uint64_t(g.nu) * g.nv;
-                tc.gridVertices += uint64_t(g.vertexCount());
-                if (displacement.displaced(piece.patch)) {
-                    tc.displacedMicropolygons += uint64_t(g.nu) * g.nv;
-                    micropolygonSides(g, tc.displacedSideSum, tc.displacedSideMax);
+        bool started = false;  // a bucket no piece reaches stays transparent black, untouched
+        auto dice = [&](const Piece& piece, Grid& g) {
+            auto td = EngineClock::now();
+            const PatchAttributes& attr = scene.attributes[piece.patch];
+            ShadeInputs in{attr.kind,
+                           &scene.materials[attr.material],
+                           attr.twoSided,
+                           attr.flipNormal,
+                           frame.lights,
+                           attr.object,
+                           (settings.output.channels & kChannelNormal) != 0,
+                           visibility,
+                           false,
+                           (settings.output.channels & kChannelShadowCount) != 0,
+                           quadricOf(view, attr)};
+            in.wantSurfaceAovs = (settings.output.channels & kSurfaceAovChannels) != 0;
+            in.textures = frame.textures.get();
+            in.texCoords = texCoordsOf(scene, piece.patch);
+            if (attr.vertexValues >= 0) in.vertexValues = &vertexValues[size_t(attr.vertexValues)];
+            in.textureScale = std::max(1.f, std::sqrt(attr.shadingRate));
+            if (attr.areaLight >= 0 && size_t(attr.areaLight) < scene.lights.size())
+                in.emission = scene.lights[size_t(attr.areaLight)].color;
+            diceAndShade(view, piece, in, g);
+            ++tc.grids;
+            tc.micropolygons += uint64_t(g.nu) * g.nv;
+            tc.gridVertices += uint64_t(g.vertexCount());
+            if (displacement.displaced(piece.patch)) {
+                tc.displacedMicropolygons += uint64_t(g.nu) * g.nv;
+                micropolygonSides(g, tc.displacedSideSum, tc.displacedSideMax);
+            }
+            tc.diceMs += msSince(td);
+        };
+        pieces.forEach(b, dice, [&](const Piece&, const Grid& grid) {
+            if (!started) {
+                const auto tt = EngineClock::now();
+                frame.resetTile(tc.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
+                if (useStrata) {
+                    tc.strata.configure(frame.blur, motion.knots);
+                    tc.strata.build(tc.tile);
                 }
-                tc.diceMs += msSince(td);
-            });
+                tc.setupMs += msSince(tt);
+                started = true;
+            }
             auto ts = EngineClock::now();
             if (grid.blurred) {
                 // The nearest-neighbour sampler has no moving form: blurred grids keep the bounding box.
@@ -237,16 +233,17 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                                           : rasterizeGrid(grid, tc.tile, view.projector.nearClip);
             }
             tc.sampleMs += msSince(ts);
-            grids.release(pi);
-        }
+        });
+        if (!started) return;
         countEmpty(tc.tile, target, tc.emptySamples, tc.emptyPixels);
         auto tf = EngineClock::now();
         reconstruct(tc.tile, frame.filter, target, result.image);
         tc.filterMs += msSince(tf);
     };
     const TileLoopResult loop =
-        runTileLoop(layout, binned.work, settings, counters, renderBucket, &result.image);
+        runTileLoop(layout, pieces.work(), settings, counters, renderBucket, &result.image);
 
+    const SplitStats splitStats = pieces.stats();
     ThreadCounters total;
     for (const ThreadCounters& tc : counters) {
         total.grids += tc.grids;
@@ -281,7 +278,9 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
                      {"knots", motion.knotCount()},
                      {"moving_patches", movingPatches},
                      {"strata_bounds", useStrata}};
-    s["pieces"] = pieces.size();
+    s["pieces"] = pieces.pieceCount();
+    // Split on demand: the most pieces alive at once (their grids are freed with them), against the frame's.
+    s["pieces_peak"] = pieces.peakPieces();
     s["grids"] = total.grids;
     s["micropolygons"] = total.micropolygons;
     s["grid_vertices"] = total.gridVertices;
@@ -303,7 +302,8 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
     writeTileLoopStats(layout, loop, s);
     s["stage_ms"] = {{"shadow_maps", shadowMaps ? shadowMaps->renderMs() : 0.0},
                      {"weld", weldMs},
-                     {"split", splitMs},
+                     {"bin", binMs},
+                     {"split_cpu", pieces.splitCpuMs()},
                      {"buckets_wall", loop.wallMs},
                      {"tile_setup_cpu", total.setupMs},
                      {"dice_shade_cpu", total.diceMs},

@@ -89,12 +89,9 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
     }
     view.maxGridEdge = std::max(1, settings.maxGridEdge);
     view.cullX0 = -1.f, view.cullY0 = -1.f, view.cullX1 = float(width + 1), view.cullY1 = float(height + 1);
-    // Split and bin, as the frame's pass does (no filter: a texel is one sample).
-    SplitStats split;
-    const PieceList pieces = splitPatches(view, scene, shadingRate, settings.cancel, split);
+    // Bin and split on demand, as the frame's pass does (no filter: a texel is one sample).
     const BucketLayout layout(Rect{0, 0, width, height}, 64);
-    const BucketedPieces binned = binPieces(pieces, layout, 1, 1, 1);
-    GridCache grids(binned);
+    LazyPieces pieces(view, scene, shadingRate, layout, 1, 1, 1);
     DepthBuffer depth(size_t(width) * size_t(height));  // every bucket writes its texels below
 
     struct Worker {
@@ -104,45 +101,45 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
     tbb::enumerable_thread_specific<Worker> workers;
     RenderSettings pass = settings;
     pass.progress = nullptr;  // the frame's progress counts the frame's buckets only
-    const TileLoopResult loop = runTileLoop(layout, binned.work, pass, workers, [&](int b, Worker& w) {
-        const uint32_t begin = binned.start[b], end = binned.start[b + 1];
+    const TileLoopResult loop = runTileLoop(layout, pieces.work(), pass, workers, [&](int b, Worker& w) {
         const Rect t = layout.target(b);
-        if (begin == end) {
+        bool started = false;
+        auto dice = [&](const Piece& piece, Grid& g) {
+            const PatchAttributes& attr = scene.attributes[piece.patch];
+            ShadeInputs in{attr.kind,  &scene.materials[attr.material], true, attr.flipNormal, {},
+                           attr.object};
+            in.depthOnly = true;
+            in.quadric = quadricOf(view, attr);
+            diceAndShade(view, piece, in, g);
+            ++w.grids;
+            w.micropolygons += uint64_t(g.nu) * g.nv;
+        };
+        pieces.forEach(b, dice, [&](const Piece&, const Grid& grid) {
+            if (!started) {
+                w.tile.reset(t, 1, 1, 0, kInf, SamplerKind::Jittered);
+                // One sample at each texel's centre: the lookups read the depth there.
+                size_t i = 0;
+                for (int py = t.y0; py < t.y1; ++py)
+                    for (int px = t.x0; px < t.x1; ++px, ++i) {
+                        w.tile.sx[i] = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+                        w.tile.sy[i] = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+                    }
+                started = true;
+            }
+            w.sampleTests += rasterizeGrid(grid, w.tile, view.projector.nearClip);
+        });
+        if (!started) {
             for (int py = t.y0; py < t.y1; ++py)
                 std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
             return;
         }
-        w.tile.reset(t, 1, 1, 0, kInf, SamplerKind::Jittered);
-        // One sample at each texel's centre: the lookups read the depth there.
         size_t i = 0;
-        for (int py = t.y0; py < t.y1; ++py)
-            for (int px = t.x0; px < t.x1; ++px, ++i) {
-                w.tile.sx[i] = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-                w.tile.sy[i] = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-            }
-        for (uint32_t k = begin; k < end; ++k) {
-            const uint32_t pi = binned.pieces[k];
-            const Grid& grid = grids.acquire(pi, [&](Grid& g) {
-                const Piece& piece = pieces[pi];
-                const PatchAttributes& attr = scene.attributes[piece.patch];
-                ShadeInputs in{attr.kind,  &scene.materials[attr.material], true, attr.flipNormal, {},
-                               attr.object};
-                in.depthOnly = true;
-                in.quadric = quadricOf(view, attr);
-                diceAndShade(view, piece, in, g);
-                ++w.grids;
-                w.micropolygons += uint64_t(g.nu) * g.nv;
-            });
-            w.sampleTests += rasterizeGrid(grid, w.tile, view.projector.nearClip);
-            grids.release(pi);
-        }
-        i = 0;
         for (int py = t.y0; py < t.y1; ++py)
             for (int px = t.x0; px < t.x1; ++px, ++i) depth[size_t(py) * width + px] = w.tile.z[i];
     });
     // A cancelled loop skips buckets: their texels were never written.
     if (loop.cancelled) std::fill(depth.begin(), depth.end(), kInf);
-    stats.pieces = pieces.size();
+    stats.pieces = pieces.pieceCount();
     for (const Worker& w : workers) {
         stats.grids += w.grids;
         stats.micropolygons += w.micropolygons;

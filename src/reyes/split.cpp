@@ -612,4 +612,23 @@ void splitSurface(const ReyesView& view, const PatchAttributes& attr, uint32_t i
     }
 }
 
+SurfaceReach surfaceReach(const ReyesView& view, const PatchAttributes& attr, uint32_t index) {
+    SurfaceReach reach;
+    const bool quadric = isQuadric(attr.kind);
+    if (!quadric)
+        for (const Vec3& c : view.patches[index].cp)
+            if (!isFinite(c)) return reach;  // splitPatch culls it
+    Piece root = rootPiece(index);
+    const PieceHull hull{view, &view.patches[index], quadric ? &view.quadrics[attr.shape] : nullptr};
+    const Verdict v = classify(view, hull, root);
+    if (v == Verdict::Cull) return reach;
+    if (!view.cull || v == Verdict::SplitNear) {
+        reach.kind = SurfaceReach::Anywhere;
+        return reach;
+    }
+    reach.kind = SurfaceReach::Bounded;
+    reach.x0 = root.x0, reach.y0 = root.y0, reach.x1 = root.x1, reach.y1 = root.y1;
+    return reach;
+}
+
 }  // namespace tessera

@@ -173,4 +173,14 @@ void splitQuadric(const ReyesView& view, const PlacedQuadric& pq, uint32_t index
 void splitPatch(const ReyesView& view, uint32_t patchIndex, float micropolygonSide, std::vector<Piece>& out,
                 SplitCounters& counters);
 
+// Where a surface's pieces can lie on screen, from its root's bound (the classification splitting starts
+// with): a piece's control hull lies inside its surface's (de Casteljau's control points are convex
+// combinations of the parent's), so its raster bound lies inside the root's. Culled: splitting would make no
+// piece; Anywhere: the root crosses the eye plane (or the view culls nothing), so it has no raster bound.
+struct SurfaceReach {
+    enum Kind : uint8_t { Culled, Bounded, Anywhere } kind = Culled;
+    float x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // Bounded: the raster bound (over the shutter and lens)
+};
+SurfaceReach surfaceReach(const ReyesView& view, const PatchAttributes& attr, uint32_t index);
+
 }  // namespace tessera

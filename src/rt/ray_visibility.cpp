@@ -22,7 +22,7 @@ void RayTracedVisibility::answer(const VisibilityQuery& q, LightSamples& ls) con
         ws.rays, ws.runs, ws.shadowIdx);
     if (ws.rays.size() == 0) return;
     // The trace stages run parallel loops; the caller may be dicing a grid that other threads wait for
-    // (Reyes' GridCache::acquire), so this thread must not pick up the caller's other tasks while it waits.
+    // (Reyes' LazyPieces::forEach), so this thread must not pick up the caller's other tasks while it waits.
     tbb::this_task_arena::isolate([&] { ws.trace.occluded(ws.rays, ws.runs, ws.blocked); });
     rt::applyShadowRays(ws.shadowIdx, ws.blocked, ls, q.points.count, nullptr);
 }
