@@ -273,6 +273,22 @@ TEST(Weld, UnifiesNearlyEqualEdgesAndLeavesDistinctOnesAlone) {
     for (int k = 0; k < 16; ++k) EXPECT_TRUE(ps[2].cp[k] == far.cp[k]);
 }
 
+// A corner whose block index does not fit 32 bits (2^31 blocks of 64 tol from the origin) is clamped and
+// taken by the pass in patch order: the pair near the origin still welds, the far patches (which share an
+// exact edge there) are left as they are.
+TEST(Weld, CornersBeyondThirtyTwoBitBlocksAreLeftToThePatchOrderPass) {
+    BezierPatch a = flatSquare(2.f, 5.f, 0.f, 0.f), b = flatSquare(2.f, 5.f, 2.f, 0.f);
+    for (int v = 0; v < 4; ++v) b.at(0, v) += Vec3{1e-7f, -1e-7f, 0.f};
+    BezierPatch farA = flatSquare(2.f, 5.f, 0.f, 0.f), farB = flatSquare(2.f, 5.f, 2.f, 0.f);
+    for (int k = 0; k < 16; ++k) farA.cp[k].x += 1e12f, farB.cp[k].x += 1e12f;
+    std::vector<BezierPatch> ps = {a, b, farA, farB};
+    const WeldResult w = weldSharedEdges(ps, 1e-5f);
+    for (int v = 0; v < 4; ++v) EXPECT_TRUE(ps[1].at(0, v) == ps[0].at(3, v)) << v;
+    EXPECT_EQ(w.cornersMoved, 2u);
+    EXPECT_EQ(w.edgesWelded, 1u);
+    for (int k = 0; k < 16; ++k) EXPECT_TRUE(ps[2].cp[k] == farA.cp[k] && ps[3].cp[k] == farB.cp[k]) << k;
+}
+
 // A 120 x 120 grid of patches whose shared control points differ by up to half the tolerance: the weld
 // (in parallel by blocks of cells, and by edge keys) must give every shared point the value of its copy in
 // the first patch in order, as one greedy pass in patch order does, and move every other copy.
@@ -430,9 +446,8 @@ TEST(LazyPieces, BucketsSeeTheUpFrontSplitsPiecesInOrder) {
         view.patches = patches.data();
         view.quadrics = quadrics.data();
         view.projector = frame.projector;
-        const DisplacementFrame disp =
-            makeDisplacementFrame(scene, frame.textures.get(), patches,
-                                  float(frame.camera.cameraFromWorld.maxStretch()));
+        const DisplacementFrame disp = makeDisplacementFrame(
+            scene, frame.textures.get(), patches, float(frame.camera.cameraFromWorld.maxStretch()));
         if (disp.any()) view.displacement = &disp;
         const Rect& region = frame.region;
         view.cullX0 = float(region.x0 - 3), view.cullY0 = float(region.y0 - 3);
@@ -457,8 +472,10 @@ TEST(LazyPieces, BucketsSeeTheUpFrontSplitsPiecesInOrder) {
                     }
                     const Piece& q = upFront[binned.pieces[k++]];
                     bool same = p.patch == q.patch && p.x0 == q.x0 && p.y0 == q.y0 && p.x1 == q.x1 &&
-                                p.y1 == q.y1 && pieceGridU(p) == pieceGridU(q) && pieceGridV(p) == pieceGridV(q);
-                    for (int i = 0; i < 4; ++i) same = same && p.uv[i].x == q.uv[i].x && p.uv[i].y == q.uv[i].y;
+                                p.y1 == q.y1 && pieceGridU(p) == pieceGridU(q) &&
+                                pieceGridV(p) == pieceGridV(q);
+                    for (int i = 0; i < 4; ++i)
+                        same = same && p.uv[i].x == q.uv[i].x && p.uv[i].y == q.uv[i].y;
                     mismatches += !same;
                 });
             mismatches += binned.start[b + 1] - k;  // pieces the lazy bucket did not see
@@ -476,6 +493,8 @@ TEST(LazyPieces, BucketsSeeTheUpFrontSplitsPiecesInOrder) {
         EXPECT_EQ(lazy.piecesBeyondSurface(), 0u);
         EXPECT_LE(lazy.peakPieces(), upFront.size());
         // Killeroo covers many bucket rows: surfaces finished above the current row are freed.
-        if (std::string(c.name) == "killeroo") EXPECT_LT(lazy.peakPieces(), upFront.size() / 2);
+        if (std::string(c.name) == "killeroo") {
+            EXPECT_LT(lazy.peakPieces(), upFront.size() / 2);
+        }
     }
 }

@@ -105,7 +105,6 @@ BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layo
     return out;
 }
 
-
 LazyPieces::LazyPieces(const ReyesView& view, const Scene& scene, float shadingRateOverride,
                        const BucketLayout& layout, int marginX, int marginY, int samplesPerPixel)
     : view_(view), scene_(scene), layout_(layout), marginX_(marginX), marginY_(marginY) {
@@ -142,8 +141,10 @@ LazyPieces::LazyPieces(const ReyesView& view, const Scene& scene, float shadingR
         slot.span = {bx0, by0, bx1, by1};
         // Micropolygons the surface's visible bound asks for, shared among its buckets.
         const Rect& r = layout.region;
-        const float w = std::clamp(reach.x1, float(r.x0), float(r.x1)) - std::clamp(reach.x0, float(r.x0), float(r.x1));
-        const float h = std::clamp(reach.y1, float(r.y0), float(r.y1)) - std::clamp(reach.y0, float(r.y0), float(r.y1));
+        const float w =
+            std::clamp(reach.x1, float(r.x0), float(r.x1)) - std::clamp(reach.x0, float(r.x0), float(r.x1));
+        const float h =
+            std::clamp(reach.y1, float(r.y0), float(r.y1)) - std::clamp(reach.y0, float(r.y0), float(r.y1));
         const float micropolygons = std::min(1e7f, w * h / (sides_[i] * sides_[i]));
         share[i] = uint64_t(micropolygons) / uint64_t((bx1 - bx0 + 1) * (by1 - by0 + 1)) + 1;
     });
@@ -188,8 +189,8 @@ void LazyPieces::split(uint32_t surface, SurfaceSlot& slot) {
     for (size_t i = 0; i < count; ++i) {
         const Piece& p = sp->pieces[i];
         BucketSpan& r = sp->spans[i];
-        layout_.overlapped(p.x0 - marginX_, p.y0 - marginY_, p.x1 + marginX_, p.y1 + marginY_, r.bx0, r.by0, r.bx1,
-                           r.by1);
+        layout_.overlapped(p.x0 - marginX_, p.y0 - marginY_, p.x1 + marginX_, p.y1 + marginY_, r.bx0, r.by0,
+                           r.bx1, r.by1);
         sp->grids[i].refs.store((r.bx1 - r.bx0 + 1) * (r.by1 - r.by0 + 1), std::memory_order_relaxed);
         if (r.bx0 < slot.span.bx0 || r.by0 < slot.span.by0 || r.bx1 > slot.span.bx1 || r.by1 > slot.span.by1)
             ++beyond_;
@@ -203,7 +204,8 @@ void LazyPieces::split(uint32_t surface, SurfaceSlot& slot) {
     while (alive > peak && !peak_.compare_exchange_weak(peak, alive, std::memory_order_relaxed)) {
     }
     slot.pieces = std::move(sp);
-    splitNs_ += uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+    splitNs_ += uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
 }
 
 void LazyPieces::release(SurfaceSlot& slot) {

@@ -92,8 +92,8 @@ class LazyPieces {
   public:
     // Pieces of about `shadingRateOverride` pixels of area when > 0, else each patch's ShadingRate; bins
     // grown by `marginX`, `marginY` (the filter radius and a pixel); `samplesPerPixel` weighs the work.
-    LazyPieces(const ReyesView& view, const Scene& scene, float shadingRateOverride, const BucketLayout& layout,
-               int marginX, int marginY, int samplesPerPixel);
+    LazyPieces(const ReyesView& view, const Scene& scene, float shadingRateOverride,
+               const BucketLayout& layout, int marginX, int marginY, int samplesPerPixel);
     ~LazyPieces();
     LazyPieces(const LazyPieces&) = delete;
     LazyPieces& operator=(const LazyPieces&) = delete;
@@ -169,8 +169,8 @@ class LazyPieces {
     const Scene& scene_;
     const BucketLayout layout_;
     const int marginX_, marginY_;
-    std::vector<float> sides_;       // per surface: its micropolygon side (ReyesView::patchSide)
-    std::vector<uint32_t> start_;    // bucket b's surfaces: surfaces_[start_[b] .. start_[b + 1])
+    std::vector<float> sides_;     // per surface: its micropolygon side (ReyesView::patchSide)
+    std::vector<uint32_t> start_;  // bucket b's surfaces: surfaces_[start_[b] .. start_[b + 1])
     std::vector<uint32_t> surfaces_;
     std::vector<uint64_t> work_;
     std::unique_ptr<SurfaceSlot[]> slots_;

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <tuple>
 #include <unordered_map>
 
@@ -59,6 +60,13 @@ void nearSides(float v, int64_t key, float side, float margin, bool& lower, bool
     upper = offset > side - margin;
 }
 
+// Lexicographic order of positions (the canonical direction of an edge, the order of the edge keys).
+bool lexLess(Vec3 a, Vec3 b) {
+    if (a.x != b.x) return a.x < b.x;
+    if (a.y != b.y) return a.y < b.y;
+    return a.z < b.z;
+}
+
 bool near(Vec3 a, Vec3 b, float tol) {
     return std::fabs(a.x - b.x) <= tol && std::fabs(a.y - b.y) <= tol && std::fabs(a.z - b.z) <= tol;
 }
@@ -80,6 +88,9 @@ void applyWeldPlan(const WeldPlan& plan, std::span<BezierPatch> patches) {
 WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* plan) {
     WeldResult result;
     if (!(tol > 0.f)) return result;
+    // Corner ids (patch * 4 + corner) and a flag share 32 bits below.
+    if (patches.size() >= (size_t(1) << 29))
+        throw std::length_error("weldSharedEdges: more than 2^29 patches");
     const float cell = tol * 4.f;
     auto keyOf = [&](Vec3 p) {
         return CellKey{int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)),
@@ -184,95 +195,109 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     // it has no corner within tol of one outside, so the pass over its corners alone decides them exactly
     // as the pass over all corners does; the corners of the other blocks take one pass in patch order.
     // (24 Big Guys: 343 K corners.)
-    const float blockSide = cell * 16.f;
-    struct CornerItem {
-        CellKey block;
-        uint32_t id;
-        bool inside;
-        bool operator<(const CornerItem& o) const {
-            return std::tie(block.x, block.y, block.z, id) < std::tie(o.block.x, o.block.y, o.block.z, o.id);
-        }
-    };
-    // Scratch arrays of several MB: on huge pages (core/buffer_allocator.h), else their first touch, one
-    // page fault per 4 KB, costs more than the pass (24 Big Guys: 55 of 95 ms in the edge keys); the items
-    // are not zero-filled first (only those flagged in `finite` / `valid`, all written, are kept).
-    std::vector<CornerItem, DefaultInitAllocator<CornerItem>> corners(patches.size() * 4);
-    std::vector<uint8_t, BufferAllocator<uint8_t>> finite(corners.size(), 0);
-    tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
-        for (int ci = 0; ci < 4; ++ci) {
-            const Vec3 p = patches[pi].cp[kCorners[ci]];
-            if (!isFinite(p)) continue;
-            CornerItem& item = corners[pi * 4 + size_t(ci)];
-            item.id = uint32_t(pi * 4 + size_t(ci));
-            item.inside = true;
-            auto axis = [&](float v, int64_t& key) {
-                key = int64_t(std::floor(v / blockSide));
-                bool lower, upper;
-                nearSides(v, key, blockSide, 1.5f * tol, lower, upper);
-                item.inside = item.inside && !lower && !upper;
-            };
-            axis(p.x, item.block.x), axis(p.y, item.block.y), axis(p.z, item.block.z);
-            finite[pi * 4 + size_t(ci)] = 1;
-        }
-    });
-    keepAndSort(corners, finite);
-    std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
-    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> ids(corners.size());
-    std::vector<uint32_t> rest;
-    for (size_t i = 0; i < corners.size(); ++i) {
-        ids[i] = corners[i].id;
-        if (i == 0 || !(corners[i].block == corners[i - 1].block)) blockStart.push_back(i);
-    }
-    blockStart.push_back(corners.size());
-    for (size_t g = 0; g + 1 < blockStart.size(); ++g) {
-        bool closed = true;
-        for (size_t i = blockStart[g]; i < blockStart[g + 1] && closed; ++i) closed = corners[i].inside;
-        if (closed)
-            closedBlocks.push_back(g);
-        else
-            rest.insert(rest.end(), ids.begin() + std::ptrdiff_t(blockStart[g]),
-                        ids.begin() + std::ptrdiff_t(blockStart[g + 1]));
-    }
-    std::sort(rest.begin(), rest.end());
-    std::vector<WeldPlan> blockPlans(plan ? closedBlocks.size() : 0);
-    std::atomic<size_t> cornersMoved{0};
-    // One atomic add per range, not per block (an add per block of 4 corners kept the pass from scaling).
-    tbb::parallel_for(
-        tbb::blocked_range<size_t>(0, closedBlocks.size()), [&](const tbb::blocked_range<size_t>& r) {
-            size_t moved = 0;
-            for (size_t b = r.begin(); b != r.end(); ++b) {
-                const size_t g = closedBlocks[b];
-                moved += snapCorners(ids.data() + blockStart[g], blockStart[g + 1] - blockStart[g],
-                                     plan ? &blockPlans[b] : nullptr);
+    // (A scope of its own: its scratch arrays are freed before the edge pass makes its own.)
+    {
+        const float blockSide = cell * 16.f;
+        // 16 bytes a corner (on big scenes this pass's arrays are the weld's memory peak): the block in
+        // 32 bits per axis, clamped (a clamped corner is never "inside": it goes to the pass in patch
+        // order), and the corner's id with its "inside" flag in the lowest bit.
+        struct CornerItem {
+            int32_t bx, by, bz;
+            uint32_t idInside;  // (patch * 4 + corner) * 2 + inside
+            uint32_t id() const { return idInside >> 1; }
+            bool inside() const { return idInside & 1u; }
+            bool sameBlock(const CornerItem& o) const { return bx == o.bx && by == o.by && bz == o.bz; }
+            bool operator<(const CornerItem& o) const {
+                return std::tie(bx, by, bz, idInside) < std::tie(o.bx, o.by, o.bz, o.idInside);
             }
-            cornersMoved += moved;
+        };
+        static_assert(sizeof(CornerItem) == 16);
+        // Scratch arrays of several MB: on huge pages (core/buffer_allocator.h), else their first touch, one
+        // page fault per 4 KB, costs more than the pass (24 Big Guys: 55 of 95 ms in the edge keys); the
+        // items are not zero-filled first (only those flagged in `finite` / `valid`, all written, are kept).
+        std::vector<CornerItem, DefaultInitAllocator<CornerItem>> corners(patches.size() * 4);
+        std::vector<uint8_t, BufferAllocator<uint8_t>> finite(corners.size(), 0);
+        tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
+            for (int ci = 0; ci < 4; ++ci) {
+                const Vec3 p = patches[pi].cp[kCorners[ci]];
+                if (!isFinite(p)) continue;
+                bool inside = true;
+                auto axis = [&](float v) {
+                    constexpr double kMax = 2147483647.0;
+                    const double cellIndex = std::floor(double(v / blockSide));
+                    const int32_t key = int32_t(std::clamp(cellIndex, -kMax, kMax));
+                    bool lower, upper;
+                    nearSides(v, key, blockSide, 1.5f * tol, lower, upper);
+                    inside = inside && !lower && !upper && std::abs(cellIndex) < kMax;
+                    return key;
+                };
+                CornerItem& item = corners[pi * 4 + size_t(ci)];
+                item.bx = axis(p.x), item.by = axis(p.y), item.bz = axis(p.z);
+                item.idInside = uint32_t(pi * 4 + size_t(ci)) * 2u + (inside ? 1u : 0u);
+                finite[pi * 4 + size_t(ci)] = 1;
+            }
         });
-    cornersMoved += snapCorners(rest.data(), rest.size(), plan);
-    if (plan)
-        for (const WeldPlan& p : blockPlans) plan->insert(plan->end(), p.begin(), p.end());
-    result.cornersMoved = cornersMoved.load();
+        keepAndSort(corners, finite);
+        std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
+        std::vector<uint32_t, DefaultInitAllocator<uint32_t>> ids(corners.size());
+        std::vector<uint32_t> rest;
+        for (size_t i = 0; i < corners.size(); ++i) {
+            ids[i] = corners[i].id();
+            if (i == 0 || !corners[i].sameBlock(corners[i - 1])) blockStart.push_back(i);
+        }
+        blockStart.push_back(corners.size());
+        for (size_t g = 0; g + 1 < blockStart.size(); ++g) {
+            bool closed = true;
+            for (size_t i = blockStart[g]; i < blockStart[g + 1] && closed; ++i) closed = corners[i].inside();
+            if (closed)
+                closedBlocks.push_back(g);
+            else
+                rest.insert(rest.end(), ids.begin() + std::ptrdiff_t(blockStart[g]),
+                            ids.begin() + std::ptrdiff_t(blockStart[g + 1]));
+        }
+        std::sort(rest.begin(), rest.end());
+        std::vector<WeldPlan> blockPlans(plan ? closedBlocks.size() : 0);
+        std::atomic<size_t> cornersMoved{0};
+        // One atomic add per range, not per block (an add per block of 4 corners kept the pass from scaling).
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(0, closedBlocks.size()), [&](const tbb::blocked_range<size_t>& r) {
+                size_t moved = 0;
+                for (size_t b = r.begin(); b != r.end(); ++b) {
+                    const size_t g = closedBlocks[b];
+                    moved += snapCorners(ids.data() + blockStart[g], blockStart[g + 1] - blockStart[g],
+                                         plan ? &blockPlans[b] : nullptr);
+                }
+                cornersMoved += moved;
+            });
+        cornersMoved += snapCorners(rest.data(), rest.size(), plan);
+        if (plan)
+            for (const WeldPlan& p : blockPlans) plan->insert(plan->end(), p.begin(), p.end());
+        result.cornersMoved = cornersMoved.load();
+    }
     // 2. Edges: key by their (now exactly shared) end corners, in canonical order. An edge welds onto the
     // first earlier edge of its key that matches; a weld writes only the edge's two inner control points,
     // which belong to no other edge, and reads only edges of the same key. So the keys are independent:
     // the edges are sorted by (key, patch, edge) and each key's group is welded in patch order, the groups
     // in parallel (24 Big Guys: 343 K edges), with the same result as one pass in patch order.
-    auto lexLess = [](Vec3 a, Vec3 b) {
-        if (a.x != b.x) return a.x < b.x;
-        if (a.y != b.y) return a.y < b.y;
-        return a.z < b.z;
-    };
+    // Keyed by the end corners' exact positions (28 bytes an item: what the pass's memory peak is made of
+    // on big scenes): edges weld only onto edges with the same two corners, so grouping by them gives
+    // what grouping by coarser cells did. -0 and +0 compare equal, so they share a group; the item's id
+    // (patch * 4 + edge) makes the order total, so the parallel sort is deterministic.
     struct EdgeItem {
-        CellKey a, b;
-        uint32_t patch;
-        int edge;
+        Vec3 a, b;
+        uint32_t id;
+        uint32_t patch() const { return id / 4; }
+        int edge() const { return int(id % 4); }
         bool operator<(const EdgeItem& o) const {
-            auto tie = [](const EdgeItem& i) {
-                return std::tie(i.a.x, i.a.y, i.a.z, i.b.x, i.b.y, i.b.z, i.patch, i.edge);
-            };
-            return tie(*this) < tie(o);
+            if (lexLess(a, o.a)) return true;
+            if (lexLess(o.a, a)) return false;
+            if (lexLess(b, o.b)) return true;
+            if (lexLess(o.b, b)) return false;
+            return id < o.id;
         }
         bool sameKey(const EdgeItem& o) const { return a == o.a && b == o.b; }
     };
+    static_assert(sizeof(EdgeItem) == 28);
     std::vector<EdgeItem, DefaultInitAllocator<EdgeItem>> items(patches.size() * 4);
     std::vector<uint8_t, BufferAllocator<uint8_t>> valid(items.size(), 0);
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
@@ -281,7 +306,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
             Vec3 a = patch.cp[edgeIndex(e, 0)], b = patch.cp[edgeIndex(e, 3)];
             if (!isFinite(a) || !isFinite(b)) continue;
             if (lexLess(b, a)) std::swap(a, b);
-            items[pi * 4 + size_t(e)] = {keyOf(a), keyOf(b), uint32_t(pi), e};
+            items[pi * 4 + size_t(e)] = {a, b, uint32_t(pi * 4 + size_t(e))};
             valid[pi * 4 + size_t(e)] = 1;
         }
     });
@@ -299,13 +324,13 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
             for (size_t g = range.begin(); g != range.end(); ++g) {
                 list.clear();
                 for (size_t i = groups[g]; i < groups[g + 1]; ++i) {
-                    const uint32_t pi = items[i].patch;
-                    const int e = items[i].edge;
+                    const uint32_t pi = items[i].patch();
+                    const int e = items[i].edge();
                     BezierPatch& patch = patches[pi];
                     bool welded = false;
                     for (const EdgeItem* other : list) {
-                        const BezierPatch& q = patches[other->patch];
-                        Vec3 qa = q.cp[edgeIndex(other->edge, 0)], qd = q.cp[edgeIndex(other->edge, 3)];
+                        const BezierPatch& q = patches[other->patch()];
+                        Vec3 qa = q.cp[edgeIndex(other->edge(), 0)], qd = q.cp[edgeIndex(other->edge(), 3)];
                         Vec3 pa = patch.cp[edgeIndex(e, 0)], pd = patch.cp[edgeIndex(e, 3)];
                         bool same = qa == pa && qd == pd, reversed = qa == pd && qd == pa;
                         for (int dir = 0; dir < 2 && !welded; ++dir) {
@@ -313,14 +338,14 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                             bool match = true;
                             for (int k = 1; k <= 2 && match; ++k)
                                 match = near(patch.cp[edgeIndex(e, k)],
-                                             q.cp[edgeIndex(other->edge, dir == 0 ? k : 3 - k)], tol);
+                                             q.cp[edgeIndex(other->edge(), dir == 0 ? k : 3 - k)], tol);
                             if (!match) continue;
                             bool changed = false;
                             for (int k = 1; k <= 2; ++k) {
-                                const int srcCp = edgeIndex(other->edge, dir == 0 ? k : 3 - k);
+                                const int srcCp = edgeIndex(other->edge(), dir == 0 ? k : 3 - k);
                                 if (plan)
                                     groupPlans[g].push_back(
-                                        {pi, other->patch, uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
+                                        {pi, other->patch(), uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
                                 Vec3 src = q.cp[srcCp];
                                 Vec3& dst = patch.cp[edgeIndex(e, k)];
                                 changed |= !(dst == src);
