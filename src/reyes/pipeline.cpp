@@ -105,6 +105,27 @@ BucketedPieces binPieces(std::span<const Piece> pieces, const BucketLayout& layo
     return out;
 }
 
+namespace {
+// About the micropolygons a patch dices into, for the progress: the grid its root piece would take
+// (pieceGridU x pieceGridV) with each boundary measured by its projected control polygon, which bounds the
+// curve's length; the dicing rounds the same way (opposite edges' longer one, both sides counted).
+float rootGridEstimate(const ReyesView& view, const BezierPatch& patch, float side) {
+    Vec3 r[16];
+    for (int k = 0; k < 16; ++k) r[k] = view.projector.toRaster(patch.cp[k]);
+    auto polyline = [&](int first, int stride) {
+        float len = 0.f;
+        for (int k = 0; k < 3; ++k) {
+            const Vec3 a = r[first + k * stride], b = r[first + (k + 1) * stride];
+            len += std::sqrt((b.x - a.x) * (b.x - a.x) + (b.y - a.y) * (b.y - a.y));
+        }
+        return len;
+    };
+    const float u = std::max(polyline(0, 1), polyline(12, 1)) / side;
+    const float v = std::max(polyline(0, 4), polyline(3, 4)) / side;
+    return std::max(1.f, std::ceil(u)) * std::max(1.f, std::ceil(v));
+}
+}  // namespace
+
 LazyPieces::LazyPieces(const ReyesView& view, const Scene& scene, float shadingRateOverride,
                        const BucketLayout& layout, int marginX, int marginY, int samplesPerPixel)
     : view_(view), scene_(scene), layout_(layout), marginX_(marginX), marginY_(marginY) {
@@ -139,13 +160,19 @@ LazyPieces::LazyPieces(const ReyesView& view, const Scene& scene, float shadingR
                           reach.x1 + marginX + allowance(reach.x1), reach.y1 + marginY + allowance(reach.y1),
                           bx0, by0, bx1, by1);
         slot.span = {bx0, by0, bx1, by1};
-        // Micropolygons the surface's visible bound asks for, shared among its buckets.
+        // The micropolygons it will make, for the progress (a quadric's: its raster bound's area), the part
+        // in the region in proportion to its bound's, shared among its buckets.
         const Rect& r = layout.region;
+        const float boundArea = (reach.x1 - reach.x0) * (reach.y1 - reach.y0);
         const float w =
             std::clamp(reach.x1, float(r.x0), float(r.x1)) - std::clamp(reach.x0, float(r.x0), float(r.x1));
         const float h =
             std::clamp(reach.y1, float(r.y0), float(r.y1)) - std::clamp(reach.y0, float(r.y0), float(r.y1));
-        const float micropolygons = std::min(1e7f, w * h / (sides_[i] * sides_[i]));
+        const float grid = isQuadric(scene.attributes[i].kind)
+                               ? boundArea / (sides_[i] * sides_[i])
+                               : rootGridEstimate(view_, view_.patches[i], sides_[i]);
+        const float inRegion = boundArea > 0.f ? w * h / boundArea : 0.f;
+        const float micropolygons = std::min(1e7f, grid * inRegion);
         share[i] = uint64_t(micropolygons) / uint64_t((bx1 - bx0 + 1) * (by1 - by0 + 1)) + 1;
     });
     // CSR bins in surface order (the order every bucket must meet them in).
