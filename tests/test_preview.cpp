@@ -256,11 +256,11 @@ TEST(Preview, TheViewerAssemblesTheImageTheRenderWrites) {
     struct Case {
         const char* scene;
         const char* options;
-        int updates;  // one per bucket: Reyes 8 px (12 x 9), the ray tracer at least 48 px at 4 spp (2 x 2)
+        int updates;  // one per bucket: Reyes 8 px (12 x 9), the ray tracer 32 px at 4 spp (3 x 3)
     };
     for (const Case& c :
-         {Case{"s.rib", "--engine reyes", 108}, Case{"s.rib", "--engine rt", 4},
-          Case{"s.rib", "--engine rt --spp 8 --passes 2", 8}, Case{"bg.rib", "--engine reyes", 108}}) {
+         {Case{"s.rib", "--engine reyes", 108}, Case{"s.rib", "--engine rt", 9},
+          Case{"s.rib", "--engine rt --spp 8 --passes 2", 18}, Case{"bg.rib", "--engine reyes", 108}}) {
         SCOPED_TRACE(std::string(c.scene) + " " + c.options);
         FakeTev server;
         ASSERT_TRUE(server.listening());
