@@ -730,6 +730,9 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
         // shadow ray may differ (below).
         EXPECT_TRUE(differing == 0 || d.psnrColor > 60.0) << what;
         EXPECT_GT(binned.stats["hits"]["primary"].get<uint64_t>(), 1000u) << what;
+        std::printf("  binned rays sent down a patch's tree per ray: %llu\n",
+                    (unsigned long long)binned.stats["binning_root_pairs"].get<uint64_t>());
+        EXPECT_EQ(traversed.stats["binning_root_pairs"].get<uint64_t>(), 0u) << what;
         std::printf("  shadow ray lists binned %llu, traversed %llu\n",
                     (unsigned long long)binned.stats["shadow_lists"]["binned"].get<uint64_t>(),
                     (unsigned long long)binned.stats["shadow_lists"]["traversed"].get<uint64_t>());
@@ -744,7 +747,10 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
         loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/teapot.rib", [](const std::string&) {});
     teapot.camera.width = 240;
     teapot.camera.height = 180;
-    compare(teapot, "teapot.rib");
+    const RenderResult tp = compare(teapot, "teapot.rib");
+    // Both ways of the binning stages run: small patches' rays go down their trees per ray (the others'
+    // leaves are found in screen space, which the orthographic view below uses throughout).
+    EXPECT_GT(tp.stats["binning_root_pairs"].get<uint64_t>(), 0u);
     Scene twoLights = teapot;
     twoLights.lights.push_back({LightType::Distant, {0.5f, 0.5f, 0.5f}, {0, 0, 0}, {1.f, -0.3f, 0.2f}});
     compare(twoLights, "teapot, two distant lights");

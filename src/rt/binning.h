@@ -50,7 +50,8 @@ struct ParallelBinning {
 
 // Scratch of the binning stages, reused from list to list.
 struct BinningScratch {
-    std::vector<Candidate> found;       // candidates in the order found
+    CandidateVector found;              // candidates in the order found
+    CandidateVector roots;              // (ray, patch) pairs left to the per-ray subpatch descent
     std::vector<uint32_t> start, next;  // grouping by ray
     ParallelBinning parallel;
 };

@@ -370,6 +370,4 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     });
 }
 
-// How the traversal stage finds a list's candidates: per ray (traverseList), or by binning the camera rays
-
 }  // namespace tessera::rt

@@ -91,10 +91,14 @@ struct Candidate {
     float tEnter;
 };
 
+// Candidate lists grown without zeroing (written through raw pointers).
+using CandidateVector = std::vector<Candidate, DefaultInitAllocator<Candidate>>;
+
 // Counters of one chunk of a stage (merged in chunk order).
 struct StageCounters {
     uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
     uint64_t timeCulled = 0;  // candidates of moving patches whose leaf box at the ray's time is missed
+    uint64_t rootPairs = 0;   // binning: (ray, patch) pairs sent down their subpatch trees per ray
     std::array<uint64_t, kHistBins> hist{};
 };
 
@@ -117,7 +121,7 @@ inline void sortSegmentByEntry(Candidate* cand, size_t begin, size_t end) {
 // output of every candidate stage and the input of the Newton stage.
 struct Chunk {
     // Written through a raw pointer by the traversal (grown without zeroing), read by index.
-    std::vector<Candidate, DefaultInitAllocator<Candidate>> cand;
+    CandidateVector cand;
     std::vector<uint32_t> segEnd;  // per ray of the chunk: end of its candidates
     StageCounters c;               // counters of this chunk (merged in chunk order)
 };

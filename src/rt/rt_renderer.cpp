@@ -981,11 +981,10 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
                     "(--engine reyes displaces them)");
                 break;
             }
-    // Binning (camera and shadow rays) pays when the subpatch leaves are few compared with the samples, i.e.
-    // boxes cover several samples each: the per-tile descent then replaces many per-ray box tests. With
-    // many small leaves the descent costs more than the traversal it replaces (teapot 0.001 and bigguy
-    // 0.19 leaves per sample: binning faster; killeroo 0.38: equal; killeroo2 0.77, bigguy9 1.07, bigguy24
-    // 2.85: the traversal faster).
+    // Binning (camera and shadow rays) replaces the per-ray BVH walk by one projection of the patches'
+    // boxes; patches whose rectangles hold few rays per leaf then go down their trees per ray. It pays
+    // unless the leaves far outnumber the samples (TraceService::binningPays: teapot 0.001 ... 24 Big Guys
+    // 2.85 leaves per sample, all faster binned).
     const double leavesPerSample =
         TraceService::leavesPerSample(acc, double(cam.width) * double(cam.height) * double(nx * ny));
     // The binning stages group the candidates of the boxes swept over the whole shutter; with time slabs
@@ -1108,6 +1107,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     s["candidates"] = total.candidates;
     s["candidates_per_ray"] = totalRays ? double(total.candidates) / double(totalRays) : 0.0;
     s["box_tests"] = total.boxTests;
+    s["binning_root_pairs"] = total.rootPairs;  // binned rays that went down a patch's tree per ray
     s["newton_runs"] = total.newtonRuns;
     s["hull_culled"] = total.hullCulled;
     s["time_culled"] = total.timeCulled;

@@ -12,7 +12,7 @@ namespace rt {
 void TraceCounters::add(const TraceCounters& c) {
     for (int k = 0; k < kKinds; ++k) rays[k] += c.rays[k], hits[k] += c.hits[k];
     candidates += c.candidates, newtonRuns += c.newtonRuns, newtonIterations += c.newtonIterations;
-    boxTests += c.boxTests, hullCulled += c.hullCulled, timeCulled += c.timeCulled;
+    boxTests += c.boxTests, hullCulled += c.hullCulled, timeCulled += c.timeCulled, rootPairs += c.rootPairs;
     shadowListsBinned += c.shadowListsBinned, shadowListsTraversed += c.shadowListsTraversed;
     for (int i = 0; i < kHistBins; ++i) hist[i] += c.hist[i];
     traversalMs += c.traversalMs, newtonMs += c.newtonMs;
@@ -78,7 +78,7 @@ void TraceService::traceList(const RayList& rays, std::vector<RayHit>& hits, boo
         const StageCounters& c = chunks_[ci].c;
         c_.candidates += c.candidates, c_.newtonRuns += c.newtonRuns;
         c_.newtonIterations += c.newtonIterations, c_.boxTests += c.boxTests;
-        c_.hullCulled += c.hullCulled, c_.timeCulled += c.timeCulled;
+        c_.hullCulled += c.hullCulled, c_.timeCulled += c.timeCulled, c_.rootPairs += c.rootPairs;
         for (int i = 0; i < kHistBins; ++i) c_.hist[i] += c.hist[i];
     }
     for (size_t r = 0; r < rays.size(); ++r) {
@@ -143,8 +143,7 @@ bool traceRayScalar(const RtAccel& acc, const Ray& ray, const TraceOptions& opt,
                     acc.placement(patch)) {  // the prototype's tree, ray moved there
                 const Vec3 boxO = affinePoint(pl->toPrototype, r.o);
                 const Vec3 boxInv = safeInverse(affineVector(pl->toPrototype, r.d));
-                if (intersectPatchTree<float>(acc.patches[patch], acc.forest,
-                                              acc.tree(patch),
+                if (intersectPatchTree<float>(acc.patches[patch], acc.forest, acc.tree(patch),
                                               enlargedHull(acc.patches[patch]), boxO, boxInv, r, h, nullptr,
                                               nullptr, nullptr, accept) &&
                     record(h))

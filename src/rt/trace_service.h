@@ -32,7 +32,7 @@ namespace rt {
 struct TraceCounters {
     uint64_t rays[kKinds] = {}, hits[kKinds] = {};
     uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
-    uint64_t timeCulled = 0;
+    uint64_t timeCulled = 0, rootPairs = 0;
     uint64_t shadowListsBinned = 0, shadowListsTraversed = 0;  // shadow lists by how candidates were found
     std::array<uint64_t, kHistBins> hist{};
     double traversalMs = 0, newtonMs = 0;  // CPU time of the candidate and Newton stages
@@ -50,10 +50,11 @@ class TraceService {
   public:
     explicit TraceService(const RtAccel& acc, TraceServiceOptions opt = {}) : acc_(&acc), opt_(opt) {}
 
-    // Binning pays when the subpatch leaves are few compared with the camera samples (boxes cover several
-    // samples each). Measured crossover (800x600, 4 spp, docs/rt.md): about 0.4 leaves per sample.
+    // Binning pays unless the subpatch leaves far outnumber the camera samples. With the per-ray descent
+    // of small patches (rt/binning.cpp) it is faster up to 2.85 leaves per sample (24 Big Guys, 800x600,
+    // 4 spp), as fast at 5.7 and 11.4, slower at 45 and 180 (docs/rt.md).
     static double leavesPerSample(const RtAccel& acc, double samples);
-    static bool binningPays(double leavesPerSample) { return leavesPerSample <= 0.4; }
+    static bool binningPays(double leavesPerSample) { return leavesPerSample <= 4.0; }
 
     // Closest hit per ray (kShadow rays: the first accepted hit). `camera`: the rays are the camera rays
     // of these samples (then binned in screen space if binning is on).

@@ -173,6 +173,98 @@ TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Can
 }
 #endif
 
+// The subpatch trees of the pairs sc.pairs (their rays' boxes in sc.ray4, sc.boxO, sc.boxInv), level by
+// level, in batches of pairs: the leaf candidates appended to out from index `used` in pair order (each
+// pair's in depth-first order), count[pair.ray] incremented per candidate. `out`'s size is its room (grown
+// without zeroing); returns the new number of candidates. All candidates of a batch are written by one
+// level (the leaves' parents).
+template <bool kAvx2>
+[[gnu::always_inline]] inline size_t descendPairs(const RtAccel& acc, const RayList& rays,
+                                                  TraverseScratch& sc, CandidateVector& out, size_t used,
+                                                  uint32_t* count, uint64_t& boxTests) {
+    const SubpatchForest& forest = acc.forest;
+    const uint32_t firstLeaf = forest.firstLeaf();
+    const uint32_t depth = uint32_t(forest.depth);
+    const uint32_t nQuads = forest.quadsPerPatch;
+    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
+    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
+    Candidate* cand = out.data();
+    auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
+        if (out.capacity() < used + more) out.reserve(std::max(used + more, 2 * out.capacity()));
+        out.resize(out.capacity());
+        cand = out.data();
+    };
+    const uint32_t nPairs = uint32_t(sc.pairs.size());
+    for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
+        const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
+        const PatchPair* pairs = sc.pairs.data() + pb;
+        if (firstLeaf == 0) {
+            candRoom(nb);
+            for (uint32_t p = 0; p < nb; ++p) {
+                cand[used++] = {pairs[p].rayId, pairs[p].patch, 0, pairs[p].te};
+                ++count[pairs[p].ray];
+            }
+            continue;
+        }
+        if (sc.items.size() < nb) sc.items.resize(nb);
+        for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
+        uint32_t nItems = nb, lvl = 0;
+        for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
+            boxTests += 4 * uint64_t(nItems);
+            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
+            if (lvl + 2 < depth) {
+                // Inner level: the hit children in hit order.
+                if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
+#if TESSERA_RT_AVX2
+                if constexpr (kAvx2)
+                    nItems = innerLevelAvx2(in, sc.next.data());
+                else
+#endif
+                    nItems = innerLevel(in, sc.next.data());
+                std::swap(sc.items, sc.next);
+                continue;
+            }
+            // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
+            // entry distance gives the same order, as equal distances keep their lane order either way).
+            // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
+            const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
+            candRoom(4 * size_t(nItems) + 1);
+#if TESSERA_RT_AVX2
+            if constexpr (kAvx2)
+                used = leafLevelAvx2(in, leafQuadFirst, cand, used, count);
+            else
+#endif
+                used = leafLevel(in, leafQuadFirst, cand, used, count);
+            nItems = 0;
+        }
+        // Odd depth: the pairs of leaves below the nodes of level depth - 1.
+        boxTests += 2 * uint64_t(nItems);
+        if (nItems > 0) candRoom(2 * size_t(nItems));
+        for (uint32_t j = 0; j < nItems; ++j) {
+            const uint32_t it = sc.items[j];
+            const PatchPair& pp = pairs[it >> kItemQuadBits];
+            const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
+            const size_t r = pp.rayId;
+            const PairRay pr(sc.boxO[pp.ray4], sc.boxInv[pp.ray4]);
+            float tn[2], tf[2];
+            const int mask =
+                rayBoxPair(forest.oddLeaves.data() + (size_t(acc.tree(pp.patch)) << depth) + (m - firstLeaf),
+                           pr, rays.tmin[r], rays.tmax[r], tn, tf);
+            const float ta = tn[0], tb = tn[1];
+            const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
+            const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
+            const bool swap = hb && (!ha || tb < ta);
+            const size_t u0 = used;
+            if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
+            if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
+            count[pp.ray] += uint32_t(used - u0);
+        }
+    }
+
+    return used;
+}
+
 // Whether the AVX2 kernels run: the CPU has AVX2 and rtUseAvx2 has not turned them off.
 std::atomic<bool> gAvx2Allowed{true};
 bool cpuHasAvx2() {
@@ -192,12 +284,7 @@ template <bool kAvx2>
     const size_t n = rays.size();
     const Bvh& bvh = acc.bvh;
     const SubpatchForest& forest = acc.forest;
-    const uint32_t firstLeaf = forest.firstLeaf();
-    const uint32_t depth = uint32_t(forest.depth);
     const float ignoreT = 8.f * acc.offset;
-    const uint32_t nQuads = forest.quadsPerPatch;
-    // Nodes of level 2 * (depth / 2) in heap numbering are 2^level - 1 + (item quad - nQuads).
-    const uint32_t pairNodeBias = (1u << (2 * (depth / 2))) - 1u - nQuads;
     const bool slabbed = forest.slabCount > 0;
     thread_local TraverseScratch scratch;
     TraverseScratch& sc = scratch;
@@ -273,82 +360,9 @@ template <bool kAvx2>
         }
     }
 
-    // Subpatch trees of all pairs, level by level, in batches of pairs; candidates in pair order. All
-    // candidates of a batch are written by one level (the leaves' parents).
-    const uint32_t nPairs = uint32_t(sc.pairs.size());
-    Candidate* cand = nullptr;
-    size_t used = 0;
-    auto candRoom = [&](size_t more) {  // the vector's size is the room (no zeroing)
-        if (ch.cand.capacity() < used + more) ch.cand.reserve(std::max(used + more, 2 * ch.cand.capacity()));
-        ch.cand.resize(ch.cand.capacity());
-        cand = ch.cand.data();
-    };
-    for (uint32_t pb = 0; pb < nPairs; pb += kMaxBatchPairs) {
-        const uint32_t nb = std::min(kMaxBatchPairs, nPairs - pb);
-        const PatchPair* pairs = sc.pairs.data() + pb;
-        if (firstLeaf == 0) {
-            candRoom(nb);
-            for (uint32_t p = 0; p < nb; ++p) {
-                cand[used++] = {uint32_t(r0) + pairs[p].ray, pairs[p].patch, 0, pairs[p].te};
-                ++sc.count[pairs[p].ray];
-            }
-            continue;
-        }
-        if (sc.items.size() < nb) sc.items.resize(nb);
-        for (uint32_t p = 0; p < nb; ++p) sc.items[p] = p << kItemQuadBits;
-        uint32_t nItems = nb, lvl = 0;
-        for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
-            boxTests += 4 * uint64_t(nItems);
-            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
-            if (lvl + 2 < depth) {
-                // Inner level: the hit children in hit order.
-                if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
-#if TESSERA_RT_AVX2
-                if constexpr (kAvx2)
-                    nItems = innerLevelAvx2(in, sc.next.data());
-                else
-#endif
-                    nItems = innerLevel(in, sc.next.data());
-                std::swap(sc.items, sc.next);
-                continue;
-            }
-            // Leaf level: the candidates of a quad in lane order (not sorted: the final stable sort by
-            // entry distance gives the same order, as equal distances keep their lane order either way).
-            // Quads whose grandchildren are leaves: nQuads - 4^(depth/2 - 1) .. nQuads - 1.
-            const uint32_t leafQuadFirst = nQuads - (1u << (depth - 2));
-            candRoom(4 * size_t(nItems) + 1);
-#if TESSERA_RT_AVX2
-            if constexpr (kAvx2)
-                used = leafLevelAvx2(in, leafQuadFirst, cand, used, sc.count.data());
-            else
-#endif
-                used = leafLevel(in, leafQuadFirst, cand, used, sc.count.data());
-            nItems = 0;
-        }
-        // Odd depth: the pairs of leaves below the nodes of level depth - 1.
-        boxTests += 2 * uint64_t(nItems);
-        if (nItems > 0) candRoom(2 * size_t(nItems));
-        for (uint32_t j = 0; j < nItems; ++j) {
-            const uint32_t it = sc.items[j];
-            const PatchPair& pp = pairs[it >> kItemQuadBits];
-            const uint32_t m = 2 * ((it & kItemQuadMask) + pairNodeBias) + 1;
-            const size_t r = r0 + pp.ray;
-            const PairRay pr(sc.boxO[pp.ray4], sc.boxInv[pp.ray4]);
-            float tn[2], tf[2];
-            const int mask =
-                rayBoxPair(forest.oddLeaves.data() + (size_t(acc.tree(pp.patch)) << depth) + (m - firstLeaf),
-                           pr, rays.tmin[r], rays.tmax[r], tn, tf);
-            const float ta = tn[0], tb = tn[1];
-            const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
-            const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
-            const bool swap = hb && (!ha || tb < ta);
-            const size_t u0 = used;
-            if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
-            if (ha) cand[used++] = {uint32_t(r), pp.patch, m - firstLeaf, ta};
-            if (hb && !swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
-            sc.count[pp.ray] += uint32_t(used - u0);
-        }
-    }
+    // Subpatch trees of all pairs, level by level; candidates in pair order.
+    const size_t used = descendPairs<kAvx2>(acc, rays, sc, ch.cand, 0, sc.count.data(), boxTests);
+    Candidate* cand = ch.cand.data();
 
     // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
     // nearly sorted).
@@ -364,6 +378,58 @@ template <bool kAvx2>
     ch.c.candidates = used;
     ch.c.boxTests = boxTests;
 }
+
+constexpr size_t kRootBatch = 1024;
+
+// descendRootPairs (see there) for the SSE2 or the AVX2 kernels.
+template <bool kAvx2>
+[[gnu::always_inline]] inline void rootPairs(const RtAccel& acc, const RayList& rays,
+                                             std::span<const Candidate> roots, bool cull,
+                                             CandidateVector& out, uint64_t& boxTests) {
+    thread_local TraverseScratch scratch;
+    TraverseScratch& sc = scratch;
+    const SubpatchForest& forest = acc.forest;
+    const float ignoreT = 8.f * acc.offset;
+    const size_t n = rays.size();
+    // Every ray of the list (a tile's camera rays or a light's shadow rays: a few thousand) with its boxes'
+    // form, as traverseChunk makes it.
+    sc.ray4.resize(n);
+    sc.boxO.resize(n);
+    sc.boxInv.resize(n);
+    for (size_t r = 0; r < n; ++r) {
+        sc.boxO[r] = rays.o[r], sc.boxInv[r] = safeInverse(rays.d[r]);
+        sc.ray4[r] = Ray4(rays.o[r], sc.boxInv[r], rays.tmin[r], rays.tmax[r]);
+    }
+    sc.count.assign(n, 0);
+    const bool canCull = cull && !forest.backfacing.empty();
+    // In batches of pairs, so that the level lists and the candidates' room stay small (a tile's camera
+    // rays may have 70 k roots on Big Guy; one batch took 280 k candidates' room for 70 k candidates).
+    size_t used = out.size();
+    for (size_t b = 0; b < roots.size(); b += kRootBatch) {
+        sc.pairs.clear();
+        for (const Candidate& c : roots.subspan(b, std::min(kRootBatch, roots.size() - b))) {
+            const uint32_t r = c.ray, patch = c.patch;
+            const bool cullRay = canCull && rays.kind[r] == kPrimary;
+            const float selfT = patch == rays.ignore[r] ? ignoreT : -std::numeric_limits<float>::infinity();
+            sc.pairs.push_back(
+                {splatF4(selfT), forest.quadTree(patch), cullRay ? forest.quadBackBits(patch) : nullptr,
+                 cullRay ? forest.backfaceBits(patch) : nullptr, r, patch, r, c.tEnter, selfT, r});
+        }
+        used = descendPairs<kAvx2>(acc, rays, sc, out, used, sc.count.data(), boxTests);
+    }
+    out.resize(used);
+}
+
+void rootPairsSse2(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots, bool cull,
+                   CandidateVector& out, uint64_t& boxTests) {
+    rootPairs<false>(acc, rays, roots, cull, out, boxTests);
+}
+#if TESSERA_RT_AVX2
+TESSERA_AVX2 void rootPairsAvx2(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots,
+                                bool cull, CandidateVector& out, uint64_t& boxTests) {
+    rootPairs<true>(acc, rays, roots, cull, out, boxTests);
+}
+#endif
 
 void traverseChunkSse2(const RtAccel& acc, const RayList& rays, Chunk& ch, size_t ci, bool cull) {
     traverseChunk<false>(acc, rays, ch, ci, cull);
@@ -392,7 +458,14 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
                       [&](size_t ci) { traverseChunkSse2(acc, rays, chunks[ci], ci, cull); });
 }
 
-// The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
+void descendRootPairs(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots, bool cull,
+                      CandidateVector& out, uint64_t& boxTests) {
+#if TESSERA_RT_AVX2
+    if (cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed))
+        return rootPairsAvx2(acc, rays, roots, cull, out, boxTests);
+#endif
+    rootPairsSse2(acc, rays, roots, cull, out, boxTests);
+}
 
 }  // namespace rt
 

@@ -1,6 +1,7 @@
 // The per-ray traversal stage: candidates (Newton starts) of every ray of a list, through the 4-wide BVH
 // and then all (ray, patch) pairs of a chunk down their subpatch trees level by level.
 #pragma once
+#include <span>
 #include <vector>
 
 #include "rt/accel.h"
@@ -37,6 +38,14 @@ namespace rt {
 //
 // `cull`: camera rays skip back-facing subpatches (--cull-backfaces). Runs tbb over chunks of kChunk rays.
 void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull);
+
+// The subpatch half of the traversal for (ray, patch) pairs found another way (the binning stages): each
+// root candidate names a ray of `rays` whose patch's root box it hits (entry distance tEnter; its leaf is
+// not read). Their leaf candidates are appended to `out`, pair by pair, each pair's as traverseList finds
+// them below that patch (the same boxes, rules and self-intersection cut). The accel's own trees only:
+// no instancing, no time slabs. Runs in the caller's thread.
+void descendRootPairs(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots, bool cull,
+                      CandidateVector& out, uint64_t& boxTests);
 
 }  // namespace rt
 }  // namespace tessera
