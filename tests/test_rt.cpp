@@ -779,6 +779,74 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
     compare(ortho, "orthographic teapot");
 }
 
+TEST(RtHierarchy, QuantizedQuadsHoldTheirBoxesTightly) {
+    // quantizeQuad stores four boxes in 8 bits per bound in a frame (here their union, or a larger parent
+    // box): each decoded box must hold its box (whatever the rounding of the decode), lie inside the frame
+    // and be at most a step of the frame larger per side; an empty box decodes to a point. Boxes near the
+    // origin and far from it (a small extent at 1e6, where one step is a few ulps), flat ones (zero extent
+    // on an axis) and empty ones.
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> U(0.f, 1.f);
+    int loose = 0, checked = 0;
+    for (int trial = 0; trial < 4000; ++trial) {
+        const float offset = trial % 4 == 0 ? 1e6f : (trial % 4 == 1 ? -3.f : 0.f);
+        const float size = trial % 3 == 0 ? 1e-3f : 2.f;
+        Bounds3 b[4];
+        for (int c = 0; c < 4; ++c)
+            for (int a = 0; a < 3; ++a) {
+                const float x = offset + size * U(rng), y = offset + size * U(rng);
+                b[c].lo[a] = std::min(x, y);
+                b[c].hi[a] = (trial % 7 == 0 && a == 1) ? b[c].lo[a] : std::max(x, y);
+            }
+        if (trial % 11 == 0) b[trial % 4] = Bounds3();  // empty
+        SubpatchQuad q;
+        Bounds3 frame;
+        for (int c = 0; c < 4; ++c)
+            if (b[c].lo.x <= b[c].hi.x) frame.extend(b[c]);
+        if (trial % 5 == 0) {  // a parent box larger than the union
+            frame.lo = frame.lo - Vec3{0.1f, 0.2f, 0.f} * size;
+            frame.hi = frame.hi + Vec3{0.3f, 0.f, 0.1f} * size;
+            quantizeQuad(b, frame, q);
+        } else {
+            quantizeQuad(b, q);
+        }
+        for (int c = 0; c < 4; ++c) {
+            const Bounds3 d = q.box(c);
+            for (int a = 0; a < 3; ++a) {
+                EXPECT_GE(d.lo[a], frame.lo[a]) << "trial " << trial;
+                EXPECT_LE(d.hi[a], frame.hi[a]) << "trial " << trial;
+            }
+            const float mag = std::max(std::fabs(frame.lo.x), std::fabs(frame.hi.x)) + 1.f;
+            if (b[c].lo.x > b[c].hi.x) {
+                for (int a = 0; a < 3; ++a) EXPECT_NEAR(d.lo[a], d.hi[a], 4e-7f * mag) << "trial " << trial;
+                continue;
+            }
+            for (int a = 0; a < 3; ++a) {
+                ++checked;
+                // Both ways a decode may round (separately or, where the build has FMA, fused).
+                const float step = q.step(a);
+#if defined(__FMA__)
+                const int ways = 2;
+#else
+                const int ways = 1;
+#endif
+                for (int fused = 0; fused < ways; ++fused) {
+                    const float lo = fused ? std::fma(float(q.lo[a][c]), step, q.frameLo[a]) : d.lo[a];
+                    const float hi = fused ? std::fma(-float(q.hi[a][c]), step, q.frameHi[a]) : d.hi[a];
+                    ASSERT_LE(lo, b[c].lo[a]) << "trial " << trial << " box " << c << " axis " << a;
+                    ASSERT_GE(hi, b[c].hi[a]) << "trial " << trial << " box " << c << " axis " << a;
+                }
+                // One step, plus the rounding of a decode near the frame's magnitude.
+                const float m = std::max(std::fabs(q.frameLo[a]), std::fabs(q.frameHi[a]));
+                const float ulps = 4.f * m * 1.2e-7f;
+                if (b[c].lo[a] - d.lo[a] > step + ulps || d.hi[a] - b[c].hi[a] > step + ulps) ++loose;
+            }
+        }
+    }
+    std::printf("%d of %d decoded bounds looser than one step of their frame\n", loose, checked);
+    EXPECT_EQ(loose, 0);
+}
+
 TEST(RtHierarchy, LeafMaxCoefficientBoundsTheLeaf) {
     // leafMaxCoefficient maps a scalar function's 16 Bernstein coefficients over the patch to one leaf and
     // returns their maximum: an upper bound of the function on the leaf (what the originating-patch plane

@@ -373,14 +373,15 @@ TEST(RtMotion, TimeSlabsBoundTheMovingPatchesAtEveryTime) {
                 const int lane = int(leaf % 4);
                 const Bounds3 swept = f.nodeBox(patch, f.firstLeaf() + leaf);
                 sweptArea += swept.diagonal().x * swept.diagonal().z;
-                slabArea += (q.hi[0][lane] - q.lo[0][lane]) * (q.hi[2][lane] - q.lo[2][lane]);
+                const Bounds3 qbox = q.box(lane);
+                slabArea += (qbox.hi.x - qbox.lo.x) * (qbox.hi.z - qbox.lo.z);
                 float u0, u1, v0, v1;
                 subpatchLeafRect(f.depth, leaf, u0, u1, v0, v1);
                 for (int b = 0; b <= 8; ++b)
                     for (int a = 0; a <= 8; ++a) {
                         const Vec3 p = evalPatch(at, u0 + (u1 - u0) * a / 8.f, v0 + (v1 - v0) * b / 8.f);
                         bool in = true;
-                        for (int k = 0; k < 3; ++k) in &= p[k] >= q.lo[k][lane] && p[k] <= q.hi[k][lane];
+                        for (int k = 0; k < 3; ++k) in &= p[k] >= qbox.lo[k] && p[k] <= qbox.hi[k];
                         outside += !in, ++checked;
                     }
             }

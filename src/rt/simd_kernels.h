@@ -96,23 +96,47 @@ inline int exitNotBelow(int mask, F4 tx, float selfT) {
 #endif
 }
 
+#if defined(__SSE2__)
+// Four bytes as four floats (SSE2 has no pmovzxbd).
+inline __m128 bytesToFloats4(const uint8_t* p) {
+    int32_t v;
+    std::memcpy(&v, p, 4);
+    const __m128i z = _mm_setzero_si128();
+    return _mm_cvtepi32_ps(_mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(v), z), z));
+}
+// The four boxes' low (high) bounds on axis a, decoded as SubpatchQuad::decodeLo (decodeHi).
+inline __m128 quadStep4(const SubpatchQuad& q, int a) {
+    return _mm_set1_ps((q.frameHi[a] - q.frameLo[a]) * (1.f / 255.f));
+}
+inline __m128 decodeLo4(const SubpatchQuad& q, int a) {
+    return _mm_add_ps(_mm_set1_ps(q.frameLo[a]), _mm_mul_ps(bytesToFloats4(q.lo[a]), quadStep4(q, a)));
+}
+inline __m128 decodeHi4(const SubpatchQuad& q, int a) {
+    return _mm_sub_ps(_mm_set1_ps(q.frameHi[a]), _mm_mul_ps(bytesToFloats4(q.hi[a]), quadStep4(q, a)));
+}
+#endif
+
 // The hit lanes of a subpatch quad whose exit distance is not below selfT (lanes of selfT4; the
 // self-intersection cut !(tx < selfT)), with the entry distances in te.
 inline int quadHits(const SubpatchQuad& q, const Ray4& r, F4 selfT4, F4& te) {
 #if defined(__SSE2__)
-    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[0]), r.ox), r.ix);
-    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[0]), r.ox), r.ix);
-    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[1]), r.oy), r.iy);
-    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[1]), r.oy), r.iy);
-    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.lo[2]), r.oz), r.iz);
-    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(q.hi[2]), r.oz), r.iz);
+    const __m128 x0 = _mm_mul_ps(_mm_sub_ps(decodeLo4(q, 0), r.ox), r.ix);
+    const __m128 x1 = _mm_mul_ps(_mm_sub_ps(decodeHi4(q, 0), r.ox), r.ix);
+    const __m128 y0 = _mm_mul_ps(_mm_sub_ps(decodeLo4(q, 1), r.oy), r.iy);
+    const __m128 y1 = _mm_mul_ps(_mm_sub_ps(decodeHi4(q, 1), r.oy), r.iy);
+    const __m128 z0 = _mm_mul_ps(_mm_sub_ps(decodeLo4(q, 2), r.oz), r.iz);
+    const __m128 z1 = _mm_mul_ps(_mm_sub_ps(decodeHi4(q, 2), r.oz), r.iz);
     te = _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
     const __m128 tx =
         _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
     return _mm_movemask_ps(_mm_andnot_ps(_mm_cmplt_ps(tx, selfT4), _mm_cmple_ps(te, tx)));
 #else
     F4 tx;
-    const int mask = rayBox4Soa(q.lo, q.hi, r, te, tx);
+    float lo[3][4], hi[3][4];
+    for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 4; ++c)
+            lo[a][c] = q.decodeLo(a, q.lo[a][c]), hi[a][c] = q.decodeHi(a, q.hi[a][c]);
+    const int mask = rayBox4Soa(lo, hi, r, te, tx);
     return exitNotBelow(mask, tx, selfT4.v[0]);
 #endif
 }
@@ -199,17 +223,29 @@ inline const HitOrder& hitOrder(int mask, F4 key) {
 TESSERA_AVX2 inline __m256 cat2(__m128 lo, __m128 hi) {
     return _mm256_insertf128_ps(_mm256_castps128_ps256(lo), hi, 1);
 }
-TESSERA_AVX2 inline __m256 slab2(const float* a, const float* b, __m128 oa, __m128 ob, __m128 ia, __m128 ib) {
-    return _mm256_mul_ps(_mm256_sub_ps(cat2(_mm_load_ps(a), _mm_load_ps(b)), cat2(oa, ob)), cat2(ia, ib));
+// The low (`high` false) or high bounds of quads qa and qb on axis a, decoded as decodeLo4 / decodeHi4 do
+// (the same operations per lane), minus the rays' origins oa, ob, times their inverse directions ia, ib.
+TESSERA_AVX2 inline __m256 slab2(const SubpatchQuad& qa, const SubpatchQuad& qb, bool high, int a, __m128 oa,
+                                 __m128 ob, __m128 ia, __m128 ib) {
+    int32_t x, y;
+    std::memcpy(&x, high ? qa.hi[a] : qa.lo[a], 4);
+    std::memcpy(&y, high ? qb.hi[a] : qb.lo[a], 4);
+    const __m256 v = _mm256_cvtepi32_ps(
+        _mm256_cvtepu8_epi32(_mm_unpacklo_epi32(_mm_cvtsi32_si128(x), _mm_cvtsi32_si128(y))));
+    const __m256 prod = _mm256_mul_ps(v, cat2(quadStep4(qa, a), quadStep4(qb, a)));
+    const __m256 bound =
+        high ? _mm256_sub_ps(cat2(_mm_set1_ps(qa.frameHi[a]), _mm_set1_ps(qb.frameHi[a])), prod)
+             : _mm256_add_ps(cat2(_mm_set1_ps(qa.frameLo[a]), _mm_set1_ps(qb.frameLo[a])), prod);
+    return _mm256_mul_ps(_mm256_sub_ps(bound, cat2(oa, ob)), cat2(ia, ib));
 }
 TESSERA_AVX2 inline int quadHits2(const SubpatchQuad& qa, const Ray4& ra, __m128 sa, const SubpatchQuad& qb,
                                   const Ray4& rb, __m128 sb, __m256& te) {
-    const __m256 x0 = slab2(qa.lo[0], qb.lo[0], ra.ox, rb.ox, ra.ix, rb.ix);
-    const __m256 x1 = slab2(qa.hi[0], qb.hi[0], ra.ox, rb.ox, ra.ix, rb.ix);
-    const __m256 y0 = slab2(qa.lo[1], qb.lo[1], ra.oy, rb.oy, ra.iy, rb.iy);
-    const __m256 y1 = slab2(qa.hi[1], qb.hi[1], ra.oy, rb.oy, ra.iy, rb.iy);
-    const __m256 z0 = slab2(qa.lo[2], qb.lo[2], ra.oz, rb.oz, ra.iz, rb.iz);
-    const __m256 z1 = slab2(qa.hi[2], qb.hi[2], ra.oz, rb.oz, ra.iz, rb.iz);
+    const __m256 x0 = slab2(qa, qb, false, 0, ra.ox, rb.ox, ra.ix, rb.ix);
+    const __m256 x1 = slab2(qa, qb, true, 0, ra.ox, rb.ox, ra.ix, rb.ix);
+    const __m256 y0 = slab2(qa, qb, false, 1, ra.oy, rb.oy, ra.iy, rb.iy);
+    const __m256 y1 = slab2(qa, qb, true, 1, ra.oy, rb.oy, ra.iy, rb.iy);
+    const __m256 z0 = slab2(qa, qb, false, 2, ra.oz, rb.oz, ra.iz, rb.iz);
+    const __m256 z1 = slab2(qa, qb, true, 2, ra.oz, rb.oz, ra.iz, rb.iz);
     te = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
                        _mm256_max_ps(_mm256_min_ps(z0, z1), cat2(ra.t0, rb.t0)));
     const __m256 tx = _mm256_min_ps(_mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),

@@ -230,16 +230,91 @@ void splatRows(LeafBasis& b) {
             for (int lane = 0; lane < 4; ++lane) b.mvSplat[j][k][lane] = b.mv[j][k];
 }
 
-// Four consecutive boxes (lo.xyz hi.xyz each, 24 floats) into structure-of-arrays form.
-void transposeQuad(const float* b, SubpatchQuad& q) {
-    static_assert(sizeof(Bounds3) == 6 * sizeof(float));
-    for (int c = 0; c < 4; ++c)
-        for (int a = 0; a < 3; ++a) {
-            q.lo[a][c] = b[6 * c + a];
-            q.hi[a][c] = b[6 * c + 3 + a];
-        }
+// from + sign * v * step as a decode may round it: both roundings (the volatile keeps the compiler from
+// fusing them) or, where the build has FMA (then the compiler may fuse the decode's multiply-add), fused;
+// `lower`: the smaller of the two, else the larger. (Without __FMA__ no code of the build can fuse: the
+// AVX2 kernels' target attribute leaves FMA out; std::fma would be a slow library call here.)
+float decodedBound(float from, float sign, float step, int v, bool lower) {
+    volatile float product = float(v) * step;
+    const float separate = from + sign * product;
+#if defined(__FMA__)
+    const float fused = std::fma(sign * float(v), step, from);
+    return lower ? std::min(separate, fused) : std::max(separate, fused);
+#else
+    (void)lower;
+    return separate;
+#endif
 }
 }  // namespace
+
+void quantizeQuad(const Bounds3* b, const Bounds3& frame, SubpatchQuad& q) {
+    // An empty box (lo > hi on an axis) is stored as the frame's low corner (as a displaced leaf without
+    // triangles, a point).
+    bool empty[4];
+    for (int c = 0; c < 4; ++c)
+        empty[c] = !(b[c].lo.x <= b[c].hi.x && b[c].lo.y <= b[c].hi.y && b[c].lo.z <= b[c].hi.z);
+    for (int a = 0; a < 3; ++a) {
+        float lo = frame.lo[a], hi = frame.hi[a];
+        for (int c = 0; c < 4; ++c)
+            if (!empty[c]) lo = std::min(lo, b[c].lo[a]), hi = std::max(hi, b[c].hi[a]);
+        if (!(lo <= hi)) lo = hi = 0.f;
+        if (!std::isfinite((hi - lo) * (1.f / 255.f))) {  // astronomically large: a frame of finite steps
+            lo = std::max(lo, -std::numeric_limits<float>::max() / 2),
+            hi = std::min(hi, std::numeric_limits<float>::max() / 2);
+        }
+        q.frameLo[a] = lo, q.frameHi[a] = hi;
+        const float step = q.step(a), inv = step > 0.f ? 1.f / step : 0.f;
+#if defined(__SSE2__) && !defined(__FMA__)
+        // The four boxes at once (the forest build's hot loop), as the scalar loop below: rounded down,
+        // then stepped back while a decode (product and sum rounded separately: no FMA in this build)
+        // passes the bound; at 0 steps a decode is the frame's end, which always holds.
+        if (!(empty[0] || empty[1] || empty[2] || empty[3]) && step > 0.f) {
+            const __m128 blo = _mm_setr_ps(b[0].lo[a], b[1].lo[a], b[2].lo[a], b[3].lo[a]);
+            const __m128 bhi = _mm_setr_ps(b[0].hi[a], b[1].hi[a], b[2].hi[a], b[3].hi[a]);
+            const __m128 lo4 = _mm_set1_ps(lo), hi4 = _mm_set1_ps(hi), st = _mm_set1_ps(step);
+            const __m128 iv = _mm_set1_ps(inv), zero = _mm_setzero_ps(), top = _mm_set1_ps(255.f);
+            __m128i up =
+                _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(blo, lo4), iv), zero), top));
+            __m128i down =
+                _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(hi4, bhi), iv), zero), top));
+            bool done = false;
+            for (int pass = 0; pass < 4 && !done; ++pass) {
+                const __m128 decLo = _mm_add_ps(lo4, _mm_mul_ps(_mm_cvtepi32_ps(up), st));
+                const __m128 decHi = _mm_sub_ps(hi4, _mm_mul_ps(_mm_cvtepi32_ps(down), st));
+                const __m128i badLo = _mm_castps_si128(_mm_cmpgt_ps(decLo, blo));  // all ones: one step back
+                const __m128i badHi = _mm_castps_si128(_mm_cmplt_ps(decHi, bhi));
+                done = _mm_movemask_epi8(_mm_or_si128(badLo, badHi)) == 0;
+                up = _mm_add_epi32(up, badLo), down = _mm_add_epi32(down, badHi);
+            }
+            if (done) {
+                alignas(16) int32_t u[4], d[4];
+                _mm_store_si128(reinterpret_cast<__m128i*>(u), up);
+                _mm_store_si128(reinterpret_cast<__m128i*>(d), down);
+                for (int c = 0; c < 4; ++c) q.lo[a][c] = uint8_t(u[c]), q.hi[a][c] = uint8_t(d[c]);
+                continue;
+            }
+        }
+#endif
+        for (int c = 0; c < 4; ++c) {
+            int up = 0, down = empty[c] ? 255 : 0;  // from the frame's ends: decoded exactly
+            if (!empty[c] && step > 0.f) {
+                // Rounded down (the truncation of a number >= 0), then checked as a decode rounds.
+                up = int(std::clamp((b[c].lo[a] - lo) * inv, 0.f, 255.f));
+                down = int(std::clamp((hi - b[c].hi[a]) * inv, 0.f, 255.f));
+                while (up > 0 && decodedBound(lo, 1.f, step, up, false) > b[c].lo[a]) --up;
+                while (down > 0 && decodedBound(hi, -1.f, step, down, true) < b[c].hi[a]) --down;
+            }
+            q.lo[a][c] = uint8_t(up), q.hi[a][c] = uint8_t(down);
+        }
+    }
+}
+
+void quantizeQuad(const Bounds3* b, SubpatchQuad& q) {
+    Bounds3 frame;
+    for (int c = 0; c < 4; ++c)
+        if (b[c].lo.x <= b[c].hi.x && b[c].lo.y <= b[c].hi.y && b[c].lo.z <= b[c].hi.z) frame.extend(b[c]);
+    quantizeQuad(b, frame, q);
+}
 
 namespace {
 // Time slabs of a blurred frame (SubpatchForest::slabCount): the timeline's segments in equal runs, as
@@ -270,10 +345,21 @@ void planTimeSlabs(SubpatchForest& f, std::span<const BezierPatch> patches, cons
     f.slabRoots.resize(size_t(moving) * f.slabCount);
 }
 
-// The quads of one tree (levels 2, 4, ...: node n's grandchildren 4n+3 .. 4n+6) from its boxes.
+// The quads of one tree (levels 2, 4, ...: node n's grandchildren 4n+3 .. 4n+6) from its boxes, top down:
+// each quad quantized in the frame of its node's box as decoded (the root's is exact), so that every
+// decoded box lies inside its parent's.
 void writeQuads(const Bounds3* bx, int depth, SubpatchQuad* q) {
-    for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3)
-        for (uint32_t n = first; n <= 2 * first; ++n, ++q) transposeQuad(&bx[4 * n + 3].lo.x, *q);
+    thread_local std::vector<Bounds3> decoded;
+    decoded.resize((2u << depth) - 1u);
+    decoded[0] = bx[0];
+    for (uint32_t first = 0, k = 0; 2 * k + 2 <= uint32_t(depth); ++k, first = 4 * first + 3) {
+        const bool framesBelow = 2 * k + 4 <= uint32_t(depth);  // the grandchildren have quads
+        for (uint32_t n = first; n <= 2 * first; ++n, ++q) {
+            quantizeQuad(&bx[4 * n + 3], decoded[n], *q);
+            if (framesBelow)
+                for (int c = 0; c < 4; ++c) decoded[4 * n + 3 + c] = q->box(c);
+        }
+    }
 }
 
 // What the forest keeps of tree `tree`'s boxes `bx` (all its nodes): the quads, the root and, for an odd
