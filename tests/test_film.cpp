@@ -179,8 +179,8 @@ TEST(Film, ARegionRendersTheSamePixelsAsTheWholeImage) {
 TEST(Film, Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths) {
     Scene base =
         loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/dof_teapot.rib", [](const std::string&) {});
-    base.camera.width = sweepSide(160);
-    base.camera.height = sweepSide(120);
+    base.camera.width = 160;
+    base.camera.height = 120;
     for (int spp : {4, 3, 1})
         for (bool lens : {false, true})
             for (float width : {2.f, 4.f}) {
@@ -200,7 +200,7 @@ TEST(Film, Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths) {
                                                           << " width " << width << " (AVX2 " << avx2 << ")";
                 double covered = 0;
                 for (size_t i = 3; i < a.image.rgba.size(); i += 4) covered += a.image.rgba[i];
-                EXPECT_GT(covered, 1000.0 * base.camera.width * base.camera.height / (160.0 * 120.0));
+                EXPECT_GT(covered, 1000.0);
             }
 }
 

@@ -344,8 +344,8 @@ TEST(MotionBlur, Avx2FiltersEqualTheFourWideFilters) {
                           Case{"motion_teapot", true, true, BlurSampling::BoundingBox, 4000.f}}) {
         Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + c.scene + ".rib",
                             [](const std::string&) {});
-        s.camera.width = sweepSide(200);
-        s.camera.height = sweepSide(150);
+        s.camera.width = 200;
+        s.camera.height = 150;
         if (c.lens && s.camera.lensRadius() == 0.f) {  // the teapot's lens of dof_teapot.rib
             s.camera.fStop = 0.8f, s.camera.focalLength = 1.f, s.camera.focalDistance = 11.f;
         }

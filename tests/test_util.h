@@ -16,18 +16,6 @@
 
 namespace tessera::test {
 
-// The sanitizer build (scripts/ci_sanitize.sh) runs code about 10x slower: the exhaustive equivalence sweeps
-// render smaller images there (every code path still runs, on fewer pixels).
-#if defined(TESSERA_SANITIZED)
-constexpr bool kSanitizedBuild = true;
-#else
-constexpr bool kSanitizedBuild = false;
-#endif
-// An image side for such a sweep: `side`, halved in the sanitizer build.
-constexpr int sweepSide(int side) {
-    return kSanitizedBuild ? side / 2 : side;
-}
-
 // A scene whose world space is camera space: the eye at the origin looking down +z, +y up.
 inline Scene cameraSpaceScene(int width, int height, float fovDegrees) {
     Scene s;
