@@ -65,5 +65,4 @@ heavy+='|NewtonLanes\.BitIdenticalToScalarNewton|RtInstancing\.RaysHitInstancesA
 heavy+=')( |$)'
 exclude=(-E "$heavy")
 [ "${TESSERA_ASAN_ALL:-0}" = 1 ] && exclude=()
-# One job more than cores: many tests parse and build serially before their multi-threaded render.
-ctest --test-dir $B --output-on-failure -j"$(($(nproc) + 1))" --timeout 900 "${exclude[@]}" "$@"
+ctest --test-dir $B --output-on-failure -j"$(nproc)" --timeout 900 "${exclude[@]}" "$@"
