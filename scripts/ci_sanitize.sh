@@ -34,7 +34,11 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 heavy='^(MotionBlurCrossEngine\.MovingSphereWithLensAgrees|DefaultFraming\.(YUpCupShowsItsOpeningFromAbove|ShippedModelsKeepSensibleViews)'
 # bigguy24_instanced (21 s here) is bigguy24 as instances, whose sharing RtInstancing's tests run;
 # displaced_killeroo (19 s) repeats the displaced dicing of RtDisplacement's and Displacement's tests.
-heavy+='|Files/ShippedSceneFile\.RendersWithBothEngines/(bigguy24|bigguy24_instanced|bigguy9|killeroo_spin|displaced_killeroo)_rib'
+# killeroo2 (25 s here) is two Killeroos; bigguy_box_glossy (24 s) bigguy_box with glossy plastic, whose
+# kernels GlossKernel's tests run; instanced_teapots (22 s) the instancing RtInstancing's tests run.
+# (One group for all of them: ctest's regular expressions allow at most 10 parenthesized groups.)
+heavy+='|Files/ShippedSceneFile\.RendersWithBothEngines/(bigguy24|bigguy24_instanced|bigguy9|killeroo_spin'
+heavy+='|displaced_killeroo|killeroo2|bigguy_box_glossy|instanced_teapots)_rib'
 heavy+='|BothEngines/ShippedScenes\.RendersWithoutPinholes/bigguy(24|9)_(reyes|rt)'
 heavy+='|ReyesSampling\.TeapotCoverageConvergesWithSpp|ReyesDeterminism\.SameImageForAnyThreadCount'
 # The engines' thread-count determinism (the same renders at 1, 2 and 4 threads and twice; 13 s here):
@@ -62,6 +66,11 @@ heavy+='|DefaultFraming\.LongModelIsNeverCutOff|GlossImages\.SpreadZeroIsTheMirr
 # are properties of the project's compiler (g++ 12, the Release stage runs them): clang's code rounds a
 # few results differently (one Newton start by 1 ulp; 5 instead of at most 4 of 4000 instance hits).
 heavy+='|NewtonLanes\.BitIdenticalToScalarNewton|RtInstancing\.RaysHitInstancesAsTheirCopies'
+# The AVX2 kernels against their scalar fallbacks, image for image over many render settings (33-86 s each
+# here, 165 of the stage's 1250 test CPU seconds): every other render here runs the AVX2 paths (the CI
+# machines have AVX2); what these add is the fallbacks' equality, a Release-stage property.
+heavy+='|Film\.Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths|MotionBlur\.Avx2FiltersEqualTheFourWideFilters'
+heavy+='|ReyesRasterize\.Avx2SampleTestsEqualTheScalarLoop'
 heavy+=')( |$)'
 exclude=(-E "$heavy")
 [ "${TESSERA_ASAN_ALL:-0}" = 1 ] && exclude=()
