@@ -806,10 +806,8 @@ TEST(RtHierarchy, QuantizedQuadsHoldTheirBoxesTightly) {
         if (trial % 5 == 0) {  // a parent box larger than the union
             frame.lo = frame.lo - Vec3{0.1f, 0.2f, 0.f} * size;
             frame.hi = frame.hi + Vec3{0.3f, 0.f, 0.1f} * size;
-            quantizeQuad(b, frame, q);
-        } else {
-            quantizeQuad(b, q);
         }
+        quantizeQuad(b, frame, q);
         for (int c = 0; c < 4; ++c) {
             const Bounds3 d = q.box(c);
             for (int a = 0; a < 3; ++a) {

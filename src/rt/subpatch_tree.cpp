@@ -309,13 +309,6 @@ void quantizeQuad(const Bounds3* b, const Bounds3& frame, SubpatchQuad& q) {
     }
 }
 
-void quantizeQuad(const Bounds3* b, SubpatchQuad& q) {
-    Bounds3 frame;
-    for (int c = 0; c < 4; ++c)
-        if (b[c].lo.x <= b[c].hi.x && b[c].lo.y <= b[c].hi.y && b[c].lo.z <= b[c].hi.z) frame.extend(b[c]);
-    quantizeQuad(b, frame, q);
-}
-
 namespace {
 // Time slabs of a blurred frame (SubpatchForest::slabCount): the timeline's segments in equal runs, as
 // many slabs as `maxSlabs` and the memory budget allow; none for a static frame or a single slab.

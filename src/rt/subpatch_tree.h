@@ -47,9 +47,8 @@ struct alignas(16) SubpatchQuad {
 static_assert(sizeof(SubpatchQuad) == 48);
 
 // Stores the four boxes b[0..3] in q (see SubpatchQuad) in the frame `frame` (their parent's box, grown
-// to hold them if they stick out), or in their union: each decoded box holds its box.
+// to hold them if they stick out): each decoded box holds its box.
 void quantizeQuad(const Bounds3* b, const Bounds3& frame, SubpatchQuad& q);
-void quantizeQuad(const Bounds3* b, SubpatchQuad& q);
 
 // Bernstein change of basis from a patch to one leaf sub-patch: leaf coefficient (row j, column i) =
 // sum over (j', i') of mv[j][j'] * patch(j', i') * mu[i'][i] (so the rows of `mu` are 4-vectors over the

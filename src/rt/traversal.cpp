@@ -58,6 +58,8 @@ struct TraverseScratch {
     std::vector<uint32_t, DefaultInitAllocator<uint32_t>> items, next;
     std::vector<uint32_t> count;  // candidates per ray of the chunk
 };
+// One per thread, for traverseChunk and rootPairs alike (neither runs inside the other).
+thread_local TraverseScratch tScratch;
 
 // One level of the subpatch traversal: the items' quads tested, items[0, n). innerLevel appends the hit
 // children of each item to `next` in hit order and returns their number; leafLevel writes the candidates
@@ -286,8 +288,7 @@ template <bool kAvx2>
     const SubpatchForest& forest = acc.forest;
     const float ignoreT = 8.f * acc.offset;
     const bool slabbed = forest.slabCount > 0;
-    thread_local TraverseScratch scratch;
-    TraverseScratch& sc = scratch;
+    TraverseScratch& sc = tScratch;
     ch.c = StageCounters();
     uint64_t boxTests = 0;
     const size_t r0 = ci * kChunk, r1 = std::min(n, r0 + kChunk);
@@ -386,8 +387,7 @@ template <bool kAvx2>
 [[gnu::always_inline]] inline void rootPairs(const RtAccel& acc, const RayList& rays,
                                              std::span<const Candidate> roots, bool cull,
                                              CandidateVector& out, uint64_t& boxTests) {
-    thread_local TraverseScratch scratch;
-    TraverseScratch& sc = scratch;
+    TraverseScratch& sc = tScratch;
     const SubpatchForest& forest = acc.forest;
     const float ignoreT = 8.f * acc.offset;
     const size_t n = rays.size();
