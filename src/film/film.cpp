@@ -20,6 +20,7 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     nx = nx_;
     ny = ny_;
     spp = nx * ny;
+    strataX.clear();
     size_t pixels = size_t(reg.width()) * reg.height();
     size_t n = pixels * spp;
     sx.resize(n);
@@ -76,6 +77,25 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
                 }
                 sampleIndex[i] = uint32_t(s);
             }
+}
+
+void SampleTile::buildStrataOrder() {
+    const int tw = region.width(), th = region.height(), w = tw * nx, h = th * ny;
+    const size_t n = sampleCount();
+    strataX.resize(n + 8);
+    strataY.resize(n + 8);
+    strataColumn.resize(size_t(w));
+    strataRow.resize(size_t(h));
+    for (int ox = 0; ox < w; ++ox) strataColumn[size_t(ox)] = {ox / nx, ox % nx};
+    for (int oy = 0; oy < h; ++oy) strataRow[size_t(oy)] = {(oy / ny) * tw, (oy % ny) * nx};
+    size_t k = 0;  // stratum (px * nx + sxi, py * ny + syi) holds slot syi * nx + sxi of pixel (px, py)
+    for (int py = 0; py < th; ++py)
+        for (int syi = 0; syi < ny; ++syi)
+            for (int px = 0; px < tw; ++px) {
+                const size_t s0 = (size_t(py) * size_t(tw) + size_t(px)) * size_t(spp) + size_t(syi * nx);
+                for (int sxi = 0; sxi < nx; ++sxi, ++k) strataX[k] = sx[s0 + sxi], strataY[k] = sy[s0 + sxi];
+            }
+    for (size_t i = n; i < n + 8; ++i) strataX[i] = strataY[i] = 0;
 }
 
 void SampleTile::setBlur(const BlurPattern* pattern) {

@@ -122,6 +122,15 @@ struct SampleTile {
     std::vector<Vec2> lens;
     std::vector<float> z, r, g, b, a;
     std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
+    // The positions again in stratum order (row of strata, then column, over the whole tile; built by
+    // buildStrataOrder, emptied by reset), padded by 8, and where the lattice's columns and rows lie: the
+    // stratum (column, row) is slot row.slot + column.slot of pixel row.pixel + column.pixel. A rasterizer
+    // reads a micropolygon's row of strata as contiguous memory.
+    struct StrataLine {
+        int32_t pixel, slot;
+    };
+    std::vector<int32_t> strataX, strataY;
+    std::vector<StrataLine> strataColumn, strataRow;
     // Per-sample attributes, present only for the FilmChannel bits in `channels` (empty otherwise).
     uint32_t channels = 0;
     std::vector<uint32_t> objectId;
@@ -140,6 +149,9 @@ struct SampleTile {
     // After reset: give the samples their times and lens points (nullptr or an inactive pattern: none).
     void setBlur(const BlurPattern* pattern);
     size_t sampleCount() const { return sx.size(); }
+    // Fills strataX, strataY, strataColumn and strataRow for the current samples.
+    void buildStrataOrder();
+    bool hasStrataOrder() const { return !strataX.empty(); }
     bool has(uint32_t channel) const { return (channels & channel) != 0; }
     // Writes the attributes of a covered sample (colour, alpha and depth are written by the engine).
     void setAttributes(size_t i, uint32_t object, Vec3 normal, int shadowedLights, bool textured) {

@@ -194,72 +194,78 @@ template <bool kAttributes>
     writeSampleHit<kAttributes>(g, a, b, c, l0, l1, l2, z, i, tile);
 }
 
+// The sample tests of the micropolygon's bound read row by row from the tile's stratum-ordered copy of
+// the positions (SampleTile::buildStrataOrder): a row's strata are contiguous there, so 8 lanes load
+// straight from memory where the pixel-ordered samples would need an index list and gathers.
 template <bool kAttributes>
 __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, SampleTile& tile, float nearZ) {
     uint64_t tests = 0;
+    if (!tile.hasStrataOrder()) tile.buildStrataOrder();
     const StrataLattice lattice(tile);
     const int stride = g.nu + 1;
-    std::vector<int32_t> index;  // the candidate samples of one micropolygon, in the scalar loop's order
-    std::vector<uint32_t> pixelOf;
+    const size_t latticeWidth = size_t(lattice.tw) * size_t(lattice.nx);
+    const int32_t* strataX = tile.strataX.data();
+    const int32_t* strataY = tile.strataY.data();
+    const SampleTile::StrataLine* columns = tile.strataColumn.data();
+    const SampleTile::StrataLine* rows = tile.strataRow.data();
+    const size_t spp = size_t(tile.spp);
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     Micropolygon m;
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
             if (!setupMicropolygon(g, j * stride + i, stride, lattice, m)) continue;
-            const size_t count = m.strata();
-            tests += count;
+            tests += m.strata();
             if (m.maxX - m.minX >= kAvx2Span || m.maxY - m.minY >= kAvx2Span) {
                 forEachStratum(m, lattice, [&](size_t pix, size_t si) {
                     testSample<kAttributes>(m, g, pix, si, tile, nearZ);
                 });
                 continue;
             }
-            // Padded to a multiple of 8 with the first candidate (its extra lanes are masked off).
-            index.resize((count + 7) & ~size_t(7));
-            pixelOf.resize(index.size());
-            size_t n = 0;
-            forEachStratum(m, lattice, [&](size_t pix, size_t si) {
-                index[n] = int32_t(si);
-                pixelOf[n++] = uint32_t(pix);
-            });
-            for (size_t k = n; k < index.size(); ++k) index[k] = index[0];
             const EdgeLanes e0 = edgeLanes(m.t0, m.minX, m.minY), e1 = edgeLanes(m.t1, m.minX, m.minY);
             const __m256i ox = _mm256_set1_epi32(int32_t(m.minX)), oy = _mm256_set1_epi32(int32_t(m.minY));
             const __m256i spanX = _mm256_set1_epi32(int32_t(m.maxX - m.minX)),
                           spanY = _mm256_set1_epi32(int32_t(m.maxY - m.minY));
-            const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-            for (size_t k = 0; k < n; k += 8) {
-                const __m256i idx = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&index[k]));
-                const __m256i dx = _mm256_sub_epi32(
-                    _mm256_i32gather_epi32(reinterpret_cast<const int*>(tile.sx.data()), idx, 4), ox);
-                const __m256i dy = _mm256_sub_epi32(
-                    _mm256_i32gather_epi32(reinterpret_cast<const int*>(tile.sy.data()), idx, 4), oy);
-                // In the bound: 0 <= d <= span (as the scalar test's minX <= sx <= maxX).
-                const __m256i out =
-                    _mm256_or_si256(_mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dx),
-                                                    _mm256_cmpgt_epi32(dx, spanX)),
-                                    _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dy),
-                                                    _mm256_cmpgt_epi32(dy, spanY)));
-                const __m256i live =
-                    _mm256_andnot_si256(out, _mm256_cmpgt_epi32(_mm256_set1_epi32(int32_t(n - k)), lane));
-                __m256i w[2][2];
-                const __m256i in0 = insideLanes(e0, dx, dy, w[0][0], w[0][1]);
-                const __m256i in1 = insideLanes(e1, dx, dy, w[1][0], w[1][1]);
-                // Sign bits: a real candidate in the bound, inside the first triangle, else the second (the
-                // scalar test's order).
-                const unsigned first =
-                    unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in0))));
-                const unsigned second =
-                    unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in1)))) & ~first;
-                if (!(first | second)) continue;
-                alignas(32) int32_t wv[2][2][8];
-                for (int t = 0; t < 2; ++t)
-                    for (int q = 0; q < 2; ++q)
-                        _mm256_store_si256(reinterpret_cast<__m256i*>(wv[t][q]), w[t][q]);
-                for (unsigned mask = first | second; mask; mask &= mask - 1) {
-                    const int l = __builtin_ctz(mask), t = (first >> l) & 1u ? 0 : 1;
-                    const size_t c = k + size_t(l);
-                    shadeInsideSample<kAttributes>(t ? m.t1 : m.t0, g, wv[t][0][l], wv[t][1][l],
-                                                   size_t(index[c]), pixelOf[c], tile, nearZ);
+            const size_t col0 = size_t(m.qx0 - lattice.sx0);
+            const int rowLength = int(m.qx1 - m.qx0 + 1);
+            for (int64_t qy = m.qy0; qy <= m.qy1; ++qy) {
+                const size_t row = size_t(qy - lattice.sy0);
+                const size_t base = row * latticeWidth + col0;  // the row's first stratum
+                for (int k = 0; k < rowLength; k += 8) {
+                    const __m256i dx = _mm256_sub_epi32(
+                        _mm256_loadu_si256(reinterpret_cast<const __m256i*>(strataX + base + k)), ox);
+                    const __m256i dy = _mm256_sub_epi32(
+                        _mm256_loadu_si256(reinterpret_cast<const __m256i*>(strataY + base + k)), oy);
+                    // In the bound: 0 <= d <= span (as the scalar test's minX <= sx <= maxX).
+                    const __m256i out =
+                        _mm256_or_si256(_mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dx),
+                                                        _mm256_cmpgt_epi32(dx, spanX)),
+                                        _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dy),
+                                                        _mm256_cmpgt_epi32(dy, spanY)));
+                    const __m256i live =
+                        _mm256_andnot_si256(out, _mm256_cmpgt_epi32(_mm256_set1_epi32(rowLength - k), lane));
+                    __m256i w[2][2];
+                    const __m256i in0 = insideLanes(e0, dx, dy, w[0][0], w[0][1]);
+                    const __m256i in1 = insideLanes(e1, dx, dy, w[1][0], w[1][1]);
+                    // Sign bits: a real candidate in the bound, inside the first triangle, else the second
+                    // (the scalar test's order).
+                    const unsigned first =
+                        unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in0))));
+                    const unsigned second =
+                        unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in1)))) &
+                        ~first;
+                    if (!(first | second)) continue;
+                    alignas(32) int32_t wv[2][2][8];
+                    for (int t = 0; t < 2; ++t)
+                        for (int q = 0; q < 2; ++q)
+                            _mm256_store_si256(reinterpret_cast<__m256i*>(wv[t][q]), w[t][q]);
+                    for (unsigned mask = first | second; mask; mask &= mask - 1) {
+                        const int l = __builtin_ctz(mask), t = (first >> l) & 1u ? 0 : 1;
+                        const SampleTile::StrataLine column = columns[col0 + size_t(k + l)];
+                        const size_t pix = size_t(rows[row].pixel + column.pixel);
+                        shadeInsideSample<kAttributes>(t ? m.t1 : m.t0, g, wv[t][0][l], wv[t][1][l],
+                                                       pix * spp + size_t(rows[row].slot + column.slot), pix,
+                                                       tile, nearZ);
+                    }
                 }
             }
         }
