@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets (clang, -fsanitize=fuzzer,address,undefined) into build-fuzz/ and runs each
+# Builds the libFuzzer targets (clang, -fsanitize=fuzzer,address,undefined) into build-fuzz/ (or in the
+# sanitizer stage's build-asan/ when that was configured with them, as CI does) and runs each
 # for a fixed time from the seed corpus (fuzz/corpus/<target>, plus the shipped scenes). A crash, leak,
 # sanitizer report, timeout or out-of-memory fails the script; the input is left in
-# build-fuzz/artifacts/<target>/: fix the bug, then keep the input in fuzz/regressions/<target>/.
+# <build>/artifacts/<target>/: fix the bug, then keep the input in fuzz/regressions/<target>/.
 # Usage: bash scripts/ci_fuzz.sh [seconds per target (default 45)] [targets... (default: all)]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,8 +23,13 @@ if ((${#TARGETS[@]} == 0)); then
 fi
 
 B=build-fuzz
-cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTESSERA_FUZZ=ON \
-  -DTESSERA_TESTS=OFF -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF >/dev/null
+if [ -f build-asan/CMakeCache.txt ] && grep -q '^TESSERA_FUZZ:BOOL=ON' build-asan/CMakeCache.txt; then
+  # The sanitizer stage's build (scripts/ci_sanitize.sh) has the targets: only they are compiled and linked.
+  B=build-asan
+else
+  cmake -S . -B $B -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTESSERA_FUZZ=ON \
+    -DTESSERA_TESTS=OFF -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF >/dev/null
+fi
 cmake --build $B -j"$(nproc)" --target "${TARGETS[@]/#/fuzz_}"
 
 # As scripts/ci_sanitize.sh: OpenImageIO 2.4's TextureSystem::destroy trips the sized-delete check inside

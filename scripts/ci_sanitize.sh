@@ -16,10 +16,11 @@ if [ -f $B/CMakeCache.txt ] && ! grep -q '^CMAKE_CXX_COMPILER:.*clang' $B/CMakeC
 # clang, as the fuzz stage: the instrumented build takes half of g++'s time here (550 against about 1000
 # CPU seconds), and the suite runs in 424 s instead of 506. -O1: fast enough to run the renders; -g1: line
 # tables and function names, all a sanitizer's stack needs. float-cast-overflow: out-of-range float -> int
-# conversions are exactly what huge inputs cause.
+# conversions are exactly what huge inputs cause. TESSERA_FUZZ: the fuzz stage's libFuzzer targets come from
+# this build (fuzz/CMakeLists.txt; scripts/ci_fuzz.sh builds only them, after this stage).
 cmake -S . -B $B -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DTESSERA_SANITIZE=address,undefined,float-cast-overflow \
-  -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF >/dev/null
+  -DTESSERA_BENCH=OFF -DTESSERA_PYTHON=OFF -DTESSERA_FUZZ=ON >/dev/null
 cmake --build $B -j"$(nproc)"
 
 # new_delete_type_mismatch=0: OpenImageIO 2.4's TextureSystem::destroy deletes its implementation through
