@@ -231,8 +231,8 @@ TEST(ReyesRasterize, Avx2SampleTestsEqualTheScalarLoop) {
                 rs.output.channels = kAllFilmChannels;
                 const Avx2Renders r = renderWithAndWithoutReyesAvx2(s, rs);
                 const RenderResult& a = r.with;
-                const std::string what = std::string(name) + " " + std::to_string(nx) + "x" + std::to_string(ny) +
-                                         " rate " + std::to_string(shadingRate);
+                const std::string what = std::string(name) + " " + std::to_string(nx) + "x" +
+                                         std::to_string(ny) + " rate " + std::to_string(shadingRate);
                 std::printf("%s: AVX2 path %s, %llu sample tests\n", what.c_str(), r.avx2 ? "on" : "off",
                             (unsigned long long)a.stats["sample_tests"].get<uint64_t>());
                 expectSameRender(a, r.without, what);

@@ -123,7 +123,8 @@ struct SampleTile {
     std::vector<float> z, r, g, b, a;
     std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
     // The positions again in stratum order (row of strata, then column, over the whole tile; built by
-    // buildStrataOrder, emptied by reset), padded by 8, and where the lattice's columns and rows lie: the
+    // buildStrataOrder once the positions are final, emptied by reset: a copy, so positions written after it
+    // is built would not reach it), padded by 8, and where the lattice's columns and rows lie: the
     // stratum (column, row) is slot row.slot + column.slot of pixel row.pixel + column.pixel. A rasterizer
     // reads a micropolygon's row of strata as contiguous memory.
     struct StrataLine {
