@@ -111,3 +111,51 @@ TEST(NewtonLanes, BitIdenticalToScalarNewton) {
     EXPECT_GT(converged, 1000);
     EXPECT_GT(failed, 200);
 }
+
+// The projection into a lane's columns (AVX2 and SSE2 builds) gives projectPatch's values bit for bit, in
+// lane l's column only, and each control point's distance along the ray as the scalar formula.
+TEST(NewtonLanes, ProjectIntoLaneEqualsProjectPatch) {
+    const Scene s =
+        loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> S(-1.f, 1.f);
+    int compared = 0;
+    for (int k = 0; k < 500; ++k) {
+        const BezierPatch& p = s.patches[rng() % s.patches.size()];
+        const Vec3 o{4.f * S(rng), 4.f * S(rng), 4.f * S(rng)};
+        const Vec3 d = Vec3{S(rng), S(rng), S(rng)} * (k % 2 ? 1.f : 3.f);  // unnormalized too
+        const RayPlanes pl = makeRayPlanes(o, d);
+        ProjectedPatch<float> pp;
+        projectPatch(p, pl, pp);
+        alignas(32) float x[16], y[16], z[16];
+        for (int i = 0; i < 16; ++i) x[i] = p.cp[i].x, y[i] = p.cp[i].y, z[i] = p.cp[i].z;
+        const float invDD = 1.f / dot(d, d);
+        const LaneRayFrame f{{pl.n1.x, pl.n1.y, pl.n1.z},
+                             pl.d1,
+                             {pl.n2.x, pl.n2.y, pl.n2.z},
+                             pl.d2,
+                             {o.x, o.y, o.z},
+                             {d.x, d.y, d.z},
+                             invDD};
+        for (auto project : {projectIntoLane, projectIntoLaneBaseline}) {
+            NewtonLanes L;
+            std::memset(&L, 0, sizeof(L));
+            const int l = k % kNewtonLanes;
+            float depth[16];
+            project(L, l, f, x, y, z, depth);
+            for (int i = 0; i < 16; ++i) {
+                ASSERT_EQ(std::memcmp(&L.a1[i][l], &pp.a1[i], 4), 0) << "patch point " << i << ", ray " << k;
+                ASSERT_EQ(std::memcmp(&L.a2[i][l], &pp.a2[i], 4), 0) << "patch point " << i << ", ray " << k;
+                const float t = ((x[i] - o.x) * d.x + (y[i] - o.y) * d.y + (z[i] - o.z) * d.z) * invDD;
+                ASSERT_EQ(std::memcmp(&depth[i], &t, 4), 0) << "patch point " << i << ", ray " << k;
+                for (int m = 0; m < kNewtonLanes; ++m) {  // the other lanes' columns are untouched
+                    if (m != l) {
+                        ASSERT_TRUE(L.a1[i][m] == 0.f && L.a2[i][m] == 0.f);
+                    }
+                }
+                ++compared;
+            }
+        }
+    }
+    EXPECT_EQ(compared, 500 * 2 * 16);
+}

@@ -115,6 +115,24 @@ __attribute__((always_inline)) inline unsigned stepImpl(NewtonLanes& L) {
     return finished;
 }
 
+// The projection in one always-inlined body, compiled twice like the step. Sums left to right as
+// projectPatch: ((n.x X + n.y Y) + n.z Z) + d.
+__attribute__((always_inline)) inline void projectImpl(NewtonLanes& L, int l, const LaneRayFrame& f,
+                                                       const float* x, const float* y, const float* z,
+                                                       float depth[16]) {
+    for (int h = 0; h < 16; h += 8) {
+        f8 X, Y, Z;
+        std::memcpy(&X, x + h, 32);
+        std::memcpy(&Y, y + h, 32);
+        std::memcpy(&Z, z + h, 32);
+        const f8 a1 = ((f.n1[0] * X + f.n1[1] * Y) + f.n1[2] * Z) + f.d1;
+        const f8 a2 = ((f.n2[0] * X + f.n2[1] * Y) + f.n2[2] * Z) + f.d2;
+        const f8 t = (((X - f.o[0]) * f.d[0] + (Y - f.o[1]) * f.d[1]) + (Z - f.o[2]) * f.d[2]) * f.invDD;
+        std::memcpy(depth + h, &t, 32);
+        for (int k = 0; k < 8; ++k) L.a1[h + k][l] = a1[k], L.a2[h + k][l] = a2[k];
+    }
+}
+
 unsigned stepBaseline(NewtonLanes& lanes) {
     return stepImpl(lanes);
 }
@@ -124,6 +142,30 @@ __attribute__((target("avx2"))) unsigned stepAvx2(NewtonLanes& lanes) {
     return stepImpl(lanes);
 }
 #endif
+
+void projectBaseline(NewtonLanes& lanes, int l, const LaneRayFrame& f, const float* x, const float* y,
+                     const float* z, float depth[16]) {
+    projectImpl(lanes, l, f, x, y, z, depth);
+}
+
+#if defined(TESSERA_LANES_AVX2)
+__attribute__((target("avx2"))) void projectAvx2(NewtonLanes& lanes, int l, const LaneRayFrame& f,
+                                                 const float* x, const float* y, const float* z,
+                                                 float depth[16]) {
+    projectImpl(lanes, l, f, x, y, z, depth);
+}
+#endif
+
+using ProjectFn = void (*)(NewtonLanes&, int, const LaneRayFrame&, const float*, const float*, const float*,
+                           float*);
+ProjectFn chooseProject() {
+#if defined(TESSERA_LANES_AVX2)
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx2")) return projectAvx2;
+#endif
+    return projectBaseline;
+}
+const ProjectFn kProject = chooseProject();
 
 using StepFn = unsigned (*)(NewtonLanes&);
 StepFn chooseStep() {
@@ -139,6 +181,16 @@ const StepFn kStep = chooseStep();
 
 unsigned newtonLanesStep(NewtonLanes& lanes) {
     return kStep(lanes);
+}
+
+void projectIntoLane(NewtonLanes& lanes, int l, const LaneRayFrame& f, const float* x, const float* y,
+                     const float* z, float depth[16]) {
+    kProject(lanes, l, f, x, y, z, depth);
+}
+
+void projectIntoLaneBaseline(NewtonLanes& lanes, int l, const LaneRayFrame& f, const float* x, const float* y,
+                             const float* z, float depth[16]) {
+    projectBaseline(lanes, l, f, x, y, z, depth);
 }
 
 unsigned newtonLanesStepBaseline(NewtonLanes& lanes) {

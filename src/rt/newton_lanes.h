@@ -33,6 +33,22 @@ struct alignas(32) NewtonLanes {
     }
 };
 
+// A ray's frame for projecting patches into the lanes: its two planes (n1.X + d1 and n2.X + d2, as
+// makeRayPlanes builds them), its origin and direction, and 1 / (d.d).
+struct LaneRayFrame {
+    float n1[3], d1, n2[3], d2, o[3], d[3], invDD;
+};
+
+// Projects a patch's 16 control points (x, y, z: structure of arrays) on the ray's planes straight into
+// lane l's columns of a1 and a2, and writes their distances along the ray, (P - o).d / (d.d), to depth.
+// The arithmetic of projectPatch operation for operation (no fused multiply-add), so the columns hold
+// exactly its values; 8 control points at a time (AVX2 when the processor has it, SSE2 otherwise).
+void projectIntoLane(NewtonLanes& lanes, int l, const LaneRayFrame& f, const float* x, const float* y,
+                     const float* z, float depth[16]);
+// The SSE2 build of the same projection, whatever the processor (tests compare the two).
+void projectIntoLaneBaseline(NewtonLanes& lanes, int l, const LaneRayFrame& f, const float* x, const float* y,
+                             const float* z, float depth[16]);
+
 // One Newton iteration on every lane (lanes already finished, or idle, compute values nobody reads).
 // After the call, status[l] tells whether lane l converged (u, v hold the root after the free final
 // step), failed (left the domain twice, diverged, NaN, or 16 iterations) or runs on; evals[l] is the

@@ -35,8 +35,8 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         uint32_t cur = 0, end = 0;  // cursor in the chunk's candidates, end of the ray's segment
         Ray ray;
         TraceOptions opt;
-        RayPlanes pl;
-        float invDD = 0.f, eps = 0.f, bestU = 0.f, bestV = 0.f;
+        LaneRayFrame frame;  // the ray's planes, origin and direction for projectIntoLane
+        float eps = 0.f, bestU = 0.f, bestV = 0.f;
         uint32_t projected = kNone, bestPatch = kNone;
         // Last converged root (accepted or not) per patch run, for the duplicate-start test. A secondary
         // ray starts (offset) on its originating patch at a known (u,v): that is the root a start near it
@@ -54,7 +54,8 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         Vec3 bestNs;                 // a displaced micro-grid hit's shading normal (zero otherwise)
         uint32_t meshPatch = kNone;  // the displaced patch whose grid `mesh` holds
         std::shared_ptr<const DisplacedMesh> mesh;
-        ProjectedPatch<float> pp;
+        ProjectedPatch<float> pp;  // lane column's copy, valid when ppValid (see `projection`)
+        bool ppValid = false;
         alignas(16) float depth[16];  // the control points' distances along the ray (t units)
         // Motion blur: the ray's time and, when the projected patch moves, that patch at the ray's time
         // (the Newton stage intersects it; static patches read the accel's copy).
@@ -75,45 +76,22 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         LaneRay lane[kNewtonLanes];
         uint32_t nextRay = 0;
 
-        // The patch projected on the ray's planes (as projectPatch, 4 control points at a time) into the
-        // lane's column and the ray's own copy; the Newton tolerance as newtonTolerance.
+        // The patch projected on the ray's planes (as projectPatch) straight into the lane's column; the
+        // Newton tolerance as newtonTolerance. The ray's copy of the projection (s.pp) is gathered from
+        // the column only where a hull or domain test needs it.
         auto projectLane = [](const PatchSoa& ps, LaneRay& s, NewtonLanes& L, int l) {
-            const RayPlanes& pl = s.pl;
-#if defined(__SSE2__)
-            const __m128 n1x = _mm_set1_ps(pl.n1.x), n1y = _mm_set1_ps(pl.n1.y), n1z = _mm_set1_ps(pl.n1.z),
-                         n2x = _mm_set1_ps(pl.n2.x), n2y = _mm_set1_ps(pl.n2.y), n2z = _mm_set1_ps(pl.n2.z),
-                         d1 = _mm_set1_ps(pl.d1), d2 = _mm_set1_ps(pl.d2);
-            const __m128 ox = _mm_set1_ps(s.ray.o.x), oy = _mm_set1_ps(s.ray.o.y),
-                         oz = _mm_set1_ps(s.ray.o.z), dx = _mm_set1_ps(s.ray.d.x),
-                         dy = _mm_set1_ps(s.ray.d.y), dz = _mm_set1_ps(s.ray.d.z), idd = _mm_set1_ps(s.invDD);
-            for (int q = 0; q < 16; q += 4) {
-                const __m128 x = _mm_load_ps(ps.x + q), y = _mm_load_ps(ps.y + q), z = _mm_load_ps(ps.z + q);
-                const __m128 a1 = _mm_add_ps(
-                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(n1x, x), _mm_mul_ps(n1y, y)), _mm_mul_ps(n1z, z)), d1);
-                const __m128 a2 = _mm_add_ps(
-                    _mm_add_ps(_mm_add_ps(_mm_mul_ps(n2x, x), _mm_mul_ps(n2y, y)), _mm_mul_ps(n2z, z)), d2);
-                _mm_store_ps(s.pp.a1 + q, a1);
-                _mm_store_ps(s.pp.a2 + q, a2);
-                // Distance along the ray, (P - o).d / d.d: t of a root without evaluating the patch again.
-                const __m128 a3 = _mm_mul_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(x, ox), dx),
-                                                                   _mm_mul_ps(_mm_sub_ps(y, oy), dy)),
-                                                        _mm_mul_ps(_mm_sub_ps(z, oz), dz)),
-                                             idd);
-                _mm_store_ps(s.depth + q, a3);
-            }
-#else
-            for (int k = 0; k < 16; ++k) {
-                s.pp.a1[k] = pl.n1.x * ps.x[k] + pl.n1.y * ps.y[k] + pl.n1.z * ps.z[k] + pl.d1;
-                s.pp.a2[k] = pl.n2.x * ps.x[k] + pl.n2.y * ps.y[k] + pl.n2.z * ps.z[k] + pl.d2;
-                s.depth[k] = ((ps.x[k] - s.ray.o.x) * s.ray.d.x + (ps.y[k] - s.ray.o.y) * s.ray.d.y +
-                              (ps.z[k] - s.ray.o.z) * s.ray.d.z) *
-                             s.invDD;
-            }
-#endif
-            for (int k = 0; k < 16; ++k) L.a1[k][l] = s.pp.a1[k], L.a2[k][l] = s.pp.a2[k];
+            projectIntoLane(L, l, s.frame, ps.x, ps.y, ps.z, s.depth);
+            s.ppValid = false;
             const Vec3 o = s.ray.o;
             const float mag = std::max({ps.boxMagnitude, std::fabs(o.x), std::fabs(o.y), std::fabs(o.z)});
             s.eps = 2e-6f * mag + 1e-6f * ps.boxExtent + 1e-30f;
+        };
+        auto projection = [&](LaneRay& s, int l) -> const ProjectedPatch<float>& {
+            if (!s.ppValid) {
+                for (int k = 0; k < 16; ++k) s.pp.a1[k] = lanes.a1[k][l], s.pp.a2[k] = lanes.a2[k][l];
+                s.ppValid = true;
+            }
+            return s.pp;
         };
         auto finishRay = [&](LaneRay& s) {
             if (s.bestPatch != kNone) {
@@ -157,8 +135,11 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 s.time = rays.time[r];
                 if (motion) acc.motion.segment(s.time, s.segK, s.segW), s.inv = safeInverse(s.ray.d);
                 if (anyHit) s.opt.anyHit = true;
-                s.pl = makeRayPlanes(s.ray.o, s.ray.d);
-                s.invDD = 1.f / dot(s.ray.d, s.ray.d);
+                const RayPlanes pl = makeRayPlanes(s.ray.o, s.ray.d);
+                s.frame = LaneRayFrame{{pl.n1.x, pl.n1.y, pl.n1.z},       pl.d1,
+                                       {pl.n2.x, pl.n2.y, pl.n2.z},       pl.d2,
+                                       {s.ray.o.x, s.ray.o.y, s.ray.o.z}, {s.ray.d.x, s.ray.d.y, s.ray.d.z},
+                                       1.f / dot(s.ray.d, s.ray.d)};
                 s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false, s.bestNs = Vec3{};
                 s.originN = rays.originN[r];
                 s.selfPlane = false;
@@ -255,9 +236,22 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     if (c.patch == s.opt.ignorePatch && dot(s.originN, s.ray.d) > 0.f) {
                         const PatchSoa& ps = *soa;
                         const Vec3 o = s.ray.o, nrm = s.originN;
+#if defined(__SSE2__)
+                        const __m128 ox = _mm_set1_ps(o.x), oy = _mm_set1_ps(o.y), oz = _mm_set1_ps(o.z),
+                                     nx = _mm_set1_ps(nrm.x), ny = _mm_set1_ps(nrm.y),
+                                     nz = _mm_set1_ps(nrm.z);
+                        for (int k = 0; k < 16; k += 4) {  // the scalar sums below, 4 points at a time
+                            const __m128 h =
+                                _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(ps.x + k), ox), nx),
+                                                      _mm_mul_ps(_mm_sub_ps(_mm_load_ps(ps.y + k), oy), ny)),
+                                           _mm_mul_ps(_mm_sub_ps(_mm_load_ps(ps.z + k), oz), nz));
+                            _mm_storeu_ps(s.selfHeight + k, h);
+                        }
+#else
                         for (int k = 0; k < 16; ++k)
                             s.selfHeight[k] =
                                 (ps.x[k] - o.x) * nrm.x + (ps.y[k] - o.y) * nrm.y + (ps.z[k] - o.z) * nrm.z;
+#endif
                         s.selfPlane = true;
                     }
                 }
@@ -279,8 +273,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                             return false;
                     return true;
                 };
-                if (c.patch == s.opt.ignorePatch && ((s.selfPlane && belowPlane(c.leaf)) ||
-                                                     !leafMayHit(s.pp, leafBasis[c.leaf], 4.f * s.eps))) {
+                if (c.patch == s.opt.ignorePatch &&
+                    ((s.selfPlane && belowPlane(c.leaf)) ||
+                     !leafMayHit(projection(s, l), leafBasis[c.leaf], 4.f * s.eps))) {
                     ++culled;
                     ++s.cur;
                     continue;
@@ -300,14 +295,18 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             iterTotal += uint32_t(iters);
             ++ch.c.hist[std::min(iters, kHistBins - 1)];
             float uc = 0.f, vc = 0.f;
-            const bool found = lanes.status[l] == kLaneConverged &&
-                               acceptRootDomain<float>(s.pp, s.eps, lanes.u[l], lanes.v[l], 1e-4f, uc, vc);
+            // The domain rule reads the projection only for a root outside the domain's tolerance.
+            const float ur = lanes.u[l], vr = lanes.v[l], tol = 1e-4f;
+            const bool inside = ur >= -tol && ur <= 1 + tol && vr >= -tol && vr <= 1 + tol;
+            const bool found =
+                lanes.status[l] == kLaneConverged &&
+                acceptRootDomain<float>(inside ? s.pp : projection(s, l), s.eps, ur, vr, tol, uc, vc);
             if (!found && c.patch == s.opt.ignorePatch) {
                 // On the originating patch, where the hull test removed the neighbouring starts that could
                 // also reach a root of this leaf, a failed start (a fold, a seam root just outside the
                 // domain) is retried from the centres of the leaf's quarters whose own hull passes the test.
                 for (int q = s.attempt; q < 4; ++q) {  // quarter q: bit 0 high u, bit 1 high v
-                    if (!leafMayHit(s.pp, quarterBasis[4 * c.leaf + q], 4.f * s.eps)) continue;
+                    if (!leafMayHit(projection(s, l), quarterBasis[4 * c.leaf + q], 4.f * s.eps)) continue;
                     const Vec2 c0 = leafCentre[c.leaf];
                     s.attempt = q + 1;
                     lanes.start(l, c0.x + (q & 1 ? 0.5f : -0.5f) * hu, c0.y + (q & 2 ? 0.5f : -0.5f) * hv,
