@@ -400,14 +400,16 @@ TESSERA_HD bool newtonIterate(const ProjectedPatch<T>& pp, T eps, T& u, T& v, in
 
 // Domain rule for a converged root (u, v): inside [0,1]^2 up to `domainTol`, or outside but the clamped
 // point still lies on the ray (|R| < 2 eps: a root at a collapsed edge, where u is free, or within rounding
-// of a shared edge). Returns the clamped parameters.
-template <class T>
-__attribute__((always_inline)) inline bool acceptRootDomain(const ProjectedPatch<T>& pp, T eps, T u, T v,
-                                                            float domainTol, float& uc, float& vc) {
+// of a shared edge). Returns the clamped parameters. `projection()` gives the projected patch; it is
+// called only for a root outside the domain's tolerance (the Newton stage gathers it then).
+template <class T, class GetProjection>
+__attribute__((always_inline)) inline bool acceptRootDomainWith(GetProjection&& projection, T eps, T u, T v,
+                                                                float domainTol, float& uc, float& vc) {
     const T tol = T(domainTol);
     uc = std::clamp(float(u), 0.f, 1.f);
     vc = std::clamp(float(v), 0.f, 1.f);
     if (u < -tol || u > 1 + tol || v < -tol || v > 1 + tol) {
+        const ProjectedPatch<T>& pp = projection();
         T bu[4], bv[4];
         T s = 1 - T(uc), w = T(uc);
         bu[0] = s * s * s, bu[1] = 3 * w * s * s, bu[2] = 3 * w * w * s, bu[3] = w * w * w;
@@ -420,6 +422,13 @@ __attribute__((always_inline)) inline bool acceptRootDomain(const ProjectedPatch
         if (!(std::max(std::fabs(r1), std::fabs(r2)) < 2 * eps)) return false;
     }
     return true;
+}
+
+template <class T>
+__attribute__((always_inline)) inline bool acceptRootDomain(const ProjectedPatch<T>& pp, T eps, T u, T v,
+                                                            float domainTol, float& uc, float& vc) {
+    return acceptRootDomainWith<T>([&]() -> const ProjectedPatch<T>& { return pp; }, eps, u, v, domainTol, uc,
+                                   vc);
 }
 
 // Newton iteration from (u0, v0) in precision T (float in the renderer; double as the reference for the

@@ -2,6 +2,8 @@
 
 #include <cstring>
 
+#include "core/cpu.h"
+
 namespace tessera {
 namespace {
 
@@ -156,26 +158,17 @@ __attribute__((target("avx2"))) void projectAvx2(NewtonLanes& lanes, int l, cons
 }
 #endif
 
+// The AVX2 builds where the processor has them (core/cpu.h), else the SSE2 ones.
 using ProjectFn = void (*)(NewtonLanes&, int, const LaneRayFrame&, const float*, const float*, const float*,
                            float*);
-ProjectFn chooseProject() {
-#if defined(TESSERA_LANES_AVX2)
-    __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2")) return projectAvx2;
-#endif
-    return projectBaseline;
-}
-const ProjectFn kProject = chooseProject();
-
 using StepFn = unsigned (*)(NewtonLanes&);
-StepFn chooseStep() {
 #if defined(TESSERA_LANES_AVX2)
-    __builtin_cpu_init();  // needed before __builtin_cpu_supports in a static initializer
-    if (__builtin_cpu_supports("avx2")) return stepAvx2;
+const ProjectFn kProject = cpuHasAvx2() ? projectAvx2 : projectBaseline;
+const StepFn kStep = cpuHasAvx2() ? stepAvx2 : stepBaseline;
+#else
+const ProjectFn kProject = projectBaseline;
+const StepFn kStep = stepBaseline;
 #endif
-    return stepBaseline;
-}
-const StepFn kStep = chooseStep();
 
 }  // namespace
 

@@ -295,12 +295,10 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             iterTotal += uint32_t(iters);
             ++ch.c.hist[std::min(iters, kHistBins - 1)];
             float uc = 0.f, vc = 0.f;
-            // The domain rule reads the projection only for a root outside the domain's tolerance.
-            const float ur = lanes.u[l], vr = lanes.v[l], tol = 1e-4f;
-            const bool inside = ur >= -tol && ur <= 1 + tol && vr >= -tol && vr <= 1 + tol;
-            const bool found =
-                lanes.status[l] == kLaneConverged &&
-                acceptRootDomain<float>(inside ? s.pp : projection(s, l), s.eps, ur, vr, tol, uc, vc);
+            const bool found = lanes.status[l] == kLaneConverged &&
+                               acceptRootDomainWith<float>(
+                                   [&]() -> const ProjectedPatch<float>& { return projection(s, l); }, s.eps,
+                                   lanes.u[l], lanes.v[l], 1e-4f, uc, vc);
             if (!found && c.patch == s.opt.ignorePatch) {
                 // On the originating patch, where the hull test removed the neighbouring starts that could
                 // also reach a root of this leaf, a failed start (a fold, a seam root just outside the
