@@ -29,7 +29,6 @@ std::string writeFile(const std::string& name, const std::string& text) {
     return p.string();
 }
 
-
 // Random knot vector of n + order values: clamped or not, with some repeated interior knots.
 std::vector<double> randomKnots(std::mt19937& rng, int n, int order, bool clamped) {
     std::uniform_real_distribution<double> step(0.2, 1.5);
@@ -128,14 +127,14 @@ double maxRelativeError(std::mt19937& rng, const NurbsSurface& s, int samples) {
 
 }  // namespace
 
-TEST(Nurbs, KnotInsertionMatchesDeBoorClamped) {
+TEST(Nurbs, BezierExtractionMatchesDeBoorClamped) {
     std::mt19937 rng(1);
     for (int trial = 0; trial < 40; ++trial)
         EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, true, false), 200), 1e-5)
             << "trial " << trial;
 }
 
-TEST(Nurbs, KnotInsertionMatchesDeBoorUnclampedAndClipped) {
+TEST(Nurbs, BezierExtractionMatchesDeBoorUnclampedAndClipped) {
     std::mt19937 rng(2);
     for (int trial = 0; trial < 40; ++trial) {
         EXPECT_LT(maxRelativeError(rng, validSurface(rng, 4, 4, false, false), 200), 1e-5)

@@ -22,31 +22,6 @@ int multiplicity(const std::vector<double>& T, double t) {
     return int(range.second - range.first);
 }
 
-// Boehm's algorithm: insert the knot t once (The NURBS Book, A5.1 with r = 1). t lies in the domain
-// [T[p], T[n+1]) or is a knot of multiplicity < p + 1 there, so every denominator below is positive.
-void insertKnot(Curve& c, double t) {
-    const int p = c.degree, dim = c.dim, n = c.count() - 1;
-    const std::vector<double>& T = c.knots;
-    const int k = int(std::upper_bound(T.begin(), T.end(), t) - T.begin()) - 1;  // T[k] <= t < T[k+1]
-    const int s = multiplicity(T, t);
-    std::vector<double> q(size_t(n + 2) * dim);
-    for (int i = 0; i <= n + 1; ++i) {
-        double* out = &q[size_t(i) * dim];
-        if (i <= k - p) {
-            std::copy_n(&c.pts[size_t(i) * dim], dim, out);
-        } else if (i <= k - s) {
-            double a = (t - T[i]) / (T[i + p] - T[i]);
-            const double* pi = &c.pts[size_t(i) * dim];
-            const double* pm = &c.pts[size_t(i - 1) * dim];
-            for (int d = 0; d < dim; ++d) out[d] = a * pi[d] + (1 - a) * pm[d];
-        } else {
-            std::copy_n(&c.pts[size_t(i - 1) * dim], dim, out);
-        }
-    }
-    c.pts = std::move(q);
-    c.knots.insert(c.knots.begin() + k + 1, t);
-}
-
 // Breakpoints of the kept range: lo, hi and every distinct knot strictly between them.
 std::vector<double> breakpoints(const std::vector<double>& T, double lo, double hi) {
     std::vector<double> b{lo};
@@ -57,30 +32,50 @@ std::vector<double> breakpoints(const std::vector<double>& T, double lo, double 
 }
 
 // Cubic Bezier segments (4 points of c.dim coordinates each) of the curve restricted to [lo, hi].
-std::vector<std::vector<double>> bezierSegments(Curve c, double lo, double hi) {
+// Span [a, b] of knot span k (T[k] <= a < b <= T[k+1]) has the Bezier points of degree p
+// b_j = f(a, ..., a, b, ..., b) (p - j times a, j times b), f the span's blossom, evaluated by de Boor's
+// algorithm with argument t_r at stage r (Ramshaw 1989; The NURBS Book sec. 5.3): the same points as
+// raising every breakpoint to multiplicity p by knot insertion, but span by span from the p + 1 control
+// points each depends on, so the work grows linearly with the curve (inserting into the whole curve,
+// as before, was quadratic: 11% of a Killeroo frame).
+std::vector<std::vector<double>> bezierSegments(const Curve& c, double lo, double hi) {
     const int p = c.degree, dim = c.dim;
-    std::vector<double> bp = breakpoints(c.knots, lo, hi);
-    // Raise every breakpoint to multiplicity p: the control points of each span are then its Bezier points.
-    for (double t : bp)
-        for (int m = multiplicity(c.knots, t); m < p; ++m) insertKnot(c, t);
+    const std::vector<double>& T = c.knots;
+    const std::vector<double> bp = breakpoints(T, lo, hi);
     std::vector<std::vector<double>> segs;
+    segs.reserve(bp.size() - 1);
+    std::vector<double> d(size_t(p + 1) * dim), bez(size_t(p + 1) * dim);
     for (size_t s = 0; s + 1 < bp.size(); ++s) {
-        const std::vector<double>& T = c.knots;
-        int k = int(std::upper_bound(T.begin(), T.end(), bp[s]) - T.begin()) - 1;
-        const double* P = &c.pts[size_t(k - p) * dim];  // P[k-p .. k]
-        std::vector<double> seg(size_t(4) * dim);
-        for (int d = 0; d < dim; ++d) {
-            double b[4];
-            if (p == 3) {
-                for (int i = 0; i < 4; ++i) b[i] = P[i * dim + d];
-            } else if (p == 2) {  // exact degree elevation 2 -> 3
-                double q0 = P[d], q1 = P[dim + d], q2 = P[2 * dim + d];
-                b[0] = q0, b[1] = (q0 + 2 * q1) / 3, b[2] = (2 * q1 + q2) / 3, b[3] = q2;
-            } else {  // p == 1: a line, elevated 1 -> 3
-                double q0 = P[d], q1 = P[dim + d];
-                b[0] = q0, b[1] = (2 * q0 + q1) / 3, b[2] = (q0 + 2 * q1) / 3, b[3] = q1;
+        const double a = bp[s], b = bp[s + 1];
+        const int k = int(std::upper_bound(T.begin(), T.end(), a) - T.begin()) - 1;  // T[k] <= a < T[k+1]
+        for (int j = 0; j <= p; ++j) {
+            // d[i - (k - p)] = control point i, i = k - p .. k
+            std::copy_n(&c.pts[size_t(k - p) * dim], size_t(p + 1) * dim, d.begin());
+            for (int r = 1; r <= p; ++r) {
+                const double t = r <= p - j ? a : b;
+                for (int i = k; i >= k - p + r; --i) {
+                    // T[i] <= T[k] < T[k+1] <= T[i + p + 1 - r]: a positive denominator
+                    const double alpha = (t - T[size_t(i)]) / (T[size_t(i + p + 1 - r)] - T[size_t(i)]);
+                    double* di = &d[size_t(i - (k - p)) * dim];
+                    const double* dm = di - dim;
+                    for (int e = 0; e < dim; ++e) di[e] = (1 - alpha) * dm[e] + alpha * di[e];
+                }
             }
-            for (int i = 0; i < 4; ++i) seg[size_t(i) * dim + d] = b[i];
+            std::copy_n(&d[size_t(p) * dim], dim, &bez[size_t(j) * dim]);
+        }
+        std::vector<double> seg(size_t(4) * dim);
+        for (int e = 0; e < dim; ++e) {
+            double q[4];
+            for (int i = 0; i <= p; ++i) q[i] = bez[size_t(i) * dim + e];
+            double out[4];
+            if (p == 3) {
+                for (int i = 0; i < 4; ++i) out[i] = q[i];
+            } else if (p == 2) {  // exact degree elevation 2 -> 3
+                out[0] = q[0], out[1] = (q[0] + 2 * q[1]) / 3, out[2] = (2 * q[1] + q[2]) / 3, out[3] = q[2];
+            } else {  // p == 1: a line, elevated 1 -> 3
+                out[0] = q[0], out[1] = (2 * q[0] + q[1]) / 3, out[2] = (q[0] + 2 * q[1]) / 3, out[3] = q[1];
+            }
+            for (int i = 0; i < 4; ++i) seg[size_t(i) * dim + e] = out[i];
         }
         segs.push_back(std::move(seg));
     }
@@ -190,7 +185,7 @@ std::vector<BezierPatch> nurbsToBezier(const NurbsSurface& s) {
             double* o = &cu.pts[size_t(i) * cu.dim + size_t(j) * 3];
             o[0] = p.x, o[1] = p.y, o[2] = p.z;
         }
-    std::vector<std::vector<double>> uSegs = bezierSegments(std::move(cu), ulo, uhi);
+    std::vector<std::vector<double>> uSegs = bezierSegments(cu, ulo, uhi);
 
     std::vector<BezierPatch> out;
     for (const std::vector<double>& useg : uSegs) {
@@ -205,7 +200,7 @@ std::vector<BezierPatch> nurbsToBezier(const NurbsSurface& s) {
                 for (int d = 0; d < 3; ++d)
                     cv.pts[size_t(j) * 12 + size_t(c) * 3 + d] =
                         useg[size_t(c) * 3 * s.nv + size_t(j) * 3 + d];
-        for (const std::vector<double>& vseg : bezierSegments(std::move(cv), vlo, vhi)) {
+        for (const std::vector<double>& vseg : bezierSegments(cv, vlo, vhi)) {
             BezierPatch b;
             for (int r = 0; r < 4; ++r)
                 for (int c = 0; c < 4; ++c) {
