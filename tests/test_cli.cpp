@@ -246,7 +246,7 @@ TEST(Cli, RenderHelpListsEveryInputFormatAndTheDefaults) {
         EXPECT_NE(r.output.find(format), std::string::npos) << format << "\n" << r.output;
     for (const char* option :
          {"--engine TEXT:{reyes,rt}=reyes", "--bucket-size INT:(4..1024)=32", "--max-grid INT:(1..256)=16",
-          "--subpatch-depth INT:(0..12)=6", "--max-depth INT:(0..64)", "default 4", "16 (path",
+          "--subpatch-depth INT:auto|(0..12)=auto", "--max-depth INT:(0..64)", "default 4", "16 (path",
           "--threads INT:(0..4096)=0", "--format", "--up", "--progress"})
         EXPECT_NE(r.output.find(option), std::string::npos) << option << "\n" << r.output;
 }

@@ -975,3 +975,49 @@ TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
         EXPECT_EQ(perRay.counters().rays[kShadow], uint64_t(n + 2 * n));
     }
 }
+
+TEST(RtAccel, AutoSubpatchDepthFollowsTheSamplesPerPatch) {
+    // A 90-degree camera at the origin looking down +z sees exactly [-1,1]^2 of the plane z = 1 (128x128
+    // pixels); tiling it with n x n flat patches gives each 128^2 / n^2 pixels.
+    Scene s;
+    s.camera.width = s.camera.height = 128;
+    s.camera.fovDegrees = 90.f;
+    auto tile = [&](float x0, float x1, float y0, float y1, int nx, int ny) {
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i)
+                s.patches.push_back(rectPatch({x0 + (x1 - x0) * i / nx, y0 + (y1 - y0) * j / ny, 1.f},
+                                              {(x1 - x0) / nx, 0, 0}, {0, (y1 - y0) / ny, 0}));
+    };
+    struct Case {
+        int n;
+        double spp;
+        int depth;
+    };
+    for (const Case& c : {Case{1, 1, 6}, Case{8, 1, 4}, Case{64, 1, 2}, Case{64, 16, 4}, Case{8, 8, 4},
+                          Case{8, 32, 6}, Case{2, 1, 6}}) {
+        s.patches.clear();
+        tile(-1, 1, -1, 1, c.n, c.n);
+        double perPatch = -1;
+        EXPECT_EQ(autoSubpatchDepth(s, s.camera, c.spp, &perPatch), c.depth)
+            << "n " << c.n << " spp " << c.spp;
+        const double expected = 128.0 * 128.0 * c.spp / (c.n * c.n);
+        EXPECT_NEAR(perPatch, expected, 0.02 * expected) << "n " << c.n;
+    }
+    // Weighted by the samples: one patch holding 3/4 of the image beside 32 x 64 tiny ones picks the big
+    // patch's depth (the plain median over patches would be a tiny one's).
+    s.patches.clear();
+    tile(-1, 0.5f, -1, 1, 1, 1);
+    tile(0.5f, 1, -1, 1, 32, 64);
+    double perPatch = -1;
+    EXPECT_EQ(autoSubpatchDepth(s, s.camera, 1.0, &perPatch), 6);
+    EXPECT_NEAR(perPatch, 96.0 * 128.0, 0.02 * 96.0 * 128.0);
+    // Nothing in view (behind the eye, or outside the image): the paper's depth 6.
+    s.patches.clear();
+    s.patches.push_back(rectPatch({-1, -1, -1}, {2, 0, 0}, {0, 2, 0}));
+    s.patches.push_back(rectPatch({5, 5, 1}, {1, 0, 0}, {0, 1, 0}));
+    EXPECT_EQ(autoSubpatchDepth(s, s.camera, 1.0, &perPatch), 6);
+    EXPECT_EQ(perPatch, 0.0);
+    // buildRtAccel takes resolved depths only.
+    RtAccel acc;
+    EXPECT_THROW(buildRtAccel(s, Mat4::identity(), kAutoSubpatchDepth, false, acc), std::invalid_argument);
+}

@@ -34,8 +34,7 @@ void buildDisplacedAccel(const Scene& scene, RtAccel& acc, bool lazy = false) {
     d.dicer = makeReyesDisplacedDicer(scene, rs, frame);
     d.forceLazy = lazy;
     ASSERT_TRUE(d.dicer);
-    buildRtAccel(scene, frame.camera.cameraFromWorld, rs.subpatchDepth, false, acc, nullptr,
-                 kDefaultTimeSlabs, &d);
+    buildRtAccel(scene, frame.camera.cameraFromWorld, 6, false, acc, nullptr, kDefaultTimeSlabs, &d);
     ASSERT_TRUE(acc.displaced.any());
 }
 

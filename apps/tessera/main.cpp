@@ -1021,8 +1021,21 @@ int main(int argc, char** argv) {
                      "differences (grid: paper 000's approximate baseline, which can crack)")
         ->check(CLI::IsMember({"exact", "grid"}))
         ->capture_default_str();
-    render->add_option("--subpatch-depth", ra.subpatchDepth, "rt: subpatch tree depth")
-        ->check(intRange(0, 12));
+    render
+        ->add_option("--subpatch-depth", ra.subpatchDepth,
+                     "rt: subpatch tree depth, 0 to 12, or auto: 2, 4 or 6 from the samples the patches "
+                     "cover on screen (default)")
+        ->transform(CLI::Validator(
+            [](std::string& text) -> std::string {
+                if (text == "auto") {
+                    text = "-1";  // kAutoSubpatchDepth
+                    return "";
+                }
+                std::string bad = intRange(0, 12)(text);
+                return bad.empty() ? "" : "must be auto or an integer from 0 to 12, got '" + text + "'";
+            },
+            "auto|(0..12)"))
+        ->default_str("auto");
     render
         ->add_option("--displacement-cache-mb", ra.displacementCacheMb,
                      "rt: memory for displaced micro-grids, MiB (built up front when they fit, else lazily "

@@ -129,7 +129,7 @@ struct RenderSettings {
     Integrator integrator = Integrator::Direct;
     AmbientOcclusionSettings ao;
     AdaptiveSettings adaptive;
-    int subpatchDepth = 6;
+    int subpatchDepth = -1;  // -1: chosen per frame (kAutoSubpatchDepth, rt/accel.h)
     // Displaced patches' micro-grids (rt/displaced.h): built up front when they fit, else lazily and kept
     // within this many MiB.
     int displacementCacheMb = 512;

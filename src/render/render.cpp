@@ -32,8 +32,14 @@ RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSet
     if (anyDisplaced(scene))
         displacement.dicer = makeReyesDisplacedDicer(scene, settings, FrameSetup(scene, settings));
     displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
-    buildRtAccel(scene, viewCamera(scene, settings).cameraFromWorld, settings.subpatchDepth, false, acc,
-                 nullptr, kDefaultTimeSlabs, &displacement, settings.instancing);
+    // Shadow rays start at the micropolygons' vertices: about one per pixel at shading rate 1, which the
+    // auto depth takes as its samples per pixel.
+    const Camera& cam = viewCamera(scene, settings);
+    const int subpatchDepth = settings.subpatchDepth == kAutoSubpatchDepth
+                                  ? autoSubpatchDepth(scene, cam, 1.0)
+                                  : settings.subpatchDepth;
+    buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, false, acc, nullptr, kDefaultTimeSlabs,
+                 &displacement, settings.instancing);
     const double buildMs = msSince(t0);
     // Per-ray traversal: a grid's lists of shadow rays are too short for the shadow binning to pay.
     const RayTracedVisibility visibility(acc, rt::TraceServiceOptions{false, false});

@@ -116,6 +116,9 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
                 : o.sampler == "sobol" || scene.image.jitter ? SamplerKind::Sobol
                                                              : SamplerKind::Centred;
     s.bucketSize = o.bucketSize;
+    if (o.subpatchDepth != -1 && (o.subpatchDepth < 0 || o.subpatchDepth > 12))
+        throw std::invalid_argument("subpatch depth must be auto or an integer from 0 to 12, got " +
+                                    std::to_string(o.subpatchDepth));
     s.subpatchDepth = o.subpatchDepth;
     s.displacementCacheMb = o.displacementCacheMb;
     // Bounces: 4 traced lobes for the direct integrator; 16 for the path tracer, whose Russian roulette

@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <stdexcept>
+#include <string>
 
 namespace tessera {
 namespace {
@@ -145,9 +147,49 @@ Bounds3 placedBox(const Affine3& a, const Bounds3& b) {
 }
 }  // namespace
 
+int autoSubpatchDepth(const Scene& scene, const Camera& cam, double samplesPerPixel,
+                      double* samplesPerPatch) {
+    // Thresholds on the median samples per patch, from the sweep at 800x600 and 1600x1200, 4 spp
+    // (docs/benchmarks/fixed_costs.md, session 22): depth 2 below kShallow, 6 from kDeep, else 4.
+    constexpr double kShallow = 16, kDeep = 4096;
+    const Projector proj(cam);
+    const size_t n = scene.patches.size();
+    // At most 8192 patches, evenly spread over the list (a median needs no more).
+    const size_t stride = std::max<size_t>(1, n / 8192);
+    std::vector<double> covered;
+    covered.reserve(n / stride + 1);
+    const float w = float(cam.width), h = float(cam.height);
+    for (size_t i = 0; i < n; i += stride) {
+        Bounds3 b;
+        for (const Vec3& p : scene.patches[i].cp) b.extend(cam.cameraFromWorld.point(p));
+        float x0, x1, y0, y1;
+        if (!proj.rasterBounds(b, x0, x1, y0, y1)) continue;  // reaches behind the eye
+        x0 = std::max(x0, 0.f), x1 = std::min(x1, w), y0 = std::max(y0, 0.f), y1 = std::min(y1, h);
+        if (!(x0 < x1 && y0 < y1)) continue;  // out of view
+        covered.push_back(double(x1 - x0) * double(y1 - y0) * samplesPerPixel);
+    }
+    if (samplesPerPatch) *samplesPerPatch = 0;
+    if (covered.empty()) return 6;
+    // The median weighted by the samples: half of the samples fall on patches covering at least this
+    // many (a large floor under small figures keeps deep trees for the floor's rays).
+    std::sort(covered.begin(), covered.end());
+    double total = 0, below = 0;
+    for (double c : covered) total += c;
+    double median = covered.back();
+    for (double c : covered)
+        if ((below += c) >= 0.5 * total) {
+            median = c;
+            break;
+        }
+    if (samplesPerPatch) *samplesPerPatch = median;
+    return median < kShallow ? 2 : median < kDeep ? 4 : 6;
+}
+
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs,
                   const RtDisplacementOptions* displacement, bool instancing) {
+    if (subpatchDepth < 0)  // kAutoSubpatchDepth is the caller's to resolve (autoSubpatchDepth)
+        throw std::invalid_argument("buildRtAccel: subpatch depth " + std::to_string(subpatchDepth));
     const size_t n = scene.patches.size();
     acc.motion = motion && motion->blurred() ? *motion : FrameMotion();
     acc.movingPatches = 0;

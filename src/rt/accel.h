@@ -137,12 +137,23 @@ struct RtDisplacementOptions {
     size_t budgetBytes = size_t(512) << 20;  // --displacement-cache-mb
     bool forceLazy = false;                  // build lazily even when everything fits (tests)
 };
+// `subpatchDepth` >= 0 (resolve kAutoSubpatchDepth with autoSubpatchDepth first).
 // `instancing`: the patches of Scene::instances that are affine copies of their object's first instance
 // share its subpatch trees (RtAccel::treeOf); not with `cullFromOrigin` (the back-facing marks depend on
 // where the eye is in the prototype's frame) nor in a frame where anything moves.
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs,
                   const RtDisplacementOptions* displacement = nullptr, bool instancing = false);
+
+// --subpatch-depth auto: a depth for the scene's subpatch trees from how many camera samples its patches
+// cover: the patches whose box projects into the image each cover its clipped raster rectangle times
+// the samples per pixel, and their median weighted by those samples (`samplesPerPatch` gets it, 0 when
+// no patch is in view) picks 2, 4 or 6. Leaves
+// much finer than the rays that reach them cost traversal, build time and memory; leaves much coarser
+// cost Newton iterations (paper 002 sec. 3.4 fixes depth 6; our sweep is in docs/benchmarks/fixed_costs.md).
+constexpr int kAutoSubpatchDepth = -1;
+int autoSubpatchDepth(const Scene& scene, const Camera& cam, double samplesPerPixel,
+                      double* samplesPerPatch = nullptr);
 
 // The ray against quadric surface `patch` (analytic, core/quadric.h), restricted to the (u,v) rectangle
 // [u0,u1] x [v0,v1] (a subpatch leaf's; a hit on its border counts for both neighbours): the nearest hit

@@ -970,8 +970,12 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     if (dicer && *dicer) displacement.dicer = (*dicer)(frame);
     const bool displacedDicer = displacement.dicer != nullptr;
     displacement.budgetBytes = size_t(std::max(1, settings.displacementCacheMb)) << 20;
-    buildRtAccel(scene, cam.cameraFromWorld, settings.subpatchDepth, settings.cullBackfaces, acc,
-                 &frame.motion, kDefaultTimeSlabs, &displacement, settings.instancing);
+    double samplesPerPatch = 0;
+    const bool autoDepth = settings.subpatchDepth == kAutoSubpatchDepth;
+    const int subpatchDepth =
+        autoDepth ? autoSubpatchDepth(scene, cam, double(nx * ny), &samplesPerPatch) : settings.subpatchDepth;
+    buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, settings.cullBackfaces, acc, &frame.motion,
+                 kDefaultTimeSlabs, &displacement, settings.instancing);
     const double buildMs = msSince(tBuild);
     if (displacedDicer)
         for (size_t i = 0; i < scene.patches.size(); ++i)
@@ -1119,6 +1123,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     s["bvh_nodes"] = acc.bvh.nodes.size();
     s["bvh_depth"] = acc.bvh.maxDepth;
     s["subpatch_depth"] = acc.forest.depth;
+    if (autoDepth) s["subpatch_depth_auto"] = {{"samples_per_patch", samplesPerPatch}};
     s["subpatch_nodes"] = acc.forest.treeCount() * acc.forest.nodesPerPatch;
     s["subpatch_trees"] = acc.forest.treeCount();
     s["instancing"] = {{"instances", acc.placements.size()}, {"shared_patches", acc.sharedPatches}};
