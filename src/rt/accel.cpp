@@ -154,8 +154,9 @@ int autoSubpatchDepth(const Scene& scene, const Camera& cam, double samplesPerPi
     constexpr double kShallow = 16, kDeep = 4096;
     const Projector proj(cam);
     const size_t n = scene.patches.size();
-    // At most 8192 patches, evenly spread over the list (a median needs no more).
-    const size_t stride = std::max<size_t>(1, n / 8192);
+    // About 2048 patches, evenly spread over the list (a median needs no more; all 11532 of Killeroo cost
+    // 19 M instructions, 1% of its 800x600 frame).
+    const size_t stride = std::max<size_t>(1, n / 2048);
     std::vector<double> covered;
     covered.reserve(n / stride + 1);
     const float w = float(cam.width), h = float(cam.height);

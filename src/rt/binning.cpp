@@ -253,38 +253,92 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
 
-    // Projected bounding rectangle of a box, grown for rounding, clipped to the points' bounds.
-    auto overlaps = [&](const Bounds3& b, Rect2& rect) {
-        float rx0 = INFINITY, rx1 = -INFINITY, ry0 = INFINITY, ry1 = -INFINITY;
-        int behind = 0;
+    // The 8 corners of box b: the rectangle of their projections (corners behind the light left out),
+    // the range [dlo, dhi] of their depths dot(w, p - C) (point light) or dot(w, p) (distant light: the
+    // startOf of each), and how many are not in front of the light. The arithmetic of project() corner by
+    // corner (no fused multiply-add), four corners at a time; min and max keep the accumulator where a
+    // projection is NaN, as std::min / std::max did.
+    struct Corners {
+        float rx0, rx1, ry0, ry1, dlo, dhi;
+        int behind;
+    };
+    auto projectCorners = [&](const Bounds3& b) {
+        Corners k;
+#if defined(__SSE2__)
+        const __m128 cx = _mm_setr_ps(b.lo.x, b.hi.x, b.lo.x, b.hi.x),
+                     cy = _mm_setr_ps(b.lo.y, b.lo.y, b.hi.y, b.hi.y);
+        auto dot4 = [](Vec3 a, __m128 x, __m128 y, __m128 z) {
+            return _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_set1_ps(a.x), x), _mm_mul_ps(_mm_set1_ps(a.y), y)),
+                              _mm_mul_ps(_mm_set1_ps(a.z), z));
+        };
+        __m128 lx = _mm_set1_ps(INFINITY), hx = _mm_set1_ps(-INFINITY), ly = lx, hy = hx, ld = lx, hd = hx;
+        k.behind = 0;
+        for (const float z : {b.lo.z, b.hi.z}) {
+            __m128 qx = cx, qy = cy, qz = _mm_set1_ps(z);
+            if (light) {
+                qx = _mm_sub_ps(qx, _mm_set1_ps(C.x));
+                qy = _mm_sub_ps(qy, _mm_set1_ps(C.y));
+                qz = _mm_sub_ps(qz, _mm_set1_ps(C.z));
+            }
+            const __m128 depth = dot4(w, qx, qy, qz);
+            __m128 px = dot4(eu, qx, qy, qz), py = dot4(ev, qx, qy, qz);
+            __m128 front = _mm_castsi128_ps(_mm_set1_epi32(-1));
+            if (light) {
+                front = _mm_cmpgt_ps(depth, _mm_setzero_ps());
+                k.behind += 4 - __builtin_popcount(unsigned(_mm_movemask_ps(front)));
+                const __m128 iz = _mm_div_ps(_mm_set1_ps(1.f), depth);
+                px = _mm_mul_ps(px, iz), py = _mm_mul_ps(py, iz);
+            }
+            // _mm_min_ps(a, acc) is (a < acc ? a : acc): std::min(acc, a). Corners behind the light skipped.
+            lx = _mm_or_ps(_mm_and_ps(front, _mm_min_ps(px, lx)), _mm_andnot_ps(front, lx));
+            hx = _mm_or_ps(_mm_and_ps(front, _mm_max_ps(px, hx)), _mm_andnot_ps(front, hx));
+            ly = _mm_or_ps(_mm_and_ps(front, _mm_min_ps(py, ly)), _mm_andnot_ps(front, ly));
+            hy = _mm_or_ps(_mm_and_ps(front, _mm_max_ps(py, hy)), _mm_andnot_ps(front, hy));
+            ld = _mm_min_ps(depth, ld), hd = _mm_max_ps(depth, hd);
+        }
+        auto hmin = [](__m128 v) {
+            v = _mm_min_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(1, 0, 3, 2)));
+            return _mm_cvtss_f32(_mm_min_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1))));
+        };
+        auto hmax = [](__m128 v) {
+            v = _mm_max_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(1, 0, 3, 2)));
+            return _mm_cvtss_f32(_mm_max_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1))));
+        };
+        k.rx0 = hmin(lx), k.rx1 = hmax(hx), k.ry0 = hmin(ly), k.ry1 = hmax(hy);
+        k.dlo = hmin(ld), k.dhi = hmax(hd);
+#else
+        k = {INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY, -INFINITY, 0};
         for (int c = 0; c < 8; ++c) {
             const Vec3 p{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z};
-            if (light && !(dot(w, p - C) > 0.f)) {
-                ++behind;
+            const float depth = light ? dot(w, p - C) : dot(w, p);
+            k.dlo = std::min(k.dlo, depth), k.dhi = std::max(k.dhi, depth);
+            if (light && !(depth > 0.f)) {
+                ++k.behind;
                 continue;
             }
             float x, y;
             project(p, x, y);
-            rx0 = std::min(rx0, x), rx1 = std::max(rx1, x), ry0 = std::min(ry0, y), ry1 = std::max(ry1, y);
+            k.rx0 = std::min(k.rx0, x), k.rx1 = std::max(k.rx1, x);
+            k.ry0 = std::min(k.ry0, y), k.ry1 = std::max(k.ry1, y);
         }
-        if (behind == 8) return false;  // behind the light: no segment towards it gets there
-        if (behind > 0) {               // around the light's plane: any ray may hit it
+#endif
+        return k;
+    };
+    // Projected bounding rectangle of a box, grown for rounding, clipped to the points' bounds.
+    auto overlaps = [&](const Bounds3& b, Rect2& rect) {
+        const Corners k = projectCorners(b);
+        if (k.behind == 8) return false;  // behind the light: no segment towards it gets there
+        if (k.behind > 0) {               // around the light's plane: any ray may hit it
             rect = {x0, x1, y0, y1};
             return true;
         }
+        float rx0 = k.rx0, rx1 = k.rx1, ry0 = k.ry0, ry1 = k.ry1;
         float m = 1e-5f * std::max({std::fabs(rx0), std::fabs(rx1), std::fabs(ry0), std::fabs(ry1), rx1 - rx0,
                                     ry1 - ry0}) +
                   1e-30f;
-        if (light) {
-            // Central projection: rounding of a ray point at distance h from the light moves its projection
-            // by ~ulp(coordinates) / h, largest at the box's nearest corner.
-            float h = INFINITY;
-            for (int c = 0; c < 8; ++c)
-                h = std::min(h, dot(w, Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y,
-                                            c & 4 ? b.hi.z : b.lo.z} -
-                                           C));
-            m += 1e-6f * reach / h;
-        }
+        // Central projection: rounding of a ray point at distance h from the light moves its projection by
+        // ~ulp(coordinates) / h, largest at the box's nearest corner (h = dlo).
+        if (light) m += 1e-6f * reach / k.dlo;
         rx0 -= m, rx1 += m, ry0 -= m, ry1 += m;
         rect = {rx0, rx1, ry0, ry1};
         if (!(std::isfinite(rx0) && std::isfinite(rx1) && std::isfinite(ry0) && std::isfinite(ry1))) {
@@ -298,13 +352,9 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
                 pb.sat[size_t(cy1 + 1) * G + cx0] + pb.sat[size_t(cy0) * G + cx0] ==
             0)
             return false;  // no ray in the rectangle
-        // Box entirely before every start in the rectangle (margin for rounding).
-        float reachOfBox = -INFINITY, mag = 0.f;
-        for (int c = 0; c < 8; ++c) {
-            const float v =
-                startOf(Vec3{c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z});
-            reachOfBox = std::max(reachOfBox, v), mag = std::max(mag, std::fabs(v));
-        }
+        // Box entirely before every start in the rectangle (margin for rounding). startOf is -depth for a
+        // point light, depth for a distant one.
+        const float reachOfBox = light ? -k.dlo : k.dhi, mag = std::max(std::fabs(k.dlo), std::fabs(k.dhi));
         const float first = minStartIn(cx0, cx1, cy0, cy1);
         return !(reachOfBox < first - (1e-5f * (mag + std::fabs(first)) + 1e-30f));
     };
