@@ -2,6 +2,8 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -206,11 +208,11 @@ TEST(RibAttributes, ObjectIdsFollowAttributeBlocksAndIdentifierNames) {
     // attribute block is one object, its nested blocks others; a name given by Attribute "identifier"
     // joins every primitive declared under it, wherever it is; the block after a named one is new again.
     const std::string square = kUnitSquare;
-    Loaded l = load(scene("", square + square + "AttributeBegin\n" + square + "AttributeBegin\n" + square +
-                                  "AttributeEnd\n" + square + "AttributeEnd\n" +
-                                  "AttributeBegin\nAttribute \"identifier\" \"name\" \"lid\"\n" + square +
-                                  "AttributeEnd\nAttributeBegin\nAttribute \"identifier\" \"name\" \"lid\"\n" +
-                                  square + "AttributeEnd\n" + square));
+    Loaded l = load(scene(
+        "", square + square + "AttributeBegin\n" + square + "AttributeBegin\n" + square + "AttributeEnd\n" +
+                square + "AttributeEnd\n" + "AttributeBegin\nAttribute \"identifier\" \"name\" \"lid\"\n" +
+                square + "AttributeEnd\nAttributeBegin\nAttribute \"identifier\" \"name\" \"lid\"\n" +
+                square + "AttributeEnd\n" + square));
     std::vector<uint32_t> ids;
     for (const PatchAttributes& a : l.scene.attributes) ids.push_back(a.object);
     EXPECT_EQ(ids, (std::vector<uint32_t>{0, 0, 1, 2, 1, 3, 3, 0, 0}));  // scene() adds a last square
@@ -502,6 +504,39 @@ TEST(RibFiles, ErrorInsideArchiveNamesTheArchive) {
     std::string msg = errorOfFile(top);
     std::string expectFile = (d / "inc" / "bad.rib").string();
     EXPECT_EQ(msg.rfind(expectFile + ":1: error:", 0), 0u) << msg;
+}
+
+TEST(RibFiles, ArchiveReadAgainIsReplayedAsRead) {
+    // From its second read on, an archive is replayed from its recorded tokens (not lexed again): the
+    // same patches as the text written out in full, and errors that only its fourth use meets still name
+    // the archive and its line.
+    fs::path d = testDir();
+    const std::string part = std::string("# a square\n") + kUnitSquare + "AttributeEnd\n";
+    writeFile(d / "part.rib", part);
+    std::string byArchive = "WorldBegin\n", inline_ = "WorldBegin\n";
+    for (int i = 0; i < 4; ++i) {
+        const std::string open = "AttributeBegin\nTranslate " + std::to_string(i) + " 0.5 0\n";
+        byArchive += open + "ReadArchive \"part.rib\"\n";
+        inline_ += open + part;
+    }
+    const Scene a = loadScene(writeFile(d / "archive.rib", byArchive + "WorldEnd\n"), {});
+    const Scene b = loadScene(writeFile(d / "inline.rib", inline_ + "WorldEnd\n"), {});
+    ASSERT_EQ(a.patches.size(), 4u);
+    ASSERT_EQ(b.patches.size(), 4u);
+    for (size_t i = 0; i < 4; ++i)
+        for (int k = 0; k < 16; ++k) {
+            EXPECT_EQ(a.patches[i].cp[k].x, b.patches[i].cp[k].x);
+            EXPECT_EQ(a.patches[i].cp[k].y, b.patches[i].cp[k].y);
+            EXPECT_EQ(a.patches[i].cp[k].z, b.patches[i].cp[k].z);
+        }
+    // A fifth read closes an attribute block that is not open: the replayed tokens' file and line.
+    const std::string msg =
+        errorOfFile(writeFile(d / "bad.rib", byArchive + "ReadArchive \"part.rib\"\nWorldEnd\n"));
+    const int squareLines = int(std::count(kUnitSquare, kUnitSquare + std::strlen(kUnitSquare), '\n'));
+    EXPECT_EQ(msg.rfind((d / "part.rib").string() + ":" + std::to_string(2 + squareLines) + ": error:", 0),
+              0u)
+        << msg;
+    EXPECT_TRUE(contains(msg, "AttributeEnd")) << msg;
 }
 
 TEST(RibFiles, RecursiveArchiveIsAnError) {
@@ -804,7 +839,7 @@ TEST(RibFiles, ShippedScenesKeepTheirContent) {
         size_t patches, objects, lights, materials;
     };
     const Expect cases[] = {
-        {"teapot", 32, 7, 4, 1},   {"killeroo", 11532, 1, 3, 1},  {"killeroo2", 23064, 2, 3, 2},
+        {"teapot", 32, 7, 4, 1},    {"killeroo", 11532, 1, 3, 1},  {"killeroo2", 23064, 2, 3, 2},
         {"bigguy", 23200, 1, 3, 1}, {"bigguy_box", 3575, 6, 2, 4},  // bigguy: OpenSubdiv, level 2
     };
     for (const Expect& c : cases) {

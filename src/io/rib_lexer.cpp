@@ -66,13 +66,26 @@ RibLexer::RibLexer(std::string text, std::string file) : text_(std::move(text)),
     if (!text_.empty() && text_.back() == '\n') --eofLine_;
 }
 
+RibLexer::RibLexer(std::shared_ptr<const LexedFile> lexed, std::string file, int eofLine)
+    : file_(std::move(file)), eofLine_(eofLine), replay_(std::move(lexed)) {}
+
 void RibLexer::fail(int line, const std::string& message) const {
     throw InputError(file_, line, message);
 }
 
 const Token& RibLexer::peek() {
+    if (replay_) return replay_->tokens[std::min(replayPos_, replay_->tokens.size() - 1)];
     if (!peeked_) peeked_ = lex();
     return *peeked_;
+}
+
+void RibLexer::skip() {
+    if (replay_)
+        ++replayPos_;
+    else if (peeked_)
+        peeked_.reset();
+    else
+        lex();
 }
 
 Token RibLexer::next() {
@@ -85,6 +98,16 @@ Token RibLexer::next() {
 }
 
 Token RibLexer::lex() {
+    if (replay_) {  // the last token (End) repeats
+        const std::vector<Token>& t = replay_->tokens;
+        return t[std::min(replayPos_++, t.size() - 1)];
+    }
+    Token t = lexText();
+    if (record_) record_->tokens.push_back(t);
+    return t;
+}
+
+Token RibLexer::lexText() {
     // Skip whitespace and comments (# to end of line; ## structure comments are comments too).
     while (pos_ < text_.size()) {
         char c = text_[pos_];

@@ -144,7 +144,7 @@ class RibReader {
                         diag_.fail(p.line, "unexpected " + describe(p) + " in the arguments of " + r.name);
                     break;
             }
-            lex.next();
+            lex.skip();
         }
     }
 
@@ -156,7 +156,7 @@ class RibReader {
             const Token& t = lex.peek();
             switch (t.type) {
                 case TokenType::ArrayEnd:
-                    lex.next();
+                    lex.skip();
                     if (hasStr) v.kind = Value::Kind::StringArray;
                     r.args.push_back(std::move(v));
                     return true;
@@ -182,7 +182,7 @@ class RibReader {
                     break;
             }
             if (hasNum && hasStr && !tolerant) diag_.fail(t.line, "array mixes numbers and strings");
-            lex.next();
+            lex.skip();
         }
     }
 
@@ -692,8 +692,7 @@ class RibReader {
                 if (p.name == "name") {
                     state_.attributes().identifier = paramString(r, p, diag_);
                     state_.attributes().object.reset();  // the primitives that follow: that name's object
-                }
-                else
+                } else
                     warnIgnoredParam(p, "Attribute \"identifier\"", diag_);
             }
             return;
@@ -1525,13 +1524,25 @@ class RibReader {
                 diag_.fail(r.line, "ReadArchive: cannot open \"" + printable(name, 200) +
                                        "\": not found in the archive search path " + where);
         }
-        std::string text;
-        try {
-            text = readInputFile(path);
-        } catch (const InputError&) {
-            diag_.fail(r.line, "ReadArchive: cannot read \"" + path + "\"");
+        // A file read a second time is recorded as it is lexed, and replayed from then on: the same
+        // tokens, so the same requests and messages (the file is taken not to change during one load).
+        ArchiveReads& reads = archives_[path];
+        std::unique_ptr<LexedFile> recording;
+        std::optional<RibLexer> lexer;
+        if (reads.lexed) {
+            lexer.emplace(reads.lexed, path, reads.eofLine);
+        } else {
+            std::string text;
+            try {
+                text = readInputFile(path);
+            } catch (const InputError&) {
+                diag_.fail(r.line, "ReadArchive: cannot read \"" + path + "\"");
+            }
+            lexer.emplace(std::move(text), path);
+            if (reads.count > 0) lexer->record((recording = std::make_unique<LexedFile>()).get());
         }
-        RibLexer lex(std::move(text), path);
+        ++reads.count;
+        RibLexer& lex = *lexer;
         RibLexer* outer = lex_;
         lex_ = &lex;
         diag_.setFile(path);
@@ -1540,6 +1551,10 @@ class RibReader {
         --archiveDepth_;
         lex_ = outer;
         diag_.setFile(outer->file());
+        if (recording) {  // read to its end
+            reads.lexed = std::move(recording);
+            reads.eofLine = lex.eofLine();
+        }
     }
 
     // The request table (RI spec 3.2, appendix C.2 names): nullptr for a request we do not handle.
@@ -1633,6 +1648,12 @@ class RibReader {
     std::optional<int> frameOrdinal_;
     RasterOverride raster_;  // the resolution the caller will render at (subdivision levels), if given
     int archiveDepth_ = 0;   // ReadArchive nesting of the file being read
+    struct ArchiveReads {
+        int count = 0;
+        std::shared_ptr<const LexedFile> lexed;  // recorded on the second read
+        int eofLine = 1;
+    };
+    std::map<std::string, ArchiveReads> archives_;                          // by resolved path
     std::optional<Definition> defining_;                                    // the open ObjectBegin
     std::map<std::string, std::shared_ptr<const RetainedObject>> objects_;  // by handle
     uint32_t objectDefinitions_ = 0;
