@@ -993,8 +993,8 @@ TEST(RtAccel, AutoSubpatchDepthFollowsTheSamplesPerPatch) {
         double spp;
         int depth;
     };
-    for (const Case& c : {Case{1, 1, 6}, Case{8, 1, 4}, Case{64, 1, 2}, Case{64, 16, 4}, Case{8, 8, 4},
-                          Case{8, 32, 6}, Case{2, 1, 6}}) {
+    for (const Case& c : {Case{1, 1, 6}, Case{2, 2, 6}, Case{4, 1, 4}, Case{8, 1, 2}, Case{8, 8, 4},
+                          Case{8, 32, 6}, Case{64, 1, 2}, Case{64, 256, 4}}) {
         s.patches.clear();
         tile(-1, 1, -1, 1, c.n, c.n);
         double perPatch = -1;

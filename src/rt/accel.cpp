@@ -149,9 +149,10 @@ Bounds3 placedBox(const Affine3& a, const Bounds3& b) {
 
 int autoSubpatchDepth(const Scene& scene, const Camera& cam, double samplesPerPixel,
                       double* samplesPerPatch) {
-    // Thresholds on the weighted median samples per patch, from the sweep at 800x600 and 1600x1200, 4 spp
-    // (docs/rt.md, "Subpatch depth per frame"): depth 2 below kShallow, 6 from kDeep, else 4.
-    constexpr double kShallow = 16, kDeep = 4096;
+    // Thresholds on the weighted median samples per patch, from the sweeps in docs/rt.md ("Subpatch depth
+    // per frame": time at 800x600 and 1600x1200, callgrind at 1 and 4 spp): depth 2 below kShallow, 6 from
+    // kDeep, else 4.
+    constexpr double kShallow = 512, kDeep = 4096;
     const Projector proj(cam);
     const size_t n = scene.patches.size();
     // About 2048 patches, evenly spread over the list (a median needs no more; all 11532 of Killeroo cost
