@@ -200,8 +200,9 @@ Request parseOptions(const py::kwargs& kw) {
         else if (key == "bucket_size")
             o.bucketSize = cast<int>(k, v);
         else if (key == "subpatch_depth")  // "auto" (the default) or 0 .. 12
-            o.subpatchDepth =
-                py::isinstance<py::str>(v) && cast<std::string>(k, v) == "auto" ? -1 : cast<int>(k, v);
+            o.subpatchDepth = py::isinstance<py::str>(v) && cast<std::string>(k, v) == "auto"
+                                  ? kAutoSubpatchDepth
+                                  : cast<int>(k, v);
         else if (key == "displacement_cache_mb")
             o.displacementCacheMb = cast<int>(k, v);
         else if (key == "max_grid")
@@ -446,8 +447,8 @@ scene: a path (RIB, .bpt, OBJ, Micropolis) or a tessera.Scene; or rib="..." for 
 Options (None or absent: the scene's own value), the CLI's long names with '_' for '-':
   engine='reyes'|'rt', res=(w, h) or 'WxH', spp, shading_rate, threads (0: all cores), seed,
   sampler='sobol'|'jittered'|'centred', shadows='on'|'off'|'scene', reyes_shadows='map'|'raytrace',
-  bucket_size, subpatch_depth (0 .. 12 or 'auto'), displacement_cache_mb, max_grid, micropolygon_sampling='bbox'|'nearest',
-  displacement_split, displacement_normals='exact'|'grid',
+  bucket_size, subpatch_depth (0 .. 12 or 'auto'), displacement_cache_mb, max_grid,
+  micropolygon_sampling='bbox'|'nearest', displacement_split, displacement_normals='exact'|'grid',
   max_depth, light_samples, cull_backfaces, ray_binning, instancing,
   blur (False: --no-blur), blur_sampling='simple'|'interleaved'|'bbox', blur_tile, blur_permutations,
   shutter=(open, close), dof=(fstop, focallength, focaldistance),

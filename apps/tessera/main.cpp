@@ -1028,7 +1028,7 @@ int main(int argc, char** argv) {
         ->transform(CLI::Validator(
             [](std::string& text) -> std::string {
                 if (text == "auto") {
-                    text = "-1";  // kAutoSubpatchDepth
+                    text = std::to_string(kAutoSubpatchDepth);
                     return "";
                 }
                 std::string bad = intRange(0, 12)(text);

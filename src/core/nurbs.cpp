@@ -14,7 +14,6 @@ struct Curve {
     std::vector<double> pts;  // (n + 1) * dim
     int dim = 3;
     int degree = 3;
-    int count() const { return int(pts.size()) / dim; }
 };
 
 int multiplicity(const std::vector<double>& T, double t) {

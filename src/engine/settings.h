@@ -110,6 +110,9 @@ inline const char* micropolygonSamplingName(MicropolygonSampling m) {
     return m == MicropolygonSampling::Nearest ? "nearest" : "bbox";
 }
 
+// RenderSettings::subpatchDepth: the ray tracer picks the depth per frame (autoSubpatchDepth, rt/accel.h).
+constexpr int kAutoSubpatchDepth = -1;
+
 struct RenderSettings {
     std::string engine = "reyes";  // "reyes" or "rt"
     int threads = 0;               // 0: all hardware threads
@@ -129,7 +132,7 @@ struct RenderSettings {
     Integrator integrator = Integrator::Direct;
     AmbientOcclusionSettings ao;
     AdaptiveSettings adaptive;
-    int subpatchDepth = -1;  // -1: chosen per frame (kAutoSubpatchDepth, rt/accel.h)
+    int subpatchDepth = kAutoSubpatchDepth;
     // Displaced patches' micro-grids (rt/displaced.h): built up front when they fit, else lazily and kept
     // within this many MiB.
     int displacementCacheMb = 512;

@@ -66,8 +66,8 @@ RibLexer::RibLexer(std::string text, std::string file) : text_(std::move(text)),
     if (!text_.empty() && text_.back() == '\n') --eofLine_;
 }
 
-RibLexer::RibLexer(std::shared_ptr<const LexedFile> lexed, std::string file, int eofLine)
-    : file_(std::move(file)), eofLine_(eofLine), replay_(std::move(lexed)) {}
+RibLexer::RibLexer(std::shared_ptr<const LexedFile> lexed, std::string file)
+    : file_(std::move(file)), eofLine_(lexed->eofLine), replay_(std::move(lexed)) {}
 
 void RibLexer::fail(int line, const std::string& message) const {
     throw InputError(file_, line, message);

@@ -32,15 +32,19 @@ std::string describe(const Token& t);
 // instead of lexed again: 24 Big Guys read one 1.9 MB archive 24 times).
 struct LexedFile {
     std::vector<Token> tokens;
+    int eofLine = 1;
 };
 
 class RibLexer {
   public:
     RibLexer(std::string text, std::string file);
     // Replays `lexed` (tokens, lines and the end-of-file line as they were lexed from `file`).
-    RibLexer(std::shared_ptr<const LexedFile> lexed, std::string file, int eofLine);
-    // From now on, append every token lexed (End included) to `into`.
-    void record(LexedFile* into) { record_ = into; }
+    RibLexer(std::shared_ptr<const LexedFile> lexed, std::string file);
+    // From now on, append every token lexed (End included) to `into`, and give it this file's last line.
+    void record(LexedFile* into) {
+        record_ = into;
+        into->eofLine = eofLine_;
+    }
 
     const Token& peek();
     Token next();

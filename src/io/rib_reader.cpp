@@ -1530,7 +1530,7 @@ class RibReader {
         std::unique_ptr<LexedFile> recording;
         std::optional<RibLexer> lexer;
         if (reads.lexed) {
-            lexer.emplace(reads.lexed, path, reads.eofLine);
+            lexer.emplace(reads.lexed, path);
         } else {
             std::string text;
             try {
@@ -1551,10 +1551,7 @@ class RibReader {
         --archiveDepth_;
         lex_ = outer;
         diag_.setFile(outer->file());
-        if (recording) {  // read to its end
-            reads.lexed = std::move(recording);
-            reads.eofLine = lex.eofLine();
-        }
+        if (recording) reads.lexed = std::move(recording);  // read to its end
     }
 
     // The request table (RI spec 3.2, appendix C.2 names): nullptr for a request we do not handle.
@@ -1651,7 +1648,6 @@ class RibReader {
     struct ArchiveReads {
         int count = 0;
         std::shared_ptr<const LexedFile> lexed;  // recorded on the second read
-        int eofLine = 1;
     };
     std::map<std::string, ArchiveReads> archives_;                          // by resolved path
     std::optional<Definition> defining_;                                    // the open ObjectBegin

@@ -35,9 +35,7 @@ RenderResult renderReyesWithRayTracedShadows(const Scene& scene, const RenderSet
     // Shadow rays start at the micropolygons' vertices: about one per pixel at shading rate 1, which the
     // auto depth takes as its samples per pixel.
     const Camera& cam = viewCamera(scene, settings);
-    const int subpatchDepth = settings.subpatchDepth == kAutoSubpatchDepth
-                                  ? autoSubpatchDepth(scene, cam, 1.0)
-                                  : settings.subpatchDepth;
+    const int subpatchDepth = resolveSubpatchDepth(settings.subpatchDepth, scene, cam, 1.0);
     buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, false, acc, nullptr, kDefaultTimeSlabs,
                  &displacement, settings.instancing);
     const double buildMs = msSince(t0);

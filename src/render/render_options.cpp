@@ -9,6 +9,7 @@
 
 #include "film/blur_pattern.h"
 #include "render/aovs.h"
+#include "rt/subpatch_tree.h"
 
 namespace tessera {
 namespace {
@@ -116,7 +117,7 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
                 : o.sampler == "sobol" || scene.image.jitter ? SamplerKind::Sobol
                                                              : SamplerKind::Centred;
     s.bucketSize = o.bucketSize;
-    if (o.subpatchDepth != -1 && (o.subpatchDepth < 0 || o.subpatchDepth > 12))
+    if (o.subpatchDepth != kAutoSubpatchDepth && (o.subpatchDepth < 0 || o.subpatchDepth > kMaxSubpatchDepth))
         throw std::invalid_argument("subpatch depth must be auto or an integer from 0 to 12, got " +
                                     std::to_string(o.subpatchDepth));
     s.subpatchDepth = o.subpatchDepth;

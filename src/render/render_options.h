@@ -26,7 +26,7 @@ struct RenderOptions {
     std::string sampler;            // sobol, jittered, centred; "": sobol, or centred for Hider "jitter" [0]
     std::string shadows = "scene";  // which lights cast shadows: on, off, scene (each light's attribute)
     std::string reyesShadows = "map";  // how Reyes answers visibility: map (shadow maps) or raytrace
-    int bucketSize = 32, subpatchDepth = -1 /* auto */, maxGridEdge = 16;
+    int bucketSize = 32, subpatchDepth = kAutoSubpatchDepth, maxGridEdge = 16;
     // Reyes (docs/textures.md): the micropolygon sampler, bbox or nearest ("": the scene's Hider
     // "micropolygonsampling", else bbox); and the displacement split threshold in micropolygon sides
     // (negative: the default, 4; 0: no displacement-aware splitting).

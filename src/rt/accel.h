@@ -6,6 +6,7 @@
 
 #include "core/transform.h"
 #include "engine/motion.h"
+#include "engine/settings.h"
 #include "rt/bvh.h"
 #include "rt/displaced.h"
 #include "rt/intersect.h"
@@ -148,12 +149,18 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
 // --subpatch-depth auto: a depth for the scene's subpatch trees from how many camera samples its patches
 // cover: the patches whose box projects into the image each cover its clipped raster rectangle times
 // the samples per pixel, and their median weighted by those samples (`samplesPerPatch` gets it, 0 when
-// no patch is in view) picks 2, 4 or 6. Leaves
-// much finer than the rays that reach them cost traversal, build time and memory; leaves much coarser
-// cost Newton iterations (paper 002 sec. 3.4 fixes depth 6; our sweep is in docs/benchmarks/fixed_costs.md).
-constexpr int kAutoSubpatchDepth = -1;
+// no patch is in view) picks 2, 4 or 6. Leaves much finer than the rays that reach them cost traversal,
+// build time and memory; leaves much coarser cost Newton iterations (paper 002 sec. 3.4 fixes depth 6;
+// our sweep is in docs/rt.md, "Subpatch depth per frame").
 int autoSubpatchDepth(const Scene& scene, const Camera& cam, double samplesPerPixel,
                       double* samplesPerPatch = nullptr);
+// The depth to build with: `requested`, or autoSubpatchDepth's when it is kAutoSubpatchDepth
+// (engine/settings.h).
+inline int resolveSubpatchDepth(int requested, const Scene& scene, const Camera& cam, double samplesPerPixel,
+                                double* samplesPerPatch = nullptr) {
+    return requested == kAutoSubpatchDepth ? autoSubpatchDepth(scene, cam, samplesPerPixel, samplesPerPatch)
+                                           : requested;
+}
 
 // The ray against quadric surface `patch` (analytic, core/quadric.h), restricted to the (u,v) rectangle
 // [u0,u1] x [v0,v1] (a subpatch leaf's; a hit on its border counts for both neighbours): the nearest hit

@@ -973,7 +973,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     double samplesPerPatch = 0;
     const bool autoDepth = settings.subpatchDepth == kAutoSubpatchDepth;
     const int subpatchDepth =
-        autoDepth ? autoSubpatchDepth(scene, cam, double(nx * ny), &samplesPerPatch) : settings.subpatchDepth;
+        resolveSubpatchDepth(settings.subpatchDepth, scene, cam, double(nx * ny), &samplesPerPatch);
     buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, settings.cullBackfaces, acc, &frame.motion,
                  kDefaultTimeSlabs, &displacement, settings.instancing);
     const double buildMs = msSince(tBuild);
