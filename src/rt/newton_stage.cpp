@@ -28,6 +28,11 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     const LeafBasis* leafBasis = acc.forest.leafBasis.data();
     const LeafBasis* quarterBasis = acc.forest.quarterBasis.data();
     const bool motion = acc.movingPatches > 0;
+    // The Newton tolerance of a patch for a ray from o (as newtonTolerance).
+    auto newtonEps = [](const PatchSoa& ps, Vec3 o) {
+        const float mag = std::max({ps.boxMagnitude, std::fabs(o.x), std::fabs(o.y), std::fabs(o.z)});
+        return 2e-6f * mag + 1e-6f * ps.boxExtent + 1e-30f;
+    };
 
     // The ray a lane is working on.
     struct LaneRay {
@@ -48,7 +53,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         // orthogonal to originN (only when the ray leaves that plane: d.n > 0).
         Vec3 originN;
         bool selfPlane = false;
+        bool heightsDone = false;  // selfPlane, selfHeight and selfEps are set for this ray
         float selfHeight[16];
+        float selfEps = 0.f;  // the originating patch's Newton tolerance
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
         Vec3 bestNs;                 // a displaced micro-grid hit's shading normal (zero otherwise)
@@ -79,12 +86,10 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         // The patch projected on the ray's planes (as projectPatch) straight into the lane's column; the
         // Newton tolerance as newtonTolerance. The ray's copy of the projection (s.pp) is gathered from
         // the column only where a hull or domain test needs it.
-        auto projectLane = [](const PatchSoa& ps, LaneRay& s, NewtonLanes& L, int l) {
+        auto projectLane = [&newtonEps](const PatchSoa& ps, LaneRay& s, NewtonLanes& L, int l) {
             projectIntoLane(L, l, s.frame, ps.x, ps.y, ps.z, s.depth);
             s.ppValid = false;
-            const Vec3 o = s.ray.o;
-            const float mag = std::max({ps.boxMagnitude, std::fabs(o.x), std::fabs(o.y), std::fabs(o.z)});
-            s.eps = 2e-6f * mag + 1e-6f * ps.boxExtent + 1e-30f;
+            s.eps = newtonEps(ps, s.ray.o);
         };
         auto projection = [&](LaneRay& s, int l) -> const ProjectedPatch<float>& {
             if (!s.ppValid) {
@@ -94,7 +99,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
             return s.pp;
         };
         auto finishRay = [&](LaneRay& s) {
-            if (s.bestPatch != kNone) {
+            if (s.bestPatch != kNone && anyHit) {
+                hits[s.r].hit = true;  // an any-hit query reads only the flag (TraceService::occluded)
+            } else if (s.bestPatch != kNone) {
                 RayHit& best = hits[s.r];
                 SurfacePoint sp;
                 if (s.bestHasDeriv) {
@@ -142,7 +149,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                                        1.f / dot(s.ray.d, s.ray.d)};
                 s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false, s.bestNs = Vec3{};
                 s.originN = rays.originN[r];
-                s.selfPlane = false;
+                s.selfPlane = false, s.heightsDone = false;
                 s.rootPatch = kNone;
                 if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
                     s.rootPatch = rays.ignore[r], s.rootU = rays.ignoreUV[r].x, s.rootV = rays.ignoreUV[r].y;
@@ -224,17 +231,29 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                     ++s.cur;
                     continue;
                 }
-                if (c.patch != s.projected) {
-                    const PatchSoa* soa = &acc.patchSoa[c.patch];
-                    s.movedPatch = motion && acc.moving(c.patch);
-                    if (s.movedPatch) {  // the patch at the ray's time (paper 002, sec. 5.3.3)
-                        patchSoaAt(acc, c.patch, s.segK, s.segW, s.movedSoa);
-                        soa = &s.movedSoa;
-                    }
-                    projectLane(*soa, s, lanes, l);
-                    s.projected = c.patch;
-                    if (c.patch == s.opt.ignorePatch && dot(s.originN, s.ray.d) > 0.f) {
-                        const PatchSoa& ps = *soa;
+                // Leaves of the originating patch below the plane through the origin (the ray only moves
+                // away from it: exact, by the convex hull of the leaf's Bernstein coefficients; this removes
+                // the starts that would converge back to the origin on convex and flat parts) cannot hold a
+                // root. The test is repeated on the leaf's quarters (their control nets bulge 4x less) when
+                // the whole leaf's net reaches above the plane. It reads the control points' heights, not
+                // the projection, so it runs before the patch is projected: a ray whose candidates on its
+                // own patch all fail it never projects that patch.
+                auto belowPlane = [&](uint32_t leaf) {
+                    const float lim = -4.f * s.selfEps;
+                    if (leafMaxCoefficient(s.selfHeight, leafBasis[leaf]) < lim) return true;
+                    for (int q = 0; q < 4; ++q)
+                        if (!(leafMaxCoefficient(s.selfHeight, quarterBasis[4 * leaf + q]) < lim))
+                            return false;
+                    return true;
+                };
+                const bool ownPatch = c.patch == s.opt.ignorePatch;
+                if (ownPatch && !s.heightsDone) {
+                    s.heightsDone = true;
+                    if (dot(s.originN, s.ray.d) > 0.f) {
+                        PatchSoa atTime;  // a moving patch at the ray's time (paper 002, sec. 5.3.3)
+                        if (motion && acc.moving(c.patch)) patchSoaAt(acc, c.patch, s.segK, s.segW, atTime);
+                        const PatchSoa& ps =
+                            motion && acc.moving(c.patch) ? atTime : acc.patchSoa[c.patch];
                         const Vec3 o = s.ray.o, nrm = s.originN;
 #if defined(__SSE2__)
                         const __m128 ox = _mm_set1_ps(o.x), oy = _mm_set1_ps(o.y), oz = _mm_set1_ps(o.z),
@@ -253,29 +272,29 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                                 (ps.x[k] - o.x) * nrm.x + (ps.y[k] - o.y) * nrm.y + (ps.z[k] - o.z) * nrm.z;
 #endif
                         s.selfPlane = true;
+                        s.selfEps = newtonEps(ps, s.ray.o);  // the patch's Newton tolerance
                     }
+                }
+                if (ownPatch && s.selfPlane && belowPlane(c.leaf)) {
+                    ++culled;
+                    ++s.cur;
+                    continue;
+                }
+                if (c.patch != s.projected) {
+                    const PatchSoa* soa = &acc.patchSoa[c.patch];
+                    s.movedPatch = motion && acc.moving(c.patch);
+                    if (s.movedPatch) {  // the patch at the ray's time (paper 002, sec. 5.3.3)
+                        patchSoaAt(acc, c.patch, s.segK, s.segW, s.movedSoa);
+                        soa = &s.movedSoa;
+                    }
+                    projectLane(*soa, s, lanes, l);
+                    s.projected = c.patch;
                 }
                 // On the ray's originating patch, leaves next to its origin converge to the origin itself
                 // (rejected as self-intersection): there the ray-frame hull test of the leaf sub-patch
                 // (exact: a leaf whose hull stays off the ray cannot hold a root) removes most of them. On
                 // other patches it costs more than the Newton runs it saves (measured, docs/rt.md).
-                // Leaves of the originating patch below the plane through the origin (the ray only moves
-                // away from it: exact, by the convex hull of the leaf's Bernstein coefficients; this
-                // removes the starts that would converge back to the origin on convex and flat parts), or
-                // whose ray-frame hull stays off the ray, cannot hold a root.
-                // The plane test is repeated on the leaf's quarters (their control nets bulge 4x less) when
-                // the whole leaf's net reaches above the plane.
-                auto belowPlane = [&](uint32_t leaf) {
-                    const float lim = -4.f * s.eps;
-                    if (leafMaxCoefficient(s.selfHeight, leafBasis[leaf]) < lim) return true;
-                    for (int q = 0; q < 4; ++q)
-                        if (!(leafMaxCoefficient(s.selfHeight, quarterBasis[4 * leaf + q]) < lim))
-                            return false;
-                    return true;
-                };
-                if (c.patch == s.opt.ignorePatch &&
-                    ((s.selfPlane && belowPlane(c.leaf)) ||
-                     !leafMayHit(projection(s, l), leafBasis[c.leaf], 4.f * s.eps))) {
+                if (ownPatch && !leafMayHit(projection(s, l), leafBasis[c.leaf], 4.f * s.eps)) {
                     ++culled;
                     ++s.cur;
                     continue;
