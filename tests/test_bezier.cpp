@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <random>
 
 #include "core/basis.h"
@@ -71,6 +72,30 @@ TEST(Bezier, DerivativesMatchFiniteDifferences) {
         EXPECT_LT(dist(s.dpdu, fu), 5e-3f * (1 + length(fu)));
         EXPECT_LT(dist(s.dpdv, fv), 5e-3f * (1 + length(fv)));
     }
+}
+
+// The two-step evaluation (rows at u, then v) that the Reyes dicer reuses down a grid column gives the
+// one-step functions' bits, so reusing it changes no image.
+TEST(Bezier, RowsAtUGiveTheOneStepBits) {
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    auto same = [](Vec3 a, Vec3 b) { return std::memcmp(&a, &b, sizeof(Vec3)) == 0; };
+    int compared = 0;
+    for (int trial = 0; trial < 200; ++trial) {
+        const BezierPatch p = randomPatch(rng);
+        const float u = trial % 10 == 0 ? float(trial % 20 == 0) : unit(rng);  // the domain's ends too
+        PatchRowsAtU rows;
+        patchRowsAtU(p, u, rows);
+        for (int k = 0; k < 8; ++k) {
+            const float v = k == 0 ? 0.f : k == 1 ? 1.f : unit(rng);
+            const SurfacePoint a = evalPatchDeriv(p, u, v), b = evalPatchDerivAt(rows, v);
+            EXPECT_TRUE(same(a.p, b.p) && same(a.dpdu, b.dpdu) && same(a.dpdv, b.dpdv))
+                << "u " << u << " v " << v;
+            EXPECT_TRUE(same(evalPatch(p, u, v), evalPatchAt(rows, v))) << "u " << u << " v " << v;
+            ++compared;
+        }
+    }
+    EXPECT_EQ(compared, 1600);
 }
 
 TEST(Bezier, CollapsedEdgeHasFiniteNormal) {

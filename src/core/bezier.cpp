@@ -94,6 +94,78 @@ SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
     return s;
 }
 
+void patchRowsAtU(const BezierPatch& patch, float u, PatchRowsAtU& rows) {
+    float bu[4], du[4];
+    bernstein3(u, bu);
+    bernstein3Deriv(u, du);
+#if defined(__SSE2__)
+    const __m128 b0 = _mm_set1_ps(bu[0]), b1 = _mm_set1_ps(bu[1]), b2 = _mm_set1_ps(bu[2]),
+                 b3 = _mm_set1_ps(bu[3]);
+    const __m128 d0 = _mm_set1_ps(du[0]), d1 = _mm_set1_ps(du[1]), d2 = _mm_set1_ps(du[2]),
+                 d3 = _mm_set1_ps(du[3]);
+    for (int j = 0; j < 4; ++j) {
+        const Vec3* row = &patch.cp[j * 4];
+        const __m128 r0 = loadVec3(row[0]), r1 = loadVec3(row[1]), r2 = loadVec3(row[2]),
+                     r3 = loadVec3(row[3]);
+        _mm_store_ps(rows.point[j], _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r0, b0), _mm_mul_ps(r1, b1)),
+                                                          _mm_mul_ps(r2, b2)),
+                                               _mm_mul_ps(r3, b3)));
+        _mm_store_ps(rows.du[j], _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r0, d0), _mm_mul_ps(r1, d1)),
+                                                       _mm_mul_ps(r2, d2)),
+                                            _mm_mul_ps(r3, d3)));
+    }
+#else
+    for (int j = 0; j < 4; ++j) {
+        const Vec3* row = &patch.cp[j * 4];
+        const Vec3 cu = row[0] * bu[0] + row[1] * bu[1] + row[2] * bu[2] + row[3] * bu[3];
+        const Vec3 cdu = row[0] * du[0] + row[1] * du[1] + row[2] * du[2] + row[3] * du[3];
+        rows.point[j][0] = cu.x, rows.point[j][1] = cu.y, rows.point[j][2] = cu.z, rows.point[j][3] = 0.f;
+        rows.du[j][0] = cdu.x, rows.du[j][1] = cdu.y, rows.du[j][2] = cdu.z, rows.du[j][3] = 0.f;
+    }
+#endif
+}
+
+Vec3 evalPatchAt(const PatchRowsAtU& rows, float v) {
+    float bv[4];
+    bernstein3(v, bv);
+#if defined(__SSE2__)
+    __m128 r = _mm_setzero_ps();
+    for (int j = 0; j < 4; ++j) r = _mm_add_ps(r, _mm_mul_ps(_mm_load_ps(rows.point[j]), _mm_set1_ps(bv[j])));
+    return storeVec3(r);
+#else
+    Vec3 r;
+    for (int j = 0; j < 4; ++j) r += Vec3{rows.point[j][0], rows.point[j][1], rows.point[j][2]} * bv[j];
+    return r;
+#endif
+}
+
+SurfacePoint evalPatchDerivAt(const PatchRowsAtU& rows, float v) {
+    float bv[4], dv[4];
+    bernstein3(v, bv);
+    bernstein3Deriv(v, dv);
+    SurfacePoint s;
+#if defined(__SSE2__)
+    __m128 p = _mm_setzero_ps(), pu = _mm_setzero_ps(), pv = _mm_setzero_ps();
+    for (int j = 0; j < 4; ++j) {
+        const __m128 cu = _mm_load_ps(rows.point[j]), cdu = _mm_load_ps(rows.du[j]);
+        const __m128 bvj = _mm_set1_ps(bv[j]);
+        p = _mm_add_ps(p, _mm_mul_ps(cu, bvj));
+        pv = _mm_add_ps(pv, _mm_mul_ps(cu, _mm_set1_ps(dv[j])));
+        pu = _mm_add_ps(pu, _mm_mul_ps(cdu, bvj));
+    }
+    s.p = storeVec3(p), s.dpdu = storeVec3(pu), s.dpdv = storeVec3(pv);
+#else
+    for (int j = 0; j < 4; ++j) {
+        const Vec3 cu{rows.point[j][0], rows.point[j][1], rows.point[j][2]};
+        const Vec3 cdu{rows.du[j][0], rows.du[j][1], rows.du[j][2]};
+        s.p += cu * bv[j];
+        s.dpdv += cu * dv[j];
+        s.dpdu += cdu * bv[j];
+    }
+#endif
+    return s;
+}
+
 Vec3 patchNormal(const BezierPatch& patch, float u, float v) {
     SurfacePoint s = evalPatchDeriv(patch, u, v);
     Vec3 n = cross(s.dpdu, s.dpdv);

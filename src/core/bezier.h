@@ -44,6 +44,17 @@ Vec3 evalPatch(const BezierPatch& patch, float u, float v);
 // Position and both first partial derivatives, sharing the basis evaluation.
 SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v);
 
+// evalPatch / evalPatchDeriv in two steps, for grids whose vertices share their u values: the sums of
+// each row of the control net at one u (the row's point and its u-derivative), then their combination at
+// v. The same operations in the same order as the one-step functions, so the same bits.
+struct PatchRowsAtU {
+    alignas(16) float point[4][4];  // row j: x, y, z, 0
+    alignas(16) float du[4][4];
+};
+void patchRowsAtU(const BezierPatch& patch, float u, PatchRowsAtU& rows);
+Vec3 evalPatchAt(const PatchRowsAtU& rows, float v);             // = evalPatch(patch, u, v)
+SurfacePoint evalPatchDerivAt(const PatchRowsAtU& rows, float v);  // = evalPatchDeriv(patch, u, v)
+
 // Geometric normal dP/du x dP/dv. At a collapsed edge (e.g. the teapot's poles) one derivative vanishes;
 // the normal is then the limit taken from just inside the domain, so poles shade like their neighbourhood.
 Vec3 patchNormal(const BezierPatch& patch, float u, float v);
