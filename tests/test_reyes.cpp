@@ -283,6 +283,49 @@ TEST(Weld, UnifiesNearlyEqualEdgesAndLeavesDistinctOnesAlone) {
     for (int k = 0; k < 16; ++k) EXPECT_TRUE(ps[2].cp[k] == far.cp[k]);
 }
 
+// Edges are grouped by their end corners' representatives: corners at -0 and +0 are one corner (as the
+// positions compare), and a pole where many patches meet (more edges at one corner than the small-bucket
+// sort takes) still welds every shared edge onto its first patch's copy.
+TEST(Weld, SignedZeroCornersAndAPoleOfManyPatchesWeld) {
+    {
+        BezierPatch a = flatSquare(2.f, 5.f, -1.f, 0.f), b = flatSquare(2.f, 5.f, 1.f, 0.f);
+        for (int v = 0; v < 4; ++v) a.at(3, v).x = 0.f, b.at(0, v).x = -0.f;  // the shared edge at x = 0
+        b.at(0, 1).y += 1e-7f, b.at(0, 2).y -= 1e-7f;                           // its inner points a bit off
+        std::vector<BezierPatch> ps = {a, b};
+        const WeldResult w = weldSharedEdges(ps, 1e-5f);
+        EXPECT_EQ(w.edgesWelded, 1u);
+        for (int v = 0; v < 4; ++v) EXPECT_TRUE(ps[1].at(0, v) == ps[0].at(3, v)) << v;
+    }
+    // 48 wedges around the origin: wedge k spans angles k and k + 1; its v = 0 edge runs from the pole out
+    // along angle k, its v = 3 edge along angle k + 1 (wedge k + 1's v = 0 edge, jittered there).
+    const int n = 48;
+    const float tol = 1e-4f;
+    auto ray = [&](int k, float r) {
+        const double a = 2.0 * 3.14159265358979 * (k % n) / n;
+        return Vec3{float(r * std::cos(a)), float(r * std::sin(a)), 0.f};
+    };
+    std::vector<BezierPatch> ps(n);
+    for (int k = 0; k < n; ++k)
+        for (int v = 0; v < 4; ++v)
+            for (int u = 0; u < 4; ++u) {
+                const Vec3 a = ray(k, 1.f + u / 3.f), b = ray(k + 1, 1.f + u / 3.f);
+                ps[size_t(k)].at(u, v) = a * (1.f - v / 3.f) + b * (v / 3.f);
+                if (u == 0) ps[size_t(k)].at(u, v) = Vec3{0.f, 0.f, 0.f} * 1.f + ray(k, 0.f);  // the pole
+            }
+    // Shared edge between wedge k (v = 3) and wedge k + 1 (v = 0): the later patch's copy is jittered.
+    for (int k = 0; k + 1 < n; ++k)
+        for (int u = 1; u < 4; ++u) ps[size_t(k + 1)].at(u, 0) += Vec3{2e-5f, -2e-5f, 1e-5f};
+    const std::vector<BezierPatch> before = ps;
+    const WeldResult w = weldSharedEdges(ps, tol);
+    size_t wrong = 0;
+    for (int k = 0; k + 1 < n; ++k)
+        for (int u = 0; u < 4; ++u) wrong += !(ps[size_t(k + 1)].at(u, 0) == before[size_t(k)].at(u, 3));
+    // The last wedge's v = 3 edge meets the first wedge's v = 0 edge: the first patch keeps its own copy.
+    for (int u = 0; u < 4; ++u) wrong += !(ps[size_t(n - 1)].at(u, 3) == before[0].at(u, 0));
+    EXPECT_EQ(wrong, 0u);
+    EXPECT_GE(w.edgesWelded, size_t(n - 1));
+}
+
 // A corner whose block index does not fit 32 bits (2^31 blocks of 64 tol from the origin) is clamped and
 // taken by the pass in patch order: the pair near the origin still welds, the far patches (which share an
 // exact edge there) are left as they are.

@@ -2,7 +2,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <atomic>
@@ -41,30 +40,12 @@ struct CellHash {
     }
 };
 
-// The items whose flag is set, in their order, then sorted (their operator< orders them completely, so
-// the parallel sort is deterministic).
-template <class Items, class Flags>
-void keepAndSort(Items& items, const Flags& keep) {
-    size_t kept = 0;
-    for (size_t i = 0; i < items.size(); ++i)
-        if (keep[i]) items[kept++] = items[i];
-    items.resize(kept);
-    tbb::parallel_sort(items.begin(), items.end());
-}
-
 // Whether v, in cell `key` of side `side` along its axis, lies within `margin` of the cell's lower and of
 // its upper side (offset from float(key) * side, as both uses compute it).
 void nearSides(float v, int64_t key, float side, float margin, bool& lower, bool& upper) {
     const float offset = v - float(key) * side;
     lower = offset < margin;
     upper = offset > side - margin;
-}
-
-// Lexicographic order of positions (the canonical direction of an edge, the order of the edge keys).
-bool lexLess(Vec3 a, Vec3 b) {
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    return a.z < b.z;
 }
 
 bool near(Vec3 a, Vec3 b, float tol) {
@@ -104,6 +85,11 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
         uint8_t cp;
     };
     static const int kCorners[4] = {0, 3, 12, 15};
+    // Each corner's representative (patch * 4 + corner; itself when it is one, kNoCorner when not finite):
+    // the edge pass groups edges by their two corners' representatives.
+    constexpr uint32_t kNoCorner = 0xffffffffu;
+    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> repOf(patches.size() * 4);
+    auto repId = [](const Rep& r) { return r.patch * 4u + (r.cp & 3u ? 1u : 0u) + (r.cp >= 12 ? 2u : 0u); };
     // That pass over corners `ids` (patch * 4 + corner, ascending) with its own table of representatives.
     // Corner c of patch pi (at p) takes representative r: recorded in the plan; 1 when p moved.
     auto snapOnto = [](const Rep& r, uint32_t pi, int c, Vec3& p, WeldPlan* out) -> size_t {
@@ -140,7 +126,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 if (rank < bestRank && near(reps[r].rep.p, p, tol)) bestRank = rank, found = &reps[r].rep;
             }
             if (found)
-                moved += snapOnto(*found, pi, c, p, out);
+                moved += snapOnto(*found, pi, c, p, out), repOf[ids[n]] = repId(*found);
             else
                 reps[nReps++] = {{p, pi, uint8_t(c)}, k};
         }
@@ -185,7 +171,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                     for (int64_t dz = z0; dz <= z1 && !found; ++dz)
                         if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
             if (found)
-                moved += snapOnto(*found, pi, c, p, out);
+                moved += snapOnto(*found, pi, c, p, out), repOf[ids[n]] = repId(*found);
             else
                 reps[k].push_back({p, pi, uint8_t(c)});
         }
@@ -220,6 +206,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
         tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
             for (int ci = 0; ci < 4; ++ci) {
                 const Vec3 p = patches[pi].cp[kCorners[ci]];
+                repOf[pi * 4 + size_t(ci)] = isFinite(p) ? uint32_t(pi * 4 + size_t(ci)) : kNoCorner;
                 if (!isFinite(p)) continue;
                 bool inside = true;
                 auto axis = [&](float v) {
@@ -237,7 +224,43 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 finite[pi * 4 + size_t(ci)] = 1;
             }
         });
-        keepAndSort(corners, finite);
+        // Grouped by block: the corners are permuted in place into buckets by a hash of their block (about
+        // 4 corners a bucket: no second array, since this pass's arrays are the weld's memory peak), then
+        // each bucket is sorted by block and id (before: a sort of all the corners, a third of the weld's
+        // instructions). The blocks come in the buckets' order, the same for any thread count.
+        {
+            size_t kept = 0;
+            for (size_t i = 0; i < corners.size(); ++i)
+                if (finite[i]) corners[kept++] = corners[i];
+            corners.resize(kept);
+            size_t buckets = 1;
+            while (buckets * 4 < kept) buckets *= 2;
+            auto bucketOf = [&](const CornerItem& c) {
+                uint64_t h = uint64_t(uint32_t(c.bx)) * 0x9E3779B97F4A7C15ull;
+                h = (h ^ uint32_t(c.by)) * 0xC2B2AE3D27D4EB4Full;
+                h = (h ^ uint32_t(c.bz)) * 0x165667B19E3779F9ull;
+                return size_t((h ^ (h >> 29)) & (buckets - 1));
+            };
+            std::vector<uint32_t> start(buckets + 1, 0);
+            for (const CornerItem& c : corners) ++start[bucketOf(c) + 1];
+            for (size_t b = 0; b < buckets; ++b) start[b + 1] += start[b];
+            std::vector<uint32_t> next(start.begin(), start.end() - 1);
+            for (size_t b = 0; b < buckets; ++b)
+                while (next[b] < start[b + 1]) {  // swap the item at b's cursor into its own bucket
+                    CornerItem& x = corners[next[b]];
+                    const size_t t = bucketOf(x);
+                    if (t == b)
+                        ++next[b];
+                    else
+                        std::swap(x, corners[next[t]++]);
+                }
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, buckets, 4096), [&](const tbb::blocked_range<size_t>& r) {
+                for (size_t b = r.begin(); b != r.end(); ++b)
+                    if (start[b + 1] - start[b] > 1)
+                        std::sort(corners.begin() + std::ptrdiff_t(start[b]),
+                                  corners.begin() + std::ptrdiff_t(start[b + 1]));
+            });
+        }
         std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
         std::vector<uint32_t, DefaultInitAllocator<uint32_t>> ids(corners.size());
         std::vector<uint32_t> rest;
@@ -274,58 +297,72 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
             for (const WeldPlan& p : blockPlans) plan->insert(plan->end(), p.begin(), p.end());
         result.cornersMoved = cornersMoved.load();
     }
-    // 2. Edges: key by their (now exactly shared) end corners, in canonical order. An edge welds onto the
-    // first earlier edge of its key that matches; a weld writes only the edge's two inner control points,
-    // which belong to no other edge, and reads only edges of the same key. So the keys are independent:
-    // the edges are sorted by (key, patch, edge) and each key's group is welded in patch order, the groups
-    // in parallel (24 Big Guys: 343 K edges), with the same result as one pass in patch order.
-    // Keyed by the end corners' exact positions (28 bytes an item: what the pass's memory peak is made of
-    // on big scenes): edges weld only onto edges with the same two corners, so grouping by them gives
-    // what grouping by coarser cells did. -0 and +0 compare equal, so they share a group; the item's id
-    // (patch * 4 + edge) makes the order total, so the parallel sort is deterministic.
+    // 2. Edges: keyed by their (now exactly shared) end corners. An edge welds onto the first earlier edge
+    // of its key that matches; a weld writes only the edge's two inner control points, which belong to no
+    // other edge, and reads only edges of the same key. So the keys are independent: each key's edges are
+    // welded in patch order, the keys in parallel (24 Big Guys: 343 K edges), with the same result as one
+    // pass in patch order. The key is the pair of the end corners' representatives from the corner pass
+    // (lower first): two corners have the same position exactly when they have the same representative
+    // (representatives lie more than tol apart, and every corner within tol of one took its position), so
+    // this groups the edges as their exact end positions do (-0 and +0 alike), and the grouping is a
+    // counting sort by the lower corner, stable (patch order kept), then a sort of each bucket's few edges
+    // by the upper one (before: a sort of 28-byte position keys, 60% of the weld's instructions).
     struct EdgeItem {
-        Vec3 a, b;
-        uint32_t id;
+        uint32_t hi, id;  // the upper representative; patch * 4 + edge
         uint32_t patch() const { return id / 4; }
         int edge() const { return int(id % 4); }
-        bool operator<(const EdgeItem& o) const {
-            if (lexLess(a, o.a)) return true;
-            if (lexLess(o.a, a)) return false;
-            if (lexLess(b, o.b)) return true;
-            if (lexLess(o.b, b)) return false;
-            return id < o.id;
-        }
-        bool sameKey(const EdgeItem& o) const { return a == o.a && b == o.b; }
     };
-    static_assert(sizeof(EdgeItem) == 28);
-    std::vector<EdgeItem, DefaultInitAllocator<EdgeItem>> items(patches.size() * 4);
-    std::vector<uint8_t, BufferAllocator<uint8_t>> valid(items.size(), 0);
-    tbb::parallel_for(size_t(0), patches.size(), [&](size_t pi) {
+    static constexpr int kEdgeCorners[4][2] = {{0, 1}, {1, 3}, {2, 3}, {0, 2}};  // as edgeIndex(e, 0 / 3)
+    const size_t nCorners = patches.size() * 4;
+    std::vector<uint32_t> bucketStart(nCorners + 1, 0);  // edges by lower representative
+    auto edgeReps = [&](size_t pi, int e, uint32_t& lo, uint32_t& hi) {
+        const uint32_t a = repOf[pi * 4 + size_t(kEdgeCorners[e][0])], b = repOf[pi * 4 + size_t(kEdgeCorners[e][1])];
+        lo = std::min(a, b), hi = std::max(a, b);
+        return a != kNoCorner && b != kNoCorner;
+    };
+    for (size_t pi = 0; pi < patches.size(); ++pi)
         for (int e = 0; e < 4; ++e) {
-            const BezierPatch& patch = patches[pi];
-            Vec3 a = patch.cp[edgeIndex(e, 0)], b = patch.cp[edgeIndex(e, 3)];
-            if (!isFinite(a) || !isFinite(b)) continue;
-            if (lexLess(b, a)) std::swap(a, b);
-            items[pi * 4 + size_t(e)] = {a, b, uint32_t(pi * 4 + size_t(e))};
-            valid[pi * 4 + size_t(e)] = 1;
+            uint32_t lo, hi;
+            if (edgeReps(pi, e, lo, hi)) ++bucketStart[lo + 1];
         }
-    });
-    keepAndSort(items, valid);
-    std::vector<size_t> groups;  // first item of each key
-    for (size_t i = 0; i < items.size(); ++i)
-        if (i == 0 || !items[i].sameKey(items[i - 1])) groups.push_back(i);
-    groups.push_back(items.size());
-    std::vector<WeldPlan> groupPlans(plan ? groups.size() - 1 : 0);
+    for (size_t c = 0; c < nCorners; ++c) bucketStart[c + 1] += bucketStart[c];
+    std::vector<EdgeItem, DefaultInitAllocator<EdgeItem>> items(bucketStart[nCorners]);
+    {
+        std::vector<uint32_t> next(bucketStart.begin(), bucketStart.end() - 1);
+        for (size_t pi = 0; pi < patches.size(); ++pi)
+            for (int e = 0; e < 4; ++e) {
+                uint32_t lo, hi;
+                if (edgeReps(pi, e, lo, hi)) items[next[lo]++] = {hi, uint32_t(pi * 4 + size_t(e))};
+            }
+    }
+    // Buckets in fixed ranges (the plan's order does not depend on the thread count).
+    constexpr size_t kBucketsPerRange = 4096;
+    const size_t ranges = (nCorners + kBucketsPerRange - 1) / kBucketsPerRange;
+    std::vector<WeldPlan> groupPlans(plan ? ranges : 0);
     std::atomic<size_t> edgesWelded{0};
-    tbb::parallel_for(
-        tbb::blocked_range<size_t>(0, groups.size() - 1), [&](const tbb::blocked_range<size_t>& range) {
-            std::vector<const EdgeItem*> list;  // the group's edges that did not weld, in patch order
-            size_t welds = 0;
-            for (size_t g = range.begin(); g != range.end(); ++g) {
+    tbb::parallel_for(size_t(0), ranges, [&](size_t range) {
+        std::vector<const EdgeItem*> list;  // the group's edges that did not weld, in patch order
+        size_t welds = 0;
+        const size_t b0 = range * kBucketsPerRange, b1 = std::min(nCorners, b0 + kBucketsPerRange);
+        for (size_t bucket = b0; bucket < b1; ++bucket) {
+            EdgeItem* first = items.data() + bucketStart[bucket];
+            EdgeItem* last = items.data() + bucketStart[bucket + 1];
+            // By upper representative, patch order kept (a bucket holds the few edges at one corner).
+            if (last - first <= 32) {
+                for (EdgeItem* it = first + 1; it < last; ++it)
+                    for (EdgeItem* j = it; j > first && j[-1].hi > j->hi; --j) std::swap(j[-1], *j);
+            } else {  // a corner shared by many edges (a pole of many patches)
+                std::sort(first, last, [](const EdgeItem& x, const EdgeItem& y) {
+                    return x.hi != y.hi ? x.hi < y.hi : x.id < y.id;
+                });
+            }
+            for (EdgeItem* g = first; g < last;) {
+                EdgeItem* gEnd = g + 1;
+                while (gEnd < last && gEnd->hi == g->hi) ++gEnd;
                 list.clear();
-                for (size_t i = groups[g]; i < groups[g + 1]; ++i) {
-                    const uint32_t pi = items[i].patch();
-                    const int e = items[i].edge();
+                for (const EdgeItem* item = g; item < gEnd; ++item) {
+                    const uint32_t pi = item->patch();
+                    const int e = item->edge();
                     BezierPatch& patch = patches[pi];
                     bool welded = false;
                     for (const EdgeItem* other : list) {
@@ -344,7 +381,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                             for (int k = 1; k <= 2; ++k) {
                                 const int srcCp = edgeIndex(other->edge(), dir == 0 ? k : 3 - k);
                                 if (plan)
-                                    groupPlans[g].push_back(
+                                    groupPlans[range].push_back(
                                         {pi, other->patch(), uint8_t(edgeIndex(e, k)), uint8_t(srcCp)});
                                 Vec3 src = q.cp[srcCp];
                                 Vec3& dst = patch.cp[edgeIndex(e, k)];
@@ -356,11 +393,13 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                         }
                         if (welded) break;
                     }
-                    if (!welded) list.push_back(&items[i]);
+                    if (!welded) list.push_back(item);
                 }
+                g = gEnd;
             }
-            edgesWelded += welds;
-        });
+        }
+        edgesWelded += welds;
+    });
     result.edgesWelded = edgesWelded.load();
     if (plan)
         for (const WeldPlan& p : groupPlans) plan->insert(plan->end(), p.begin(), p.end());
