@@ -1673,7 +1673,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
     // transpose); a patch with vertex colours takes the surface with Cs = 1, which the engines multiply by
     // the interpolated colour (scene.h, PatchVertexValues).
     const std::vector<PatchVertexValues>& vertexValues = keys.front().vertexValues;
-    const Mat4 objectFromWorld = ctm.at(open).inverse();
+    std::optional<Mat4> objectFromWorld;  // computed on the first user normal (most primitives have none)
     uint32_t whiteMaterial = 0;
     bool haveWhite = false;
     auto attributesOf = [&](size_t j) {
@@ -1681,8 +1681,10 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         if (!patchMaterial.empty()) pa.material = patchMaterial[j];
         if (vertexValues.size() == n) {
             PatchVertexValues vv = vertexValues[j];
-            if (vv.hasN)
-                for (Vec3& nrm : vv.N) nrm = Mat4::normalWithInverse(objectFromWorld, nrm);
+            if (vv.hasN) {
+                if (!objectFromWorld) objectFromWorld = ctm.at(open).inverse();
+                for (Vec3& nrm : vv.N) nrm = Mat4::normalWithInverse(*objectFromWorld, nrm);
+            }
             if (vv.hasCs) {
                 if (!haveWhite) {
                     Material m = c.state.attributes().surface;
