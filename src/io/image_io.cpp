@@ -124,8 +124,11 @@ std::vector<uint8_t> compressedPngData(const std::vector<uint8_t>& rgba, int wid
         for (size_t y = y0; y < y1; ++y) {  // filter type 1 (Sub): each byte minus the one 4 bytes before
             uint8_t* line = &lines[(y - y0) * lineBytes];
             const uint8_t* row = &rgba[y * rowBytes];
+            // (A local bound: the bytes written could alias a captured one, which stops vectorization.)
+            const size_t n = rowBytes, head = std::min<size_t>(4, n);
             line[0] = 1;
-            for (size_t i = 0; i < rowBytes; ++i) line[1 + i] = uint8_t(row[i] - (i >= 4 ? row[i - 4] : 0));
+            for (size_t i = 0; i < head; ++i) line[1 + i] = row[i];
+            for (size_t i = head; i < n; ++i) line[1 + i] = uint8_t(row[i] - row[i - 4]);
         }
         Block& out = block[b];
         out.rawBytes = lines.size();
