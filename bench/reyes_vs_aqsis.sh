@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Reyes against Aqsis 1.8 on the same RIB (issue 18): the sharp teapot (scenes/dof_teapot.rib without its
-# DepthOfField line: 800x600, PixelSamples 4 4, ShadingRate 1, plastic) and Killeroo (796x515, 16 spp,
-# matte), shadows off in both. Aqsis and Tessera (2 threads, and 1 thread) run alternately R times; wall
-# time and peak RSS of each whole process (/usr/bin/time), Tessera's engine time from its stats. Aqsis is
-# built from its public source beside this repository, never committed (docs/benchmarks/fixed_costs.md,
-# "Session 23", says how); pass its `aqsis` binary.
+# Reyes against Aqsis 1.8 on the same RIB (issue 18): by default the sharp teapot (scenes/dof_teapot.rib
+# without its DepthOfField line: 800x600, PixelSamples 4 4, ShadingRate 1, plastic) and Killeroo (796x515,
+# 16 spp, matte); SCENES="teapot killeroo bigguy24" for others. Shadows off in both. Aqsis and Tessera (2
+# threads, and 1 thread) run alternately R times: wall time and peak RSS of each whole process, Tessera's
+# engine time from its stats. Aqsis is built from its public source beside this repository by
+# bench/build_aqsis.sh, never committed (docs/benchmarks/fixed_costs.md, "Session 23"); pass its binary.
 # Usage: R=5 bench/reyes_vs_aqsis.sh /path/to/aqsis [path/to/tessera]
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -15,13 +15,17 @@ R="${R:-5}"
 TMP="$(mktemp -d /tmp/reyes_vs_aqsis.XXXXXX)"
 trap 'rm -rf "$TMP"' EXIT
 mkdir -p "$TMP/archives" "$ROOT/bench/results"
-cp "$ROOT"/scenes/archives/teapot_model.rib "$ROOT"/scenes/archives/killeroo_model.rib "$TMP/archives/"
+cp "$ROOT"/scenes/archives/*.rib "$TMP/archives/"
 # The RIBs as both renderers read them: the image goes to a TIFF (Aqsis' "file" driver) in $TMP; no depth
 # of field; Tessera's per-light shadow attribute left out (without it lights cast no shadows in Tessera).
-sed -e "s#^Display .*#Display \"$TMP/teapot.tif\" \"file\" \"rgba\"#" -e '/^DepthOfField /d' \
-    -e '/^Attribute "light" "shadows"/d' "$ROOT/scenes/dof_teapot.rib" > "$TMP/teapot.rib"
-sed -e "s#^Display .*#Display \"$TMP/killeroo.tif\" \"file\" \"rgba\"#" \
-    -e '/^Attribute "light" "shadows"/d' "$ROOT/scenes/killeroo.rib" > "$TMP/killeroo.rib"
+# "teapot" is dof_teapot.rib without its DepthOfField line; other names are scenes/NAME.rib.
+for sc in ${SCENES:-teapot killeroo}; do
+    src="$ROOT/scenes/$sc.rib"
+    [ "$sc" = teapot ] && src="$ROOT/scenes/dof_teapot.rib"
+    [ -f "$src" ] || { echo "no scene $src"; exit 2; }
+    sed -e "s#^Display .*#Display \"$TMP/$sc.tif\" \"file\" \"rgba\"#" -e '/^DepthOfField /d' \
+        -e '/^Attribute "light" "shadows"/d' "$src" > "$TMP/$sc.rib"
+done
 OUT="$ROOT/bench/results/reyes_vs_aqsis.json"
 echo "[" > "$OUT"
 first=1
