@@ -15,7 +15,9 @@ BezierPatch randomPatch(std::mt19937& rng) {
     for (auto& c : p.cp) c = {d(rng), d(rng), d(rng)};
     return p;
 }
-float dist(Vec3 a, Vec3 b) { return length(a - b); }
+float dist(Vec3 a, Vec3 b) {
+    return length(a - b);
+}
 }  // namespace
 
 TEST(Bezier, FlatBilinearPatchIsExact) {

@@ -1,8 +1,7 @@
 // Image files: PNG encoding (straight alpha, RI Exposure, sRGB) and EXR round trips.
 #include <gtest/gtest.h>
-#include <unistd.h>
-
 #include <tbb/task_arena.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>

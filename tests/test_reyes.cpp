@@ -290,7 +290,7 @@ TEST(Weld, SignedZeroCornersAndAPoleOfManyPatchesWeld) {
     {
         BezierPatch a = flatSquare(2.f, 5.f, -1.f, 0.f), b = flatSquare(2.f, 5.f, 1.f, 0.f);
         for (int v = 0; v < 4; ++v) a.at(3, v).x = 0.f, b.at(0, v).x = -0.f;  // the shared edge at x = 0
-        b.at(0, 1).y += 1e-7f, b.at(0, 2).y -= 1e-7f;                           // its inner points a bit off
+        b.at(0, 1).y += 1e-7f, b.at(0, 2).y -= 1e-7f;                         // its inner points a bit off
         std::vector<BezierPatch> ps = {a, b};
         const WeldResult w = weldSharedEdges(ps, 1e-5f);
         EXPECT_EQ(w.edgesWelded, 1u);
@@ -310,7 +310,7 @@ TEST(Weld, SignedZeroCornersAndAPoleOfManyPatchesWeld) {
             for (int u = 0; u < 4; ++u) {
                 const Vec3 a = ray(k, 1.f + u / 3.f), b = ray(k + 1, 1.f + u / 3.f);
                 ps[size_t(k)].at(u, v) = a * (1.f - v / 3.f) + b * (v / 3.f);
-                if (u == 0) ps[size_t(k)].at(u, v) = Vec3{0.f, 0.f, 0.f} * 1.f + ray(k, 0.f);  // the pole
+                if (u == 0) ps[size_t(k)].at(u, v) = ray(k, 0.f);  // the pole (some coordinates -0)
             }
     // Shared edge between wedge k (v = 3) and wedge k + 1 (v = 0): the later patch's copy is jittered.
     for (int k = 0; k + 1 < n; ++k)

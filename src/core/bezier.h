@@ -52,7 +52,7 @@ struct PatchRowsAtU {
     alignas(16) float du[4][4];
 };
 void patchRowsAtU(const BezierPatch& patch, float u, PatchRowsAtU& rows);
-Vec3 evalPatchAt(const PatchRowsAtU& rows, float v);             // = evalPatch(patch, u, v)
+Vec3 evalPatchAt(const PatchRowsAtU& rows, float v);               // = evalPatch(patch, u, v)
 SurfacePoint evalPatchDerivAt(const PatchRowsAtU& rows, float v);  // = evalPatchDeriv(patch, u, v)
 
 // Geometric normal dP/du x dP/dv. At a collapsed edge (e.g. the teapot's poles) one derivative vanishes;

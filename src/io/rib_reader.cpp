@@ -1643,7 +1643,7 @@ class RibReader {
     Declarations decls_;
     GraphicsState state_;
     std::optional<std::string> skipUntil_;
-    std::vector<double> numberScratch_;  // collectArray's numbers, reused from array to array
+    std::vector<double> numberScratch_;      // collectArray's numbers, reused from array to array
     std::optional<MotionBlock> motion_;      // the open motion block
     std::vector<MotionBlock> cameraMotion_;  // motion blocks before WorldBegin, checked against the shutter
     int framesSeen_ = 0, worldsSeen_ = 0;

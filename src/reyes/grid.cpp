@@ -103,7 +103,8 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     auto rowsAt = [&](int i, float u) -> const PatchRowsAtU& {
         uint32_t bits;
         std::memcpy(&bits, &u, sizeof bits);
-        if (columnU[size_t(i)] != bits) patchRowsAtU(patch, u, columnRows[size_t(i)]), columnU[size_t(i)] = bits;
+        if (columnU[size_t(i)] != bits)
+            patchRowsAtU(patch, u, columnRows[size_t(i)]), columnU[size_t(i)] = bits;
         return columnRows[size_t(i)];
     };
     for (int j = 0; j <= nv; ++j) {
@@ -114,7 +115,8 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             const int v = j * (nu + 1) + i;
             if (shade.depthOnly) {  // a shadow map's pass: positions only
                 Vec3 P = quadric ? quadricPoint(*quadric, uv)
-                                 : (owner ? latticePosition(patch, *owner, k) : evalPatchAt(rowsAt(i, uv.x), uv.y));
+                                 : (owner ? latticePosition(patch, *owner, k)
+                                          : evalPatchAt(rowsAt(i, uv.x), uv.y));
                 if (displaced)
                     P = displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P,
                                        shade.flipNormal,

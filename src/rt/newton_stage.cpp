@@ -55,7 +55,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         bool selfPlane = false;
         bool heightsDone = false;  // selfPlane, selfHeight and selfEps are set for this ray
         float selfHeight[16];
-        float selfEps = 0.f;  // the originating patch's Newton tolerance
+        float selfEps = 0.f;        // the originating patch's Newton tolerance
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
         Vec3 bestNs;                 // a displaced micro-grid hit's shading normal (zero otherwise)
@@ -250,10 +250,10 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 if (ownPatch && !s.heightsDone) {
                     s.heightsDone = true;
                     if (dot(s.originN, s.ray.d) > 0.f) {
+                        const bool moving = motion && acc.moving(c.patch);
                         PatchSoa atTime;  // a moving patch at the ray's time (paper 002, sec. 5.3.3)
-                        if (motion && acc.moving(c.patch)) patchSoaAt(acc, c.patch, s.segK, s.segW, atTime);
-                        const PatchSoa& ps =
-                            motion && acc.moving(c.patch) ? atTime : acc.patchSoa[c.patch];
+                        if (moving) patchSoaAt(acc, c.patch, s.segK, s.segW, atTime);
+                        const PatchSoa& ps = moving ? atTime : acc.patchSoa[c.patch];
                         const Vec3 o = s.ray.o, nrm = s.originN;
 #if defined(__SSE2__)
                         const __m128 ox = _mm_set1_ps(o.x), oy = _mm_set1_ps(o.y), oz = _mm_set1_ps(o.z),

@@ -19,7 +19,8 @@ namespace tessera::rt {
 // once per ray, at the closest hit. Results do not depend on which lane a ray runs in.
 //
 // Each ray follows its kind's rules (optionsFor; `cull`: --cull-backfaces for camera rays); `anyHit` makes
-// every ray stop at its first accepted hit. Runs tbb over the chunks.
+// every ray stop at its first accepted hit and writes only the hits' flags (occlusion queries). Runs tbb
+// over the chunks.
 void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks,
                 std::vector<RayHit>& hits, bool cull, bool anyHit = false);
 

@@ -254,12 +254,13 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                     else
                         std::swap(x, corners[next[t]++]);
                 }
-            tbb::parallel_for(tbb::blocked_range<size_t>(0, buckets, 4096), [&](const tbb::blocked_range<size_t>& r) {
-                for (size_t b = r.begin(); b != r.end(); ++b)
-                    if (start[b + 1] - start[b] > 1)
-                        std::sort(corners.begin() + std::ptrdiff_t(start[b]),
-                                  corners.begin() + std::ptrdiff_t(start[b + 1]));
-            });
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, buckets, 4096),
+                              [&](const tbb::blocked_range<size_t>& r) {
+                                  for (size_t b = r.begin(); b != r.end(); ++b)
+                                      if (start[b + 1] - start[b] > 1)
+                                          std::sort(corners.begin() + std::ptrdiff_t(start[b]),
+                                                    corners.begin() + std::ptrdiff_t(start[b + 1]));
+                              });
         }
         std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
         std::vector<uint32_t, DefaultInitAllocator<uint32_t>> ids(corners.size());
@@ -316,7 +317,8 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     const size_t nCorners = patches.size() * 4;
     std::vector<uint32_t> bucketStart(nCorners + 1, 0);  // edges by lower representative
     auto edgeReps = [&](size_t pi, int e, uint32_t& lo, uint32_t& hi) {
-        const uint32_t a = repOf[pi * 4 + size_t(kEdgeCorners[e][0])], b = repOf[pi * 4 + size_t(kEdgeCorners[e][1])];
+        const uint32_t a = repOf[pi * 4 + size_t(kEdgeCorners[e][0])],
+                       b = repOf[pi * 4 + size_t(kEdgeCorners[e][1])];
         lo = std::min(a, b), hi = std::max(a, b);
         return a != kNoCorner && b != kNoCorner;
     };
