@@ -343,22 +343,24 @@ TESSERA_HD void filmSamplesFixed(const FilmPattern& fp, int px, int py, int32_t*
         // the Laine-Karras hash carries upwards only). So 16-bit arithmetic gives the same bytes; it runs
         // for every sample of every tile, in chunks the compiler vectorizes (8 lanes per SSE2 register),
         // then the points go to their strata's slots.
+        // The stratum slot of each point is computed in the same vector loop (nx = 2^lx: shifts only).
         const uint16_t sx16 = uint16_t(sx), sy16 = uint16_t(sy);
         constexpr int kChunk = 64;
-        uint16_t both[kChunk];
+        uint16_t both[kChunk], slotOf[kChunk];
         for (int first = 0; first < spp; first += kChunk) {
             const int count = spp - first < kChunk ? spp - first : kChunk;
             for (int k = 0; k < count; ++k) {
                 const uint16_t i = uint16_t(first + k);
                 const uint16_t lowX = laineKarrasLow16(i, sx16) & 0xffu;
                 const uint16_t lowY = laineKarrasLow16(sobolBits1Reversed16(i), sy16) & 0xffu;
-                both[k] = reverseBitsInBytes16(uint16_t(lowX | lowY << 8));
+                const uint16_t b = reverseBitsInBytes16(uint16_t(lowX | lowY << 8));
+                both[k] = b;
+                slotOf[k] = uint16_t(((b >> 8) >> (8 - ly)) << lx | (b & 0xffu) >> (8 - lx));
             }
             for (int k = 0; k < count; ++k) {
-                const uint32_t ox = both[k] & 0xffu, oy = uint32_t(both[k]) >> 8;
-                const int slot = int(oy >> (8 - ly)) * nx + int(ox >> (8 - lx));
-                x[slot] = x0 + int32_t(ox);
-                y[slot] = y0 + int32_t(oy);
+                const int slot = slotOf[k];
+                x[slot] = x0 + int32_t(both[k] & 0xffu);
+                y[slot] = y0 + int32_t(both[k] >> 8);
                 index[slot] = uint32_t(first + k);
             }
         }
