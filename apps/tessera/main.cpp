@@ -30,6 +30,7 @@
 #include "render/aovs.h"
 #include "render/render.h"
 #include "render/render_options.h"
+#include "rt/subpatch_tree.h"
 
 #ifndef TESSERA_VERSION
 #define TESSERA_VERSION "unknown"
@@ -1031,10 +1032,12 @@ int main(int argc, char** argv) {
                     text = std::to_string(kAutoSubpatchDepth);
                     return "";
                 }
-                std::string bad = intRange(0, 12)(text);
-                return bad.empty() ? "" : "must be auto or an integer from 0 to 12, got '" + text + "'";
+                std::string bad = intRange(0, kMaxSubpatchDepth)(text);
+                return bad.empty() ? ""
+                                   : "must be auto or an integer from 0 to " +
+                                         std::to_string(kMaxSubpatchDepth) + ", got '" + text + "'";
             },
-            "auto|(0..12)"))
+            "auto|(0.." + std::to_string(kMaxSubpatchDepth) + ")"))
         ->default_str("auto");
     render
         ->add_option("--displacement-cache-mb", ra.displacementCacheMb,

@@ -52,48 +52,6 @@ Vec3 evalPatch(const BezierPatch& patch, float u, float v) {
 #endif
 }
 
-SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
-    float bu[4], bv[4], du[4], dv[4];
-    bernstein3(u, bu);
-    bernstein3(v, bv);
-    bernstein3Deriv(u, du);
-    bernstein3Deriv(v, dv);
-    SurfacePoint s;
-#if defined(__SSE2__)
-    const __m128 b0 = _mm_set1_ps(bu[0]), b1 = _mm_set1_ps(bu[1]), b2 = _mm_set1_ps(bu[2]),
-                 b3 = _mm_set1_ps(bu[3]);
-    const __m128 d0 = _mm_set1_ps(du[0]), d1 = _mm_set1_ps(du[1]), d2 = _mm_set1_ps(du[2]),
-                 d3 = _mm_set1_ps(du[3]);
-    __m128 p = _mm_setzero_ps(), pu = _mm_setzero_ps(), pv = _mm_setzero_ps();
-    for (int j = 0; j < 4; ++j) {
-        const Vec3* row = &patch.cp[j * 4];
-        const __m128 r0 = loadVec3(row[0]), r1 = loadVec3(row[1]), r2 = loadVec3(row[2]),
-                     r3 = loadVec3(row[3]);
-        const __m128 cu =
-            _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r0, b0), _mm_mul_ps(r1, b1)), _mm_mul_ps(r2, b2)),
-                       _mm_mul_ps(r3, b3));
-        const __m128 cdu =
-            _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r0, d0), _mm_mul_ps(r1, d1)), _mm_mul_ps(r2, d2)),
-                       _mm_mul_ps(r3, d3));
-        const __m128 bvj = _mm_set1_ps(bv[j]);
-        p = _mm_add_ps(p, _mm_mul_ps(cu, bvj));
-        pv = _mm_add_ps(pv, _mm_mul_ps(cu, _mm_set1_ps(dv[j])));
-        pu = _mm_add_ps(pu, _mm_mul_ps(cdu, bvj));
-    }
-    s.p = storeVec3(p), s.dpdu = storeVec3(pu), s.dpdv = storeVec3(pv);
-#else
-    for (int j = 0; j < 4; ++j) {
-        const Vec3* row = &patch.cp[j * 4];
-        Vec3 cu = row[0] * bu[0] + row[1] * bu[1] + row[2] * bu[2] + row[3] * bu[3];
-        Vec3 cdu = row[0] * du[0] + row[1] * du[1] + row[2] * du[2] + row[3] * du[3];
-        s.p += cu * bv[j];
-        s.dpdv += cu * dv[j];
-        s.dpdu += cdu * bv[j];
-    }
-#endif
-    return s;
-}
-
 void patchRowsAtU(const BezierPatch& patch, float u, PatchRowsAtU& rows) {
     float bu[4], du[4];
     bernstein3(u, bu);
@@ -164,6 +122,13 @@ SurfacePoint evalPatchDerivAt(const PatchRowsAtU& rows, float v) {
     }
 #endif
     return s;
+}
+
+// The two steps at one (u, v): one definition of the derivative evaluation.
+SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v) {
+    PatchRowsAtU rows;
+    patchRowsAtU(patch, u, rows);
+    return evalPatchDerivAt(rows, v);
 }
 
 Vec3 patchNormal(const BezierPatch& patch, float u, float v) {

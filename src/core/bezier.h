@@ -46,7 +46,8 @@ SurfacePoint evalPatchDeriv(const BezierPatch& patch, float u, float v);
 
 // evalPatch / evalPatchDeriv in two steps, for grids whose vertices share their u values: the sums of
 // each row of the control net at one u (the row's point and its u-derivative), then their combination at
-// v. The same operations in the same order as the one-step functions, so the same bits.
+// v. evalPatchDeriv is these two steps; evalPatch (points only) does the same operations in the same
+// order, so evalPatchAt and the point of evalPatchDerivAt give its bits.
 struct PatchRowsAtU {
     alignas(16) float point[4][4];  // row j: x, y, z, 0
     alignas(16) float du[4][4];

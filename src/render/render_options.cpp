@@ -118,7 +118,8 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
                                                              : SamplerKind::Centred;
     s.bucketSize = o.bucketSize;
     if (o.subpatchDepth != kAutoSubpatchDepth && (o.subpatchDepth < 0 || o.subpatchDepth > kMaxSubpatchDepth))
-        throw std::invalid_argument("subpatch depth must be auto or an integer from 0 to 12, got " +
+        throw std::invalid_argument("subpatch depth must be auto or an integer from 0 to " +
+                                    std::to_string(kMaxSubpatchDepth) + ", got " +
                                     std::to_string(o.subpatchDepth));
     s.subpatchDepth = o.subpatchDepth;
     s.displacementCacheMb = o.displacementCacheMb;
