@@ -9,8 +9,7 @@
 #include "render/render_options.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::adaptive_tests {
 
 namespace {
 
@@ -351,3 +350,5 @@ TEST(Adaptive, ThresholdAndFocusOptionsParseOrFailNamingTheProblem) {
     for (const char* bad : {"", "3,", "-1", "a", "1.5", "99999999999"})
         EXPECT_THROW(parseObjectIds(bad), std::invalid_argument) << bad;
 }
+
+}  // namespace tessera::test::adaptive_tests

@@ -17,7 +17,7 @@
 #include "floor_scenes.h"
 #include "test_util.h"
 
-namespace tessera::test {
+namespace tessera::test::ambient_occlusion_tests {
 namespace {
 
 void samplesPerPixel(Scene& s, int nx, int ny) {
@@ -185,4 +185,4 @@ TEST(AmbientOcclusion, OcclusionAov) {
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::ambient_occlusion_tests

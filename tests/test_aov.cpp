@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+namespace tessera::test::aov_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -279,3 +281,5 @@ TEST(Aov, SecondaryDisplaysWriteTheirOwnLayers) {
     fails("Display \"+x.png\" \"file\" \"z\"", "needs an OpenEXR file");
     fs::remove_all(dir);
 }
+
+}  // namespace tessera::test::aov_tests

@@ -6,7 +6,7 @@
 #include "core/basis.h"
 #include "core/bezier.h"
 
-using namespace tessera;
+namespace tessera::test::bezier_tests {
 
 namespace {
 BezierPatch randomPatch(std::mt19937& rng) {
@@ -142,3 +142,5 @@ TEST(Basis, ConversionsReproduceTheCurve) {
         for (int k = 0; k < 16; ++k) EXPECT_LT(dist(same.cp[k], bez.cp[k]), 1e-5f);
     }
 }
+
+}  // namespace tessera::test::bezier_tests

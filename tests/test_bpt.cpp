@@ -8,7 +8,8 @@
 #include "io/scene_loader.h"
 #include "test_support.h"
 
-using namespace tessera;
+namespace tessera::test::bpt_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -37,7 +38,6 @@ std::string patchText(int degreeU = 3, int degreeV = 3) {
     for (int k = 0; k < 16; ++k) s += std::to_string(k % 4) + " " + std::to_string(k / 4) + " 0\n";
     return s;
 }
-
 
 }  // namespace
 
@@ -106,3 +106,5 @@ TEST(Bpt, WrongAndNegativeCounts) {
     EXPECT_NE(msg.find("trailing"), std::string::npos) << msg;
     expectError("", 1);
 }
+
+}  // namespace tessera::test::bpt_tests

@@ -9,7 +9,7 @@
 
 #include "scene/camera.h"
 
-using namespace tessera;
+namespace tessera::test::camera_tests {
 
 namespace {
 Camera lensCamera() {
@@ -114,3 +114,5 @@ TEST(Camera, ConcentricDiskMapStaysInTheDisk) {
     const Vec2 o = squareToDisk(0.5f, 0.5f);
     EXPECT_EQ(o.x, 0.f);
 }
+
+}  // namespace tessera::test::camera_tests

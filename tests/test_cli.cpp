@@ -15,8 +15,9 @@
 #include "../apps/tessera/progress.h"
 #include "io/image_io.h"
 
+namespace tessera::test::cli_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
 
 namespace {
 
@@ -531,3 +532,5 @@ TEST(Cli, TexturesLoadTheOpenImageIOModuleOnlyWhenNeeded) {
               std::string::npos);
     fs::remove_all(dir);
 }
+
+}  // namespace tessera::test::cli_tests

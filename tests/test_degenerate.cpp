@@ -13,10 +13,7 @@
 #include "render/render.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
-
-namespace {
+namespace tessera::test::degenerate_tests {
 
 class Degenerate : public ::testing::TestWithParam<std::string> {
   protected:
@@ -28,6 +25,8 @@ class Degenerate : public ::testing::TestWithParam<std::string> {
         return render(s, st).image;
     }
 };
+
+namespace {
 
 // Every channel finite, coverage in [0, 1], colour premultiplied (no colour without coverage).
 void expectFiniteImage(const Image& img) {
@@ -296,3 +295,5 @@ TEST_P(Degenerate, NonFiniteControlPointsNeverReachThePixels) {
 
 INSTANTIATE_TEST_SUITE_P(Engines, Degenerate, ::testing::Values("reyes", "rt"),
                          [](const auto& info) { return info.param; });
+
+}  // namespace tessera::test::degenerate_tests

@@ -10,8 +10,9 @@
 
 #include "io/image_io.h"
 
+namespace tessera::test::determinism_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
 
 namespace {
 
@@ -47,9 +48,9 @@ void expectIdentical(const Image& a, const Image& b, const std::string& what) {
                           << " vs " << b.rgba[first];
 }
 
-class Determinism : public ::testing::TestWithParam<std::string> {};
-
 }  // namespace
+
+class Determinism : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(Determinism, SameImageForAnyThreadCountAndAcrossRuns) {
     const std::string opts = "--engine " + GetParam() + " --res 160x120 --spp 4 --seed 7 --bucket-size 16";
@@ -72,3 +73,5 @@ TEST_P(Determinism, SameImageForAnyThreadCountAndAcrossRuns) {
 
 INSTANTIATE_TEST_SUITE_P(Engines, Determinism, ::testing::Values("reyes", "rt"),
                          [](const auto& info) { return info.param; });
+
+}  // namespace tessera::test::determinism_tests

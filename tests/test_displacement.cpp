@@ -21,8 +21,7 @@
 #include "shading/texture.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::displacement_tests {
 
 namespace {
 
@@ -475,3 +474,5 @@ TEST(DisplacementSplit, HighFrequencyTextureGetsMorePiecesAndSmallerMicropolygon
     EXPECT_GT(inside, 3000);
     EXPECT_EQ(holes, 0);
 }
+
+}  // namespace tessera::test::displacement_tests

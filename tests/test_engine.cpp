@@ -10,8 +10,7 @@
 #include "shading/registry.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::engine_tests {
 
 namespace {
 // Big enough for many buckets in both engines (the ray tracer's tiles are 64 pixels at 4 spp).
@@ -132,3 +131,5 @@ TEST(Engines, AViewCameraReplacesTheScenesCamera) {
         EXPECT_NE(got.image.rgba, render(scene, RenderSettings{}).image.rgba);
     }
 }
+
+}  // namespace tessera::test::engine_tests

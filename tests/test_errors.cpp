@@ -21,10 +21,12 @@
 #include "io/scene_loader.h"
 #include "render/render.h"
 
+// posix_spawn passes the test process's environment on (POSIX declares no header for it).
 extern char** environ;
 
+namespace tessera::test::errors_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
 
 namespace {
 
@@ -563,3 +565,5 @@ TEST(BadInput, SubdivisionMesh) {
                    valid(mesh + "[0 1 2 3 4 5 6 7 0 1 5 4 1 2 6 5 2 3 7 6 3 0 4 7]\n" + P), 6,
                    "used twice in the same direction");
 }
+
+}  // namespace tessera::test::errors_tests

@@ -9,8 +9,7 @@
 #include "render/render.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::film_tests {
 
 namespace {
 
@@ -227,3 +226,5 @@ TEST(BufferAllocator, LargeAndSmallBuffersBehaveAsVectors) {
     EXPECT_EQ(grown.size(), 8u);
     EXPECT_EQ(grown[7], 1.f);
 }
+
+}  // namespace tessera::test::film_tests

@@ -14,9 +14,9 @@
 #include "shading/light.h"
 #include "test_support.h"
 
+namespace tessera::test::frames_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
-using tessera::test::runTesseraIn;
 
 namespace {
 
@@ -241,3 +241,5 @@ TEST(Frames, SpotlightConeFalloffFollowsTheRiFormula) {
     EXPECT_GT(inside, 40);  // the cone and the smoothstep band are both sampled
     EXPECT_GT(band, 10);
 }
+
+}  // namespace tessera::test::frames_tests

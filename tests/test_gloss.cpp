@@ -17,7 +17,7 @@
 #include "shading/gloss.h"
 #include "shading/registry.h"
 
-namespace tessera::test {
+namespace tessera::test::gloss_tests {
 namespace {
 
 Material glossyMaterial(float Ks, float spread) {
@@ -191,4 +191,4 @@ TEST(GlossInput, RibParametersRangesAndTheWriter) {
     EXPECT_TRUE(warned);
 }
 
-}  // namespace tessera::test
+}  // namespace tessera::test::gloss_tests

@@ -10,7 +10,8 @@
 
 #include "io/image_io.h"
 
-using namespace tessera;
+namespace tessera::test::image_io_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -103,3 +104,5 @@ TEST(ImageIo, UnsupportedExtensionIsRejectedAndNothingIsWritten) {
 TEST(ImageIo, UnwritableDirectoryFailsCleanly) {
     EXPECT_THROW(writePng("/nonexistent-dir/x.png", twoPixels(), {}), std::runtime_error);
 }
+
+}  // namespace tessera::test::image_io_tests

@@ -21,7 +21,7 @@
 #include "shading/path_bsdf.h"
 #include "test_util.h"
 
-namespace tessera::test {
+namespace tessera::test::light_transport_tests {
 namespace {
 
 constexpr float kLe = 12.f;
@@ -316,9 +316,9 @@ WorldEnd
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::light_transport_tests
 
-namespace tessera::test {
+namespace tessera::test::light_transport_tests {
 namespace {
 
 // RI Imager "background" (appendix A): Ci += (1 - alpha) background, alpha = 1, in both engines: empty
@@ -368,4 +368,4 @@ WorldEnd
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::light_transport_tests

@@ -10,7 +10,8 @@
 #include "io/scene_loader.h"
 #include "test_support.h"
 
-using namespace tessera;
+namespace tessera::test::micropolis_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -18,7 +19,6 @@ namespace {
 std::string writeText(const std::string& text, const std::string& name = "model") {
     return tessera::test::writeTestFile(name, text);
 }
-
 
 // One flat patch: 16 vertices of a 4 x 4 grid.
 std::string onePatch(const std::string& indices = "1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16", int count = 16) {
@@ -103,3 +103,5 @@ TEST(Micropolis, FormatOverrideAndNames) {
     EXPECT_EQ(parseSceneFormat("mesh"), std::nullopt);
     EXPECT_THROW(detectSceneFormat(writeText("x", "k.mscene")), InputError);
 }
+
+}  // namespace tessera::test::micropolis_tests

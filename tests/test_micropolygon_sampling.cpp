@@ -11,8 +11,7 @@
 #include "render/render_options.h"
 #include "rib_test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::micropolygon_sampling_tests {
 
 namespace {
 
@@ -122,3 +121,5 @@ TEST(ReyesNearestSampler, CliOptionIsCheckedAndReported) {
     EXPECT_EQ(j.at("micropolygon_sampling").get<std::string>(), "nearest");
     EXPECT_GT(j.at("empty_pixels").get<uint64_t>(), 0u);
 }
+
+}  // namespace tessera::test::micropolygon_sampling_tests

@@ -20,8 +20,7 @@
 #include "reyes/split.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::motion_tests {
 
 namespace {
 
@@ -607,3 +606,5 @@ TEST(MotionBlur, MotionFactorCoarsensOnlyBlurredGeometry) {
     const ImageDiff d = compareImages(plain.image, r.image, 0.1f);
     EXPECT_LT(d.meanAbsAlpha, 0.01);
 }
+
+}  // namespace tessera::test::motion_tests

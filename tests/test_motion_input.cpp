@@ -19,8 +19,8 @@
 #include "rib_test_util.h"
 #include "test_support.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::motion_input_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -453,3 +453,5 @@ TEST(MotionCli, BadValuesExitWith2) {
         EXPECT_TRUE(contains(r.output, c.message)) << c.flags << ": " << r.output;
     }
 }
+
+}  // namespace tessera::test::motion_input_tests

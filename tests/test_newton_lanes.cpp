@@ -11,7 +11,7 @@
 #include "rt/intersect.h"
 #include "rt/newton_lanes.h"
 
-using namespace tessera;
+namespace tessera::test::newton_lanes_tests {
 
 namespace {
 
@@ -159,3 +159,5 @@ TEST(NewtonLanes, ProjectIntoLaneEqualsProjectPatch) {
     }
     EXPECT_EQ(compared, 500 * 2 * 16);
 }
+
+}  // namespace tessera::test::newton_lanes_tests

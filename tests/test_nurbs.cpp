@@ -14,7 +14,8 @@
 #include "io/scene_loader.h"
 #include "test_support.h"
 
-using namespace tessera;
+namespace tessera::test::nurbs_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -333,3 +334,5 @@ TEST(NuPatchRib, Errors) {
     EXPECT_EQ(line, 3) << msg;
     EXPECT_NE(msg.find("outside the knot domain"), std::string::npos) << msg;
 }
+
+}  // namespace tessera::test::nurbs_tests

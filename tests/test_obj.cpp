@@ -10,7 +10,8 @@
 #include "io/scene_loader.h"
 #include "test_support.h"
 
-using namespace tessera;
+namespace tessera::test::obj_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -18,7 +19,6 @@ namespace {
 std::string writeObj(const std::string& text, const std::string& name = "mesh.obj") {
     return tessera::test::writeTestFile(name, text);
 }
-
 
 const char* kCubeVerts =
     "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n";
@@ -110,3 +110,5 @@ TEST(Obj, DetectedByContentWithoutExtension) {
     EXPECT_EQ(detectSceneFormat(path), SceneFormat::Obj);
     EXPECT_EQ(loadScene(path, {}).patches.size(), 6u * 16);
 }
+
+}  // namespace tessera::test::obj_tests

@@ -13,7 +13,7 @@
 #include "rib_test_util.h"
 #include "test_util.h"
 
-namespace tessera::test {
+namespace tessera::test::polygons_tests {
 namespace {
 
 struct P2 {
@@ -589,4 +589,4 @@ TEST(Polygons, DegeneratePolygonsWarnAndAreSkipped) {
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::polygons_tests

@@ -21,9 +21,9 @@
 #include "io/image_io.h"
 #include "test_support.h"
 
+namespace tessera::test::preview_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
-using tessera::test::runTesseraIn;
 
 namespace {
 
@@ -366,3 +366,5 @@ TEST(Preview, AFramebufferDisplayStreamsToTevsDefaultAddress) {
     EXPECT_GT(log.updates, 0);
     EXPECT_TRUE(fs::exists(dir / "fb.exr"));  // the file is written as well
 }
+
+}  // namespace tessera::test::preview_tests

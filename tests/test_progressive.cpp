@@ -10,9 +10,9 @@
 #include "io/image_io.h"
 #include "test_support.h"
 
+namespace tessera::test::progressive_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
-using tessera::test::runTesseraIn;
 
 namespace {
 
@@ -99,3 +99,5 @@ TEST(Progressive, WritePartialKeepsTheFinishedPassesWhenInterrupted) {
     EXPECT_GT(lit, 0.0);  // a real image of the finished passes
     EXPECT_FALSE(fs::exists(dir / "part.exr.tmp"));
 }
+
+}  // namespace tessera::test::progressive_tests

@@ -15,7 +15,7 @@
 #include "scene/camera.h"
 #include "test_util.h"
 
-namespace tessera::test {
+namespace tessera::test::quadrics_tests {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -519,4 +519,4 @@ TEST(QuadricInput, MovingQuadricsWarnOnceAndRenderAtShutterOpen) {
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::quadrics_tests

@@ -15,8 +15,7 @@
 #include "test_support.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::reyes_tests {
 
 namespace {
 RenderResult renderWith(const Scene& s, int threads = 2) {
@@ -551,3 +550,5 @@ TEST(LazyPieces, BucketsSeeTheUpFrontSplitsPiecesInOrder) {
         }
     }
 }
+
+}  // namespace tessera::test::reyes_tests

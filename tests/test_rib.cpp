@@ -21,8 +21,8 @@
 #include "shading/registry.h"
 #include "test_support.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::rib_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -872,3 +872,5 @@ TEST(RibShaderTables, MatchTheShaderRegistry) {
     for (const rib::LightShader& t : rib::lightShaders())
         EXPECT_NE(tessera::findLightShader(t.name), nullptr);
 }
+
+}  // namespace tessera::test::rib_tests

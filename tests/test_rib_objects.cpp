@@ -10,7 +10,7 @@
 #include "rib_test_util.h"
 #include "test_util.h"
 
-namespace tessera::test {
+namespace tessera::test::rib_objects_tests {
 namespace {
 
 // A small object: a GeneralPolygon with a hole, a bilinear patch and a sphere, with a translation inside.
@@ -202,4 +202,4 @@ TEST(RibObjects, ArchiveSearchPath) {
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::rib_objects_tests

@@ -12,7 +12,8 @@
 #include "io/scene_loader.h"
 #include "test_support.h"
 
-using namespace tessera;
+namespace tessera::test::rib_writer_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -20,7 +21,6 @@ namespace {
 fs::path testDir() {
     return tessera::test::testScratchDir();
 }
-
 
 void expectSameScene(const Scene& a, const Scene& b) {
     ASSERT_EQ(a.patches.size(), b.patches.size());
@@ -108,3 +108,5 @@ TEST(RibWriter, UnwritablePathThrows) {
     EXPECT_NE(text.str().find("Patch \"bicubic\" \"P\" ["), std::string::npos);
     EXPECT_NE(text.str().find("WorldEnd"), std::string::npos);
 }
+
+}  // namespace tessera::test::rib_writer_tests

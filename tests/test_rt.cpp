@@ -14,8 +14,7 @@
 #include "shading/registry.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::rt_tests {
 
 namespace {
 
@@ -1021,3 +1020,5 @@ TEST(RtAccel, AutoSubpatchDepthFollowsTheSamplesPerPatch) {
     RtAccel acc;
     EXPECT_THROW(buildRtAccel(s, Mat4::identity(), kAutoSubpatchDepth, false, acc), std::invalid_argument);
 }
+
+}  // namespace tessera::test::rt_tests

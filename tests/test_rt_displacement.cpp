@@ -20,8 +20,7 @@
 #include "rt/trace_service.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::rt_displacement_tests {
 
 namespace {
 
@@ -358,3 +357,5 @@ TEST(RtDisplacement, MovingDisplacedPatchesAreWarnedAbout) {
     EXPECT_TRUE(said);
     EXPECT_EQ(r.stats["displaced"]["patches"].get<uint64_t>(), 1u);
 }
+
+}  // namespace tessera::test::rt_displacement_tests

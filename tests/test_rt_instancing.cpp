@@ -16,7 +16,7 @@
 #include "rt/traversal.h"
 #include "test_util.h"
 
-namespace tessera::test {
+namespace tessera::test::rt_instancing_tests {
 namespace {
 
 // Three teapots (one object, 32 patches): as defined; turned and scaled non-uniformly; tilted, mirrored
@@ -224,4 +224,4 @@ TEST(RtInstancing, NotWithBackfaceCullingOrMotion) {
 }
 
 }  // namespace
-}  // namespace tessera::test
+}  // namespace tessera::test::rt_instancing_tests

@@ -13,8 +13,7 @@
 #include "rt/trace_service.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::rt_motion_tests {
 
 namespace {
 
@@ -495,3 +494,5 @@ TEST(RtMotion, AdaptiveSamplingRefinesTheSweepAndConvergesToTheTimeAverage) {
     EXPECT_LT(err, 1.5 * errFixed);
     EXPECT_LT(err, 0.5 * errPresample);
 }
+
+}  // namespace tessera::test::rt_motion_tests

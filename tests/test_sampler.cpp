@@ -9,7 +9,7 @@
 #include "film/film.h"
 #include "film/sampler.h"
 
-using namespace tessera;
+namespace tessera::test::sampler_tests {
 
 namespace {
 
@@ -326,3 +326,5 @@ TEST(Sampler, SixteenBitFilmOperationsMatchTheThirtyTwoBitOnes) {
             ASSERT_EQ(reverseBitsInBytes16(uint16_t(x)), reverseBitsInBytes(x) & 0xffffu);
         }
 }
+
+}  // namespace tessera::test::sampler_tests

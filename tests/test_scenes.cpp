@@ -18,12 +18,9 @@
 #include "test_support.h"
 #include "test_util.h"
 
+namespace tessera::test::scenes_tests {
+
 namespace fs = std::filesystem;
-
-using namespace tessera;
-using tessera::test::countPinholes;
-
-namespace {
 
 struct SceneCase {
     const char* name;
@@ -37,8 +34,6 @@ struct SceneCase {
 }
 
 class ShippedScenes : public ::testing::TestWithParam<SceneCase> {};
-
-}  // namespace
 
 TEST_P(ShippedScenes, RendersWithoutPinholes) {
     const SceneCase c = GetParam();
@@ -398,3 +393,5 @@ TEST(DefaultFraming, UpAxisRule) {
     EXPECT_EQ(defaultUpAxis(SceneFormat::Obj, box({-3, -2, 0}, {3.5f, 2, 3.2f})), UpAxis::Y)
         << "OBJ is y-up by convention, whatever the data";
 }
+
+}  // namespace tessera::test::scenes_tests

@@ -180,6 +180,8 @@ TEST(ShaderRegistry, EveryEntryRoundTrips) {
 #include "render/render.h"
 #include "test_util.h"
 
+namespace tessera::test::shading_tests {
+
 TEST(Shading, BothEnginesGiveTheShadingModuleRadianceForTheSameHit) {
     // A plastic square facing the eye, lit by a distant, a point and a spot light: each pixel's one sample
     // sees a known hit (P on the plane z = 5, N = -z, I from the eye), whose radiance the shading module
@@ -240,3 +242,5 @@ TEST(Shading, BothEnginesGiveTheShadingModuleRadianceForTheSameHit) {
         std::printf("%s: largest difference from the shading module %.2e\n", engine, worst);
     }
 }
+
+}  // namespace tessera::test::shading_tests

@@ -16,9 +16,9 @@
 #include "io/rib_writer.h"
 #include "test_support.h"
 
+namespace tessera::test::shadow_files_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
-using tessera::test::runTesseraIn;
 
 namespace {
 
@@ -314,3 +314,5 @@ TEST(ShadowFiles, TheRibWriterKeepsShadowspotAndItsMap) {
     ASSERT_GE(spot->shadowFiles[0], 0);
     EXPECT_TRUE(fs::equivalent(back.shadowMapFiles[size_t(spot->shadowFiles[0])].path, dir / "spot.shad"));
 }
+
+}  // namespace tessera::test::shadow_files_tests

@@ -16,8 +16,7 @@
 #include "rib_test_util.h"
 #include "test_util.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::shadows_tests {
 
 namespace {
 
@@ -617,3 +616,5 @@ TEST(ReyesShadowMaps, TheShadowCountChannelCountsTheLightsInShadowInBothEngines)
         EXPECT_EQ(wrong, 0) << method;
     }
 }
+
+}  // namespace tessera::test::shadows_tests

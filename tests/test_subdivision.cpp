@@ -24,7 +24,8 @@
 #include "test_support.h"
 #include "test_util.h"
 
-using namespace tessera;
+namespace tessera::test::subdivision_tests {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -1349,3 +1350,5 @@ TEST(SubdivisionRib, VertexColorsRenderAlikeInBothEngines) {
     EXPECT_GE(d.psnrColor, 35.0);
     EXPECT_LT(d.alphaMismatch, 0.01);
 }
+
+}  // namespace tessera::test::subdivision_tests

@@ -15,8 +15,7 @@
 #include "rib_test_util.h"
 #include "shading/texture.h"
 
-using namespace tessera;
-using namespace tessera::test;
+namespace tessera::test::textures_tests {
 
 namespace {
 
@@ -330,3 +329,5 @@ TEST(Textures, AdaptiveTextureThresholdRefinesATexturedSurfaceAlongItsEdges) {
     EXPECT_EQ(nearEdge, refined);
     EXPECT_EQ(strict.stats["adaptive"]["active_subpixels"].get<int>(), refined);
 }
+
+}  // namespace tessera::test::textures_tests

@@ -24,8 +24,9 @@
 #include "io/image_io.h"
 #include "test_support.h"
 
+namespace tessera::test::tiles_tests {
+
 namespace fs = std::filesystem;
-using namespace tessera;
 
 namespace {
 
@@ -453,3 +454,5 @@ TEST(Tiles, ShadowMapCacheRendersTheMapsOnceForEveryTile) {
 }
 
 }  // namespace
+
+}  // namespace tessera::test::tiles_tests

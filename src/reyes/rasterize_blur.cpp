@@ -321,9 +321,6 @@ inline bool shiftFactors(int cell, int cells, float a, float b, float& lo, float
     return false;
 }
 
-// The most lens cells per axis (BlurStrata::configure).
-constexpr int kMaxLensCells = 2;
-
 #if defined(__SSE2__)
 // The lanes of entries e .. e + 3 that `out` does not mark (and that lie before end), in order: hit(entry).
 template <class Hit>
