@@ -507,7 +507,7 @@ TEST(RibFiles, ErrorInsideArchiveNamesTheArchive) {
 }
 
 TEST(RibFiles, ArchiveReadAgainIsReplayedAsRead) {
-    // From its second read on, an archive is replayed from its recorded tokens (not lexed again): the
+    // From its second read on, an archive is replayed from its recorded requests (not lexed again): the
     // same patches as the text written out in full, and errors that only its fourth use meets still name
     // the archive and its line.
     fs::path d = testDir();
@@ -537,6 +537,35 @@ TEST(RibFiles, ArchiveReadAgainIsReplayedAsRead) {
               0u)
         << msg;
     EXPECT_TRUE(contains(msg, "AttributeEnd")) << msg;
+}
+
+TEST(RibFiles, ArchiveRecordedWhileSkippingAFrameIsCollectedStrictlyWhenLoaded) {
+    // Frames not loaded are skipped with their arguments collected tolerantly. An archive holding a frame,
+    // read three times while loading the third frame, is recorded on its second read, inside a skipped
+    // frame: its third read, the frame loaded, must meet the stray ']' as the text does (a replay of the
+    // tolerantly collected requests would drop it silently), and without it load the frame's square.
+    fs::path d = testDir();
+    const std::string top =
+        "ReadArchive \"frame.rib\"\nReadArchive \"frame.rib\"\nReadArchive \"frame.rib\"\n";
+    auto frame = [&](const std::string& translate) {
+        return "FrameBegin 1\nWorldBegin\n" + translate + "\n" + kUnitSquare + "WorldEnd\nFrameEnd\n";
+    };
+    writeFile(d / "frame.rib", frame("Translate 1 2 ] 3"));
+    const std::string bad = writeFile(d / "top.rib", top);
+    try {
+        Scene s;
+        readRibFrame(bad, 2, s, {});
+        ADD_FAILURE() << "the third read loaded the frame without meeting the stray ']'";
+    } catch (const InputError& e) {
+        const std::string msg = e.what();
+        EXPECT_EQ(msg.rfind((d / "frame.rib").string() + ":3: error:", 0), 0u) << msg;
+        EXPECT_TRUE(contains(msg, "Translate")) << msg;
+    }
+    writeFile(d / "frame.rib", frame("Translate 1 2 3"));
+    Scene s;
+    readRibFrame(writeFile(d / "good.rib", top), 2, s, {});
+    ASSERT_EQ(s.patches.size(), 1u);
+    expectVec(s.patches[0].at(0, 0), {1, 2, 3});
 }
 
 TEST(RibFiles, RecursiveArchiveIsAnError) {

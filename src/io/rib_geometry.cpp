@@ -80,6 +80,7 @@ class PrimitiveReader {
                                            std::to_string(n) + " points), got " +
                                            std::to_string(p.value->size()));
                 out.emplace();
+                out->reserve(n);
                 for (size_t i = 0; i < n; ++i)
                     out->push_back({float(v[3 * i]), float(v[3 * i + 1]), float(v[3 * i + 2])});
             } else if (p.name == "Pw") {
@@ -88,6 +89,7 @@ class PrimitiveReader {
                                            std::to_string(n) + " homogeneous points), got " +
                                            std::to_string(p.value->size()));
                 out.emplace();
+                out->reserve(n);
                 for (size_t i = 0; i < n; ++i) {
                     if (std::fabs(v[4 * i + 3] - 1.0) > 1e-9)
                         diag_.fail(p.line,
