@@ -41,7 +41,7 @@ for sc in ${SCENES:-teapot killeroo}; do
             m=$( { /usr/bin/time -f "%M" "$BIN" render "$TMP/$sc.rib" --engine reyes --shadows off \
                 --threads "$t" -q -o "$TMP/t.png" --stats "$TMP/s.json"; } 2>&1 | tail -1)
             w="$(python3 -c "print(($(date +%s%N) - $s0) / 1e9)") $m"
-            e=$(python3 -c "import json;print(json.load(open('$TMP/s.json'))['engine_ms'])")
+            e=$(python3 -c "import json;s=json.load(open('$TMP/s.json'));print(s['engine_ms'],s['load_ms'])")
             echo "$a $t $w $e" >> "$TMP/rows"
         done
     done
@@ -57,6 +57,7 @@ for t in ("2", "1"):
     sel = [r for r in rows if r[2] == t]
     rec[f"tessera_t{t}_wall_s"] = [float(r[3]) for r in sel]
     rec[f"tessera_t{t}_engine_ms"] = [float(r[5]) for r in sel]
+    rec[f"tessera_t{t}_load_ms"] = [float(r[6]) for r in sel]
     rec[f"tessera_t{t}_peak_mb"] = max(int(r[4]) for r in sel) / 1024
 w2, e2 = rec["tessera_t2_wall_s"], rec["tessera_t2_engine_ms"]
 rec["ratio_wall_min"] = min(aq) / min(w2)
@@ -65,7 +66,7 @@ rec["ratio_engine_min"] = min(aq) / (min(e2) / 1000)
 sys.stderr.write(
     f"{sc}: Aqsis {min(aq):.2f} s min, {statistics.median(aq):.2f} median ({aq_rss:.0f} MB); "
     f"Tessera 2 threads wall {min(w2):.3f} / {statistics.median(w2):.3f} s, engine {min(e2):.0f} ms "
-    f"({rec['tessera_t2_peak_mb']:.0f} MB); 1 thread wall {min(rec['tessera_t1_wall_s']):.3f} s. "
+    f"load {min(rec['tessera_t2_load_ms']):.0f} ms ({rec['tessera_t2_peak_mb']:.0f} MB); 1 thread wall {min(rec['tessera_t1_wall_s']):.3f} s. "
     f"Aqsis / Tessera: wall {rec['ratio_wall_min']:.1f}x (min) {rec['ratio_wall_median']:.1f}x (median), "
     f"Aqsis wall / Tessera engine {rec['ratio_engine_min']:.1f}x\n")
 print(json.dumps(rec, indent=1))

@@ -86,9 +86,11 @@ TEST(Cli, RendersTeapotToPngAndExr) {
 
     std::ifstream sf(stats);
     nlohmann::json j = nlohmann::json::parse(sf);
-    for (const char* key : {"engine", "width", "height", "spp", "threads", "patches_in", "patches_culled",
-                            "splits", "grids", "micropolygons", "sample_tests", "render_ms", "peak_rss_mb"})
+    for (const char* key :
+         {"engine", "width", "height", "spp", "threads", "patches_in", "patches_culled", "splits", "grids",
+          "micropolygons", "sample_tests", "load_ms", "render_ms", "peak_rss_mb"})
         EXPECT_TRUE(j.contains(key)) << key;
+    EXPECT_GT(j["load_ms"].get<double>(), 0.0);
     EXPECT_EQ(j["patches_in"].get<int>(), 32);
     EXPECT_EQ(j["spp"].get<int>(), 16);
     EXPECT_GT(j["micropolygons"].get<int>(), 10000);

@@ -438,8 +438,11 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     std::signal(SIGINT, onSigint);
     // --res is known before the scene is read: subdivision meshes are refined for the size they will have
     // in this image (docs/subdivision.md), the whole frame's (--crop and --tile do not change it).
+    const auto loadStart = std::chrono::steady_clock::now();
     Scene scene =
         loadOrFail(a.scene, a.quiet, a.format, parseUp(a.up), ribFrameOrdinal, RasterOverride{resW, resH});
+    const double loadMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - loadStart).count();
     if (gCancel.load()) {
         fmt::print(stderr, "interrupted while loading {}: no image written\n", a.scene);
         return 130;
@@ -653,6 +656,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
     nlohmann::json& s = result.stats;
     s["scene"] = a.scene;
     s["output"] = output;
+    s["load_ms"] = loadMs;  // reading the scene file(s) into the Scene, before render_ms
     s["render_ms"] = renderMs;
     s["peak_rss_mb"] = peakRssMb();
     describeRender(s, scene, settings);
