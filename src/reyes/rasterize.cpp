@@ -194,6 +194,46 @@ template <bool kAttributes>
     writeSampleHit<kAttributes>(g, a, b, c, l0, l1, l2, z, i, tile);
 }
 
+// Depth and colour at 8 lanes, each interpolated on triangle t0 of the micropolygon where `in0` (sign bits)
+// marks it inside t0, else on t1, with edge values w[t][0], w[t][1]: writeSampleHit's values.
+struct alignas(32) HitLanes {
+    float z[8], r[8], g[8], b[8];
+};
+
+// Per lane: `first` where the sign bit of `onFirst` is set, else `second`.
+__attribute__((target("avx2"))) inline __m256 pickLanes(__m256 onFirst, __m256 first, __m256 second) {
+    return _mm256_blendv_ps(second, first, onFirst);
+}
+
+// l0 v[a] + l1 v[b] + l2 v[c] per lane, the vertices of the lane's triangle.
+__attribute__((target("avx2"))) inline void interpolateLanes(const Micropolygon& m, __m256 onFirst, __m256 l0,
+                                                             __m256 l1, __m256 l2,
+                                                             const std::vector<float>& v, float* out) {
+    __m256 at[3];
+    for (int k = 0; k < 3; ++k)
+        at[k] =
+            pickLanes(onFirst, _mm256_set1_ps(v[size_t(m.t0.v[k])]), _mm256_set1_ps(v[size_t(m.t1.v[k])]));
+    _mm256_store_ps(out, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(l0, at[0]), _mm256_mul_ps(l1, at[1])),
+                                       _mm256_mul_ps(l2, at[2])));
+}
+
+__attribute__((target("avx2"))) inline HitLanes hitLanes(const Micropolygon& m, const Grid& g, __m256i in0,
+                                                         const __m256i (&w)[2][2]) {
+    const __m256 onFirst = _mm256_castsi256_ps(in0);
+    // Edge values fit 32 bits, so converting them from 32 bits rounds as the scalar path's 64-bit ones.
+    const __m256 inv = pickLanes(onFirst, _mm256_set1_ps(m.t0.e.invArea), _mm256_set1_ps(m.t1.e.invArea));
+    const __m256 w1 = pickLanes(onFirst, _mm256_cvtepi32_ps(w[0][0]), _mm256_cvtepi32_ps(w[1][0]));
+    const __m256 w2 = pickLanes(onFirst, _mm256_cvtepi32_ps(w[0][1]), _mm256_cvtepi32_ps(w[1][1]));
+    const __m256 l1 = _mm256_mul_ps(w1, inv), l2 = _mm256_mul_ps(w2, inv);
+    const __m256 l0 = _mm256_sub_ps(_mm256_sub_ps(_mm256_set1_ps(1.f), l1), l2);
+    HitLanes h;
+    interpolateLanes(m, onFirst, l0, l1, l2, g.Z, h.z);
+    interpolateLanes(m, onFirst, l0, l1, l2, g.R, h.r);
+    interpolateLanes(m, onFirst, l0, l1, l2, g.G, h.g);
+    interpolateLanes(m, onFirst, l0, l1, l2, g.B, h.b);
+    return h;
+}
+
 // The sample tests of the micropolygon's bound read row by row from the tile's stratum-ordered copy of
 // the positions (SampleTile::buildStrataOrder): a row's strata are contiguous there, so 8 lanes load
 // straight from memory where the pixel-ordered samples would need an index list and gathers.
@@ -254,6 +294,27 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                         unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in1)))) &
                         ~first;
                     if (!(first | second)) continue;
+                    if constexpr (!kAttributes) {
+                        // The hit lanes' weights, depth and colour for all 8 lanes at once, each lane with
+                        // its triangle's values (the first where inside it): shadeInsideSample's float
+                        // operations in its order, so the same bits; then the depth test and the writes
+                        // per hit (the lanes' samples lie apart in the pixel-ordered tile).
+                        const HitLanes h = hitLanes(m, g, in0, w);
+                        for (unsigned mask = first | second; mask; mask &= mask - 1) {
+                            const int l = __builtin_ctz(mask);
+                            const SampleTile::StrataLine column = columns[col0 + size_t(k + l)];
+                            const size_t pix = size_t(rows[row].pixel + column.pixel);
+                            const size_t si = pix * spp + size_t(rows[row].slot + column.slot);
+                            tile.pixelHit[pix] = 1;
+                            if (!(h.z[l] < tile.z[si]) || h.z[l] < nearZ) continue;
+                            tile.z[si] = h.z[l];
+                            tile.r[si] = h.r[l];
+                            tile.g[si] = h.g[l];
+                            tile.b[si] = h.b[l];
+                            tile.a[si] = 1.f;
+                        }
+                        continue;
+                    }
                     alignas(32) int32_t wv[2][2][8];
                     for (int t = 0; t < 2; ++t)
                         for (int q = 0; q < 2; ++q)
