@@ -3,12 +3,17 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <random>
 #include <vector>
 
+#include "film/film.h"
+#include "render/render.h"
 #include "shading/registry.h"
 #include "shading/surface.h"
+#include "test_util.h"
 
-using namespace tessera;
+namespace tessera::test::shading_tests {
 
 namespace {
 
@@ -128,6 +133,62 @@ TEST(Shading, OnlyFrontFacingShadowCastingLightsAskForVisibility) {
     EXPECT_NEAR(Ci[0].x, 2.f, 1e-6f);  // Ka * ambient (1) * Cs (1) + Kd * 1 * N.L (1)
 }
 
+TEST(Shading, UnoccludedBatchesGiveEachPointsOwnBits) {
+    // shadeSurfacesUnoccluded shades four points at a time (one material, ambient, distant and point
+    // lights): every point must get the bits shadeSurfaceLights gives it alone, over every material, for
+    // normals facing towards and away from the eye, a point light at one of the points, and a batch whose
+    // size is not a multiple of four.
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    const size_t n = 103;
+    std::vector<Vec3> P(n), N(n), I(n);
+    for (size_t i = 0; i < n; ++i) {
+        P[i] = {3 * u(rng), 3 * u(rng), 4 + u(rng)};
+        N[i] = normalize(Vec3{u(rng), u(rng), u(rng)});
+        I[i] = normalize(P[i]);
+    }
+    std::vector<ShadingLight> lights;
+    auto add = [&](LightType type, Vec3 from, Vec3 to, Color c) {
+        Light l = defaultLight(type);
+        l.color = c, l.from = from, l.to = to;
+        lights.push_back(prepareLight(l, Mat4{}));
+    };
+    add(LightType::Ambient, {}, {}, {0.1f, 0.2f, 0.3f});
+    add(LightType::Distant, {1, 2, -3}, {0, 0, 0}, {0.9f, 0.8f, 0.7f});
+    add(LightType::Point, {0.5f, 4, 1}, {}, {20, 18, 15});
+    add(LightType::Distant, {-2, -1, -1}, {0, 0, 0}, {0.3f, 0.3f, 0.5f});
+    add(LightType::Point, P[9], {}, {5, 5, 5});  // at point 9 itself: no light there
+    const MaterialType types[] = {
+        MaterialType::Matte,          MaterialType::Plastic, MaterialType::Metal, MaterialType::ShinyMetal,
+        MaterialType::PaintedPlastic, MaterialType::Mirror,  MaterialType::Glass, MaterialType::Glossy};
+    int compared = 0, lit = 0;
+    for (MaterialType type : types) {
+        Material m = defaultMaterial(type);
+        m.Cs = {0.8f, 0.6f, 0.4f};
+        m.Kd = 0.7f, m.Ks = 0.6f, m.roughness = 0.13f;
+        SurfacePoints pts;
+        pts.count = n;
+        pts.P = P.data(), pts.N = N.data(), pts.I = I.data();
+        std::vector<Color> batch(n);
+        shadeSurfacesUnoccluded(lights, std::span<const Material>(&m, 1), pts, batch.data());
+        for (size_t i = 0; i < n; ++i) {
+            const Color alone = shadeSurfaceLights(
+                m, N[i], I[i], lights.size(), [&](size_t l) { return sampleLight(lights[l], P[i]); },
+                [](size_t) { return 1.f; });
+            EXPECT_EQ(std::memcmp(&alone, &batch[i], sizeof(Color)), 0)
+                << int(type) << " point " << i << ": " << alone.x << " " << alone.y << " " << alone.z
+                << " alone, " << batch[i].x << " " << batch[i].y << " " << batch[i].z << " in the batch";
+            ++compared;
+            const Color ambientAlone = shadeSurfaceLights(
+                m, N[i], I[i], 1, [&](size_t l) { return sampleLight(lights[l], P[i]); },
+                [](size_t) { return 1.f; });
+            lit += !(alone == ambientAlone);
+        }
+    }
+    EXPECT_EQ(compared, 8 * int(n));
+    EXPECT_GT(lit, int(n));  // the lights reach the points, not only the ambient term
+}
+
 TEST(Shading, GlassSplitsTheWeightByFresnel) {
     Material g = defaultMaterial(MaterialType::Glass);
     TracedLobe lobes[2];
@@ -176,11 +237,6 @@ TEST(ShaderRegistry, EveryEntryRoundTrips) {
 }
 
 // ---- the same radiance in both engines -------------------------------------------------------------------
-#include "film/film.h"
-#include "render/render.h"
-#include "test_util.h"
-
-namespace tessera::test::shading_tests {
 
 TEST(Shading, BothEnginesGiveTheShadingModuleRadianceForTheSameHit) {
     // A plastic square facing the eye, lit by a distant, a point and a spot light: each pixel's one sample

@@ -100,32 +100,15 @@ void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& poi
 void shadeSurfaces(std::span<const Material> materials, const SurfacePoints& points, const LightSamples& ls,
                    size_t begin, size_t end, Color* Ci);
 
-// The local response of one point, over light samples given by sampleAt(l) and their visibility by
-// visibilityAt(l): the one accumulation of the RI ambient, diffuse and specular terms that every path uses.
-// `Ct` is the point's texture colour (white when untextured).
-template <class SampleAt, class VisibilityAt>
-TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t lightCount, SampleAt&& sampleAt,
-                                    VisibilityAt&& visibilityAt, Color Ct = Color{1, 1, 1}) {
-    if (m.type == MaterialType::Constant) return m.Os * m.Cs;
-    const Vec3 Nf = faceForward(N, I);
-    const Vec3 V = -I;
-    const float exponent = specularExponent(m.roughness);
-    Color ambient, diffuse, specular;
-    for (size_t l = 0; l < lightCount; ++l) {
-        const LightSample s = sampleAt(l);
-        if (!s.valid) continue;
-        if (s.ambient) {
-            ambient += s.Cl;
-            continue;
-        }
-        const float nl = dot(Nf, s.L);
-        if (nl <= 0.f) continue;
-        const float vis = visibilityAt(l);
-        if (vis <= 0.f) continue;
-        const Color Cl = s.Cl * vis;
-        diffuse += Cl * nl;
-        specular += Cl * specularLobe(Nf, V, s.L, exponent);
-    }
+// Whether a material's response has a specular term (matte's has none: its lobes need not be evaluated).
+TESSERA_HD bool surfaceHasSpecular(MaterialType t) {
+    return t != MaterialType::Matte && t != MaterialType::Constant;
+}
+
+// A material's local response from its summed ambient, diffuse and specular light (RI spec 3.2, appendix
+// A's shaders). `Ct` is the point's texture colour (white when untextured).
+TESSERA_HD Color combineSurfaceTerms(const Material& m, Color ambient, Color diffuse, Color specular,
+                                     Color Ct) {
     switch (m.type) {
         case MaterialType::Matte:
             return m.Os * m.Cs * (ambient * m.Ka + diffuse * m.Kd);
@@ -147,6 +130,36 @@ TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t li
         default:
             return m.Os * (m.Cs * (ambient * m.Ka + diffuse * m.Kd) + m.specularColor * specular * m.Ks);
     }
+}
+
+// The local response of one point, over light samples given by sampleAt(l) and their visibility by
+// visibilityAt(l): the one accumulation of the RI ambient, diffuse and specular terms that every path uses.
+// `Ct` is the point's texture colour (white when untextured).
+template <class SampleAt, class VisibilityAt>
+TESSERA_HD Color shadeSurfaceLights(const Material& m, Vec3 N, Vec3 I, size_t lightCount, SampleAt&& sampleAt,
+                                    VisibilityAt&& visibilityAt, Color Ct = Color{1, 1, 1}) {
+    if (m.type == MaterialType::Constant) return m.Os * m.Cs;
+    const Vec3 Nf = faceForward(N, I);
+    const Vec3 V = -I;
+    const float exponent = specularExponent(m.roughness);
+    const bool specularTerm = surfaceHasSpecular(m.type);
+    Color ambient, diffuse, specular;
+    for (size_t l = 0; l < lightCount; ++l) {
+        const LightSample s = sampleAt(l);
+        if (!s.valid) continue;
+        if (s.ambient) {
+            ambient += s.Cl;
+            continue;
+        }
+        const float nl = dot(Nf, s.L);
+        if (nl <= 0.f) continue;
+        const float vis = visibilityAt(l);
+        if (vis <= 0.f) continue;
+        const Color Cl = s.Cl * vis;
+        diffuse += Cl * nl;
+        if (specularTerm) specular += Cl * specularLobe(Nf, V, s.L, exponent);
+    }
+    return combineSurfaceTerms(m, ambient, diffuse, specular, Ct);
 }
 
 // The local response of one point from stored light samples and visibilities (the batch loop, and tests
