@@ -568,6 +568,24 @@ TEST(RibFiles, ArchiveRecordedWhileSkippingAFrameIsCollectedStrictlyWhenLoaded) 
     expectVec(s.patches[0].at(0, 0), {1, 2, 3});
 }
 
+TEST(RibFiles, UnreadableArchiveIsAnErrorAtTheReadArchiveLine) {
+    // An archive that exists but cannot be read (a gzip header over garbage): the error names the
+    // including file and the ReadArchive line, not the archive; also after another archive's replays
+    // (which must hand the reader back to the including file).
+    fs::path d = testDir();
+    writeFile(d / "part.rib", std::string(kUnitSquare));
+    writeFile(d / "bad.rib", std::string("\x1f\x8b not a gzip stream", 24));
+    for (const char* text : {"WorldBegin\nReadArchive \"bad.rib\"\nWorldEnd\n",
+                             "WorldBegin\nReadArchive \"part.rib\"\nReadArchive \"part.rib\"\n"
+                             "ReadArchive \"part.rib\"\nReadArchive \"bad.rib\"\nWorldEnd\n"}) {
+        const std::string top = writeFile(d / "top.rib", text);
+        const std::string msg = errorOfFile(top);
+        const int line = int(std::count(text, text + std::strlen(text), '\n'));  // the line before WorldEnd
+        EXPECT_EQ(msg.rfind(top + ":" + std::to_string(line - 1) + ": error:", 0), 0u) << msg;
+        EXPECT_TRUE(contains(msg, "cannot read")) << msg;
+    }
+}
+
 TEST(RibFiles, RecursiveArchiveIsAnError) {
     fs::path d = testDir();
     std::string loop = writeFile(d / "loop.rib", "# includes itself\nReadArchive \"loop.rib\"\n");

@@ -1568,6 +1568,15 @@ class RibReader {
         // requests are run again as collected (no lexing, no argument collection: 28% of loading 24 Big
         // Guys from one archive); a file whose recording was skipped in part replays its tokens instead.
         ArchiveReads& reads = archives_[path];
+        // Read before the reader moves into the file: a failure is the ReadArchive line's.
+        std::string text;
+        if (!reads.requests && !reads.tokens) {
+            try {
+                text = readInputFile(path);
+            } catch (const InputError&) {
+                diag_.fail(r.line, "ReadArchive: cannot read \"" + path + "\"");
+            }
+        }
         const std::string outerFile = std::exchange(currentFile_, path);
         diag_.setFile(path);
         ++archiveDepth_;
@@ -1580,12 +1589,6 @@ class RibReader {
             if (reads.tokens) {
                 lexer.emplace(reads.tokens, path);
             } else {
-                std::string text;
-                try {
-                    text = readInputFile(path);
-                } catch (const InputError&) {
-                    diag_.fail(r.line, "ReadArchive: cannot read \"" + path + "\"");
-                }
                 lexer.emplace(std::move(text), path);
                 if (reads.count > 0) {
                     lexer->record((tokens = std::make_unique<LexedFile>()).get());
