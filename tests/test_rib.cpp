@@ -574,7 +574,7 @@ TEST(RibFiles, UnreadableArchiveIsAnErrorAtTheReadArchiveLine) {
     // (which must hand the reader back to the including file).
     fs::path d = testDir();
     writeFile(d / "part.rib", std::string(kUnitSquare));
-    writeFile(d / "bad.rib", std::string("\x1f\x8b not a gzip stream", 24));
+    writeFile(d / "bad.rib", std::string("\x1f\x8b") + " not a gzip stream");
     for (const char* text : {"WorldBegin\nReadArchive \"bad.rib\"\nWorldEnd\n",
                              "WorldBegin\nReadArchive \"part.rib\"\nReadArchive \"part.rib\"\n"
                              "ReadArchive \"part.rib\"\nReadArchive \"bad.rib\"\nWorldEnd\n"}) {
