@@ -91,8 +91,10 @@ struct Candidate {
     float tEnter;
 };
 
-// Candidate lists grown without zeroing (written through raw pointers).
-using CandidateVector = std::vector<Candidate, DefaultInitAllocator<Candidate>>;
+// Candidate lists grown without zeroing (written through raw pointers). Per-thread scratch reused from
+// tile to tile, so not on huge pages: rounded up to whole 2 MB pages, the binning's lists held 2.7 MB more
+// of the teapot frame's 35 MB peak (800x600, 4 spp, 2 threads; issue 18).
+using CandidateVector = std::vector<Candidate, DefaultInitAllocator<Candidate, false>>;
 
 // Counters of one chunk of a stage (merged in chunk order).
 struct StageCounters {

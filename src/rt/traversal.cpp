@@ -55,7 +55,7 @@ struct TraverseScratch {
     std::vector<Ray4> ray4;
     std::vector<Vec3> boxO, boxInv;
     std::vector<PatchPair> pairs;
-    std::vector<uint32_t, DefaultInitAllocator<uint32_t>> items, next;
+    std::vector<uint32_t, DefaultInitAllocator<uint32_t, false>> items, next;  // scratch: no huge pages
     std::vector<uint32_t> count;  // candidates per ray of the chunk
 };
 // One per thread, for traverseChunk and rootPairs alike (neither runs inside the other).
