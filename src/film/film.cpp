@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <stdexcept>
 #include <type_traits>
 #include <utility>
 #if defined(__GNUC__) && defined(__x86_64__)
@@ -23,6 +24,7 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     ny = ny_;
     spp = nx * ny;
     strataX.clear();
+    strataWrites = false;
     size_t pixels = size_t(reg.width()) * reg.height();
     size_t n = pixels * spp;
     sx.resize(n);
@@ -81,6 +83,49 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
             }
 }
 
+namespace {
+
+// Calls visit(pixelOrder, strataOrder, rowLength) for each pixel's row of nx slots: slots syi * nx ..
+// syi * nx + nx - 1 of pixel (px, py) start at pixelOrder in the pixel-ordered arrays and are strata
+// (px * nx .. px * nx + nx - 1, py * ny + syi), contiguous from strataOrder in stratum order. The row
+// length is a template argument for the usual lattices, so that a copy of a row is a fixed-size move (a
+// runtime nx left it a scalar loop of about 18 instructions a sample).
+template <class Visit>
+void forEachSlotRow(int tw, int th, int nx, int ny, Visit&& visit) {
+    auto rows = [&]<int kNx>(std::integral_constant<int, kNx>) {
+        const int rowLength = kNx > 0 ? kNx : nx;
+        const size_t pixelSamples = size_t(rowLength) * size_t(ny), width = size_t(tw);
+        size_t k = 0;
+        for (int py = 0; py < th; ++py)
+            for (int syi = 0; syi < ny; ++syi) {
+                size_t s0 = size_t(py) * width * pixelSamples + size_t(syi * rowLength);
+                for (int px = 0; px < tw; ++px, s0 += pixelSamples, k += size_t(rowLength))
+                    visit(s0, k, std::integral_constant<int, kNx>{}, rowLength);
+            }
+    };
+    switch (nx) {
+        case 2:
+            rows(std::integral_constant<int, 2>{});
+            break;
+        case 4:
+            rows(std::integral_constant<int, 4>{});
+            break;
+        case 8:
+            rows(std::integral_constant<int, 8>{});
+            break;
+        default:
+            rows(std::integral_constant<int, 0>{});
+    }
+}
+
+// Copies one row of slots (length kNx when it is not 0, else rowLength).
+template <int kNx, class T>
+inline void copySlots(T* __restrict to, const T* __restrict from, int rowLength) {
+    std::memcpy(to, from, sizeof(T) * size_t(kNx > 0 ? kNx : rowLength));
+}
+
+}  // namespace
+
 void SampleTile::buildStrataOrder() {
     const int tw = region.width(), th = region.height(), w = tw * nx, h = th * ny;
     const size_t n = sampleCount();
@@ -90,40 +135,48 @@ void SampleTile::buildStrataOrder() {
     strataRow.resize(size_t(h));
     for (int ox = 0; ox < w; ++ox) strataColumn[size_t(ox)] = {ox / nx, ox % nx};
     for (int oy = 0; oy < h; ++oy) strataRow[size_t(oy)] = {(oy / ny) * tw, (oy % ny) * nx};
-    // Stratum (px * nx + sxi, py * ny + syi) holds slot syi * nx + sxi of pixel (px, py): each pixel's
-    // row of nx slots is copied whole. The row length is a template argument for the usual lattices, so
-    // the copy is a fixed-size move (a runtime nx left it a scalar loop of about 18 instructions a sample).
-    auto copyRows = [&]<int kNx>(std::integral_constant<int, kNx>) {
-        const int rowLength = kNx > 0 ? kNx : nx;
-        const int32_t* __restrict fromX = sx.data();
-        const int32_t* __restrict fromY = sy.data();
-        int32_t* __restrict toX = strataX.data();
-        int32_t* __restrict toY = strataY.data();
-        const size_t pixelSamples = size_t(spp), width = size_t(tw);
-        size_t k = 0;
-        for (int py = 0; py < th; ++py)
-            for (int syi = 0; syi < ny; ++syi) {
-                size_t s0 = size_t(py) * width * pixelSamples + size_t(syi * rowLength);
-                for (int px = 0; px < tw; ++px, s0 += pixelSamples, k += size_t(rowLength)) {
-                    std::memcpy(toX + k, fromX + s0, sizeof(int32_t) * size_t(rowLength));
-                    std::memcpy(toY + k, fromY + s0, sizeof(int32_t) * size_t(rowLength));
-                }
-            }
-    };
-    switch (nx) {
-        case 2:
-            copyRows(std::integral_constant<int, 2>{});
-            break;
-        case 4:
-            copyRows(std::integral_constant<int, 4>{});
-            break;
-        case 8:
-            copyRows(std::integral_constant<int, 8>{});
-            break;
-        default:
-            copyRows(std::integral_constant<int, 0>{});
-    }
+    // Stratum (px * nx + sxi, py * ny + syi) holds slot syi * nx + sxi of pixel (px, py).
+    forEachSlotRow(tw, th, nx, ny,
+                   [&]<int kNx>(size_t s0, size_t k, std::integral_constant<int, kNx>, int len) {
+                       copySlots<kNx>(strataX.data() + k, sx.data() + s0, len);
+                       copySlots<kNx>(strataY.data() + k, sy.data() + s0, len);
+                   });
     for (size_t i = n; i < n + 8; ++i) strataX[i] = strataY[i] = 0;
+}
+
+void SampleTile::enterStrataOrder() {
+    if (strataWrites) return;
+    if (!hasStrataOrder()) buildStrataOrder();
+    const size_t n = sampleCount();
+    for (std::vector<float>* v : {&strataZ, &strataR, &strataG, &strataB, &strataA}) v->resize(n + 8);
+    strataCovered.assign(n + 8, 0);
+    forEachSlotRow(region.width(), region.height(), nx, ny,
+                   [&]<int kNx>(size_t s0, size_t k, std::integral_constant<int, kNx>, int len) {
+                       copySlots<kNx>(strataZ.data() + k, z.data() + s0, len);
+                       copySlots<kNx>(strataR.data() + k, r.data() + s0, len);
+                       copySlots<kNx>(strataG.data() + k, g.data() + s0, len);
+                       copySlots<kNx>(strataB.data() + k, b.data() + s0, len);
+                       copySlots<kNx>(strataA.data() + k, a.data() + s0, len);
+                   });
+    strataWrites = true;
+}
+
+void SampleTile::leaveStrataOrder() {
+    if (!strataWrites) return;
+    const size_t spp_ = size_t(spp);
+    forEachSlotRow(region.width(), region.height(), nx, ny,
+                   [&]<int kNx>(size_t s0, size_t k, std::integral_constant<int, kNx>, int len) {
+                       copySlots<kNx>(z.data() + s0, strataZ.data() + k, len);
+                       copySlots<kNx>(r.data() + s0, strataR.data() + k, len);
+                       copySlots<kNx>(g.data() + s0, strataG.data() + k, len);
+                       copySlots<kNx>(b.data() + s0, strataB.data() + k, len);
+                       copySlots<kNx>(a.data() + s0, strataA.data() + k, len);
+                       int32_t covered = 0;
+                       for (int i = 0; i < (kNx > 0 ? kNx : len); ++i)
+                           covered |= strataCovered[k + size_t(i)];
+                       if (covered) pixelHit[s0 / spp_] = 1;
+                   });
+    strataWrites = false;
 }
 
 void SampleTile::setBlur(const BlurPattern* pattern) {
@@ -403,6 +456,8 @@ bool filmUseAvx2(bool allow) {
 }
 
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
+    if (tile.strataWrites)
+        throw std::logic_error("reconstruct: the tile's samples are still in stratum order");
     if (!out.planes.empty()) reconstructPlanes(tile, filter, target, out);
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int tw = tile.region.width(), th = tile.region.height();

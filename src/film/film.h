@@ -132,6 +132,14 @@ struct SampleTile {
     };
     std::vector<int32_t> strataX, strataY;
     std::vector<StrataLine> strataColumn, strataRow;
+    // While `strataWrites` (enterStrataOrder .. leaveStrataOrder): the depth, colour, alpha and coverage
+    // live in stratum order, padded by 8, where a rasterizer tests and writes a micropolygon's row of 8
+    // strata as vectors (the pixel-ordered arrays would scatter each hit). strataCovered: -1 where a
+    // micropolygon covers the stratum's sample (pixelHit's source). Meanwhile z, r, g, b, a and pixelHit
+    // are stale: leaveStrataOrder copies them back, and must run before anything else reads or writes them.
+    std::vector<float> strataZ, strataR, strataG, strataB, strataA;
+    std::vector<int32_t> strataCovered;
+    bool strataWrites = false;
     // Per-sample attributes, present only for the FilmChannel bits in `channels` (empty otherwise).
     uint32_t channels = 0;
     std::vector<uint32_t> objectId;
@@ -153,6 +161,11 @@ struct SampleTile {
     // Fills strataX, strataY, strataColumn and strataRow for the current samples.
     void buildStrataOrder();
     bool hasStrataOrder() const { return !strataX.empty(); }
+    // Moves the depth, colour and alpha into stratum order (building the positions' order if needed), with
+    // no stratum covered yet; and back, marking pixelHit where a stratum was covered. No-ops when already
+    // in the asked order.
+    void enterStrataOrder();
+    void leaveStrataOrder();
     bool has(uint32_t channel) const { return (channels & channel) != 0; }
     // Writes the attributes of a covered sample (colour, alpha and depth are written by the engine).
     void setAttributes(size_t i, uint32_t object, Vec3 normal, int shadowedLights, bool textured) {

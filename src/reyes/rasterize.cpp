@@ -121,8 +121,31 @@ template <bool kAttributes>
     if (hit) tile.pixelHit[pix] = 1;
 }
 
+// testSample for a tile in stratum order (SampleTile::enterStrataOrder): the sample of stratum s, its depth
+// and colour written at s.
+[[gnu::always_inline]] inline void testStratum(const Micropolygon& m, const Grid& g, size_t s,
+                                               SampleTile& tile, float nearZ) {
+    const int64_t sx = tile.strataX[s], sy = tile.strataY[s];
+    if (sx < m.minX || sx > m.maxX || sy < m.minY || sy > m.maxY) return;
+    for (const TriangleSetup* t : {&m.t0, &m.t1}) {
+        float l0, l1, l2;
+        if (!t->valid || !insideTriangle(t->e, sx, sy, l0, l1, l2)) continue;
+        const int a = t->v[0], b = t->v[1], c = t->v[2];
+        const float z = l0 * g.Z[a] + l1 * g.Z[b] + l2 * g.Z[c];
+        tile.strataCovered[s] = -1;
+        if (!(z < tile.strataZ[s]) || z < nearZ) return;
+        tile.strataZ[s] = z;
+        tile.strataR[s] = l0 * g.R[a] + l1 * g.R[b] + l2 * g.R[c];
+        tile.strataG[s] = l0 * g.G[a] + l1 * g.G[b] + l2 * g.G[c];
+        tile.strataB[s] = l0 * g.B[a] + l1 * g.B[b] + l2 * g.B[c];
+        tile.strataA[s] = 1.f;
+        return;
+    }
+}
+
 template <bool kAttributes>
 uint64_t rasterizeGridImpl(const Grid& g, SampleTile& tile, float nearZ) {
+    tile.leaveStrataOrder();
     uint64_t tests = 0;
     const StrataLattice lattice(tile);
     const int stride = g.nu + 1;
@@ -234,13 +257,26 @@ __attribute__((target("avx2"))) inline HitLanes hitLanes(const Micropolygon& m, 
     return h;
 }
 
+// value where the sign bit of `pass` is set, else what `to` holds.
+__attribute__((target("avx2"))) inline void writeLanes(float* to, __m256 value, __m256 pass) {
+    _mm256_storeu_ps(to, _mm256_blendv_ps(_mm256_loadu_ps(to), value, pass));
+}
+
 // The sample tests of the micropolygon's bound read row by row from the tile's stratum-ordered copy of
 // the positions (SampleTile::buildStrataOrder): a row's strata are contiguous there, so 8 lanes load
 // straight from memory where the pixel-ordered samples would need an index list and gathers.
+// Without attributes the depth, colour and coverage are written in stratum order too (the tile stays in it
+// until the bucket's last grid: SampleTile::enterStrataOrder), so a row group's depth test and writes are
+// 8-lane vector operations; with attributes they go to the pixel-ordered arrays hit by hit.
 template <bool kAttributes>
 __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, SampleTile& tile, float nearZ) {
     uint64_t tests = 0;
-    if (!tile.hasStrataOrder()) tile.buildStrataOrder();
+    if constexpr (kAttributes) {
+        tile.leaveStrataOrder();
+        if (!tile.hasStrataOrder()) tile.buildStrataOrder();
+    } else {
+        tile.enterStrataOrder();
+    }
     const StrataLattice lattice(tile);
     const int stride = g.nu + 1;
     const size_t latticeWidth = size_t(lattice.tw) * size_t(lattice.nx);
@@ -256,9 +292,17 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
             if (!setupMicropolygon(g, j * stride + i, stride, lattice, m)) continue;
             tests += m.strata();
             if (m.maxX - m.minX >= kAvx2Span || m.maxY - m.minY >= kAvx2Span) {
-                forEachStratum(m, lattice, [&](size_t pix, size_t si) {
-                    testSample<kAttributes>(m, g, pix, si, tile, nearZ);
-                });
+                if constexpr (kAttributes) {
+                    forEachStratum(m, lattice, [&](size_t pix, size_t si) {
+                        testSample<kAttributes>(m, g, pix, si, tile, nearZ);
+                    });
+                } else {
+                    for (int64_t qy = m.qy0; qy <= m.qy1; ++qy)
+                        for (int64_t qx = m.qx0; qx <= m.qx1; ++qx)
+                            testStratum(m, g,
+                                        size_t(qy - lattice.sy0) * latticeWidth + size_t(qx - lattice.sx0),
+                                        tile, nearZ);
+                }
                 continue;
             }
             const EdgeLanes e0 = edgeLanes(m.t0, m.minX, m.minY), e1 = edgeLanes(m.t1, m.minX, m.minY);
@@ -297,22 +341,29 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                     if constexpr (!kAttributes) {
                         // The hit lanes' weights, depth and colour for all 8 lanes at once, each lane with
                         // its triangle's values (the first where inside it): shadeInsideSample's float
-                        // operations in its order, so the same bits; then the depth test and the writes
-                        // per hit (the lanes' samples lie apart in the pixel-ordered tile).
+                        // operations in its order, so the same bits. The lanes' strata are contiguous in
+                        // the stratum-ordered depth and colour: the depth test (the scalar path's: written
+                        // where z < the old depth and not z < nearZ) and the writes are vector operations.
                         const HitLanes h = hitLanes(m, g, in0, w);
-                        for (unsigned mask = first | second; mask; mask &= mask - 1) {
-                            const int l = __builtin_ctz(mask);
-                            const SampleTile::StrataLine column = columns[col0 + size_t(k + l)];
-                            const size_t pix = size_t(rows[row].pixel + column.pixel);
-                            const size_t si = pix * spp + size_t(rows[row].slot + column.slot);
-                            tile.pixelHit[pix] = 1;
-                            if (!(h.z[l] < tile.z[si]) || h.z[l] < nearZ) continue;
-                            tile.z[si] = h.z[l];
-                            tile.r[si] = h.r[l];
-                            tile.g[si] = h.g[l];
-                            tile.b[si] = h.b[l];
-                            tile.a[si] = 1.f;
-                        }
+                        const __m256i covered =
+                            _mm256_or_si256(_mm256_and_si256(live, in0), _mm256_and_si256(live, in1));
+                        const size_t at = base + size_t(k);
+                        int32_t* cov = tile.strataCovered.data() + at;
+                        _mm256_storeu_si256(
+                            reinterpret_cast<__m256i*>(cov),
+                            _mm256_or_si256(_mm256_loadu_si256(reinterpret_cast<__m256i*>(cov)), covered));
+                        const __m256 z = _mm256_load_ps(h.z);
+                        float* zs = tile.strataZ.data() + at;
+                        const __m256 pass =
+                            _mm256_and_ps(_mm256_and_ps(_mm256_castsi256_ps(covered),
+                                                        _mm256_cmp_ps(z, _mm256_loadu_ps(zs), _CMP_LT_OQ)),
+                                          _mm256_cmp_ps(z, _mm256_set1_ps(nearZ), _CMP_NLT_UQ));
+                        if (_mm256_movemask_ps(pass) == 0) continue;
+                        writeLanes(zs, z, pass);
+                        writeLanes(tile.strataR.data() + at, _mm256_load_ps(h.r), pass);
+                        writeLanes(tile.strataG.data() + at, _mm256_load_ps(h.g), pass);
+                        writeLanes(tile.strataB.data() + at, _mm256_load_ps(h.b), pass);
+                        writeLanes(tile.strataA.data() + at, _mm256_set1_ps(1.f), pass);
                         continue;
                     }
                     alignas(32) int32_t wv[2][2][8];
@@ -342,6 +393,7 @@ std::atomic<bool> gReyesAvx2Allowed{true};
 
 template <bool kAttributes>
 uint64_t rasterizeGridNearestImpl(const Grid& g, SampleTile& tile, float nearZ) {
+    tile.leaveStrataOrder();
     uint64_t tests = 0;
     const Rect& reg = tile.region;
     const int stride = g.nu + 1;

@@ -1489,6 +1489,7 @@ void BlurStrata::build(const SampleTile& tile) {
 
 uint64_t rasterizeBlurredGrid(const Grid& grid, SampleTile& tile, float nearZ, const BlurRasterContext& ctx,
                               const BlurStrata& strata) {
+    tile.leaveStrataOrder();  // a sharp grid of the bucket may have left it in stratum order
     return tile.channels ? rasterizeImpl<true>(grid, tile, nearZ, ctx, strata)
                          : rasterizeImpl<false>(grid, tile, nearZ, ctx, strata);
 }

@@ -235,6 +235,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
             tc.sampleMs += msSince(ts);
         });
         if (!started) return;
+        tc.tile.leaveStrataOrder();  // the rasterizer's stratum-ordered samples back into pixel order
         countEmpty(tc.tile, target, tc.emptySamples, tc.emptyPixels);
         auto tf = EngineClock::now();
         reconstruct(tc.tile, frame.filter, target, result.image);

@@ -133,6 +133,7 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
                 std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
             return;
         }
+        w.tile.leaveStrataOrder();  // the rasterizer's stratum-ordered depths back into pixel order
         size_t i = 0;
         for (int py = t.y0; py < t.y1; ++py)
             for (int px = t.x0; px < t.x1; ++px, ++i) depth[size_t(py) * width + px] = w.tile.z[i];
