@@ -167,12 +167,13 @@ uint64_t rasterizeGridImpl(const Grid& g, SampleTile& tile, float nearZ) {
 // attribute, run when the CPU has it). A micropolygon whose bound spans less than kAvx2Span fixed-point
 // units (32 pixels) is tested in coordinates relative to its bound's corner: there every edge function
 // value fits 32 bits (|A|, |B| < 2^13, |offset| < 2^13 + 256, |C| < 2^27) and equals the 64-bit one, so the
-// same samples are inside; each inside sample is then shaded by the scalar path (same depth and colour).
-// Larger micropolygons take the scalar loop.
+// same samples are inside. A and B and the offsets also fit 16 bits, so A dx + B dy is one multiply-add
+// of 16-bit pairs (vpmaddwd, exact) instead of two 32-bit multiplies. Larger micropolygons take the scalar
+// loop.
 constexpr int64_t kAvx2Span = int64_t(1) << 13;
 
 struct EdgeLanes {
-    __m256i A[3], B[3], C[3];
+    __m256i AB[3], C[3];  // AB: A in the low 16 bits of each 32-bit lane, B in the high 16
     int valid;
 };
 
@@ -182,22 +183,21 @@ __attribute__((target("avx2"))) inline EdgeLanes edgeLanes(const TriangleSetup& 
     for (int k = 0; k < 3; ++k) {
         // C relative to (ox, oy): the edge function at (ox + dx, oy + dy) is A dx + B dy + (A ox + B oy + C).
         const int64_t c = t.e.A[k] * ox + t.e.B[k] * oy + t.e.C[k];
-        e.A[k] = _mm256_set1_epi32(int32_t(t.e.A[k]));
-        e.B[k] = _mm256_set1_epi32(int32_t(t.e.B[k]));
+        e.AB[k] = _mm256_set1_epi32(
+            int32_t(uint32_t(uint16_t(int16_t(t.e.A[k]))) | uint32_t(uint16_t(int16_t(t.e.B[k]))) << 16));
         e.C[k] = _mm256_set1_epi32(int32_t(c));
     }
     return e;
 }
 
 // The lanes whose sample (dx, dy) lies inside the triangle (all three edge functions >= 0), as set sign
-// bits (none for an invalid triangle); w1, w2: the edge functions of edges 1 and 2 (the weights of oriented
-// vertices 1 and 2 times the doubled area, as insideTriangle computes them).
-__attribute__((target("avx2"))) inline __m256i insideLanes(const EdgeLanes& e, __m256i dx, __m256i dy,
-                                                           __m256i& w1, __m256i& w2) {
+// bits (none for an invalid triangle); dxdy: dx in the low 16 bits of each lane, dy in the high 16; w1, w2:
+// the edge functions of edges 1 and 2 (the weights of oriented vertices 1 and 2 times the doubled area, as
+// insideTriangle computes them).
+__attribute__((target("avx2"))) inline __m256i insideLanes(const EdgeLanes& e, __m256i dxdy, __m256i& w1,
+                                                           __m256i& w2) {
     __m256i w[3];
-    for (int k = 0; k < 3; ++k)
-        w[k] = _mm256_add_epi32(
-            _mm256_add_epi32(_mm256_mullo_epi32(e.A[k], dx), _mm256_mullo_epi32(e.B[k], dy)), e.C[k]);
+    for (int k = 0; k < 3; ++k) w[k] = _mm256_add_epi32(_mm256_madd_epi16(e.AB[k], dxdy), e.C[k]);
     w1 = w[1], w2 = w[2];
     const __m256i any = _mm256_or_si256(_mm256_or_si256(w[0], w[1]), w[2]);
     return _mm256_andnot_si256(any, _mm256_set1_epi32(e.valid ? -1 : 0));  // sign clear: inside
@@ -307,8 +307,6 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
             }
             const EdgeLanes e0 = edgeLanes(m.t0, m.minX, m.minY), e1 = edgeLanes(m.t1, m.minX, m.minY);
             const __m256i ox = _mm256_set1_epi32(int32_t(m.minX)), oy = _mm256_set1_epi32(int32_t(m.minY));
-            const __m256i spanX = _mm256_set1_epi32(int32_t(m.maxX - m.minX)),
-                          spanY = _mm256_set1_epi32(int32_t(m.maxY - m.minY));
             const size_t col0 = size_t(m.qx0 - lattice.sx0);
             const int rowLength = int(m.qx1 - m.qx0 + 1);
             for (int64_t qy = m.qy0; qy <= m.qy1; ++qy) {
@@ -319,19 +317,15 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(strataX + base + k)), ox);
                     const __m256i dy = _mm256_sub_epi32(
                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(strataY + base + k)), oy);
-                    // In the bound: 0 <= d <= span (as the scalar test's minX <= sx <= maxX).
-                    const __m256i out =
-                        _mm256_or_si256(_mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dx),
-                                                        _mm256_cmpgt_epi32(dx, spanX)),
-                                        _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), dy),
-                                                        _mm256_cmpgt_epi32(dy, spanY)));
-                    const __m256i live =
-                        _mm256_andnot_si256(out, _mm256_cmpgt_epi32(_mm256_set1_epi32(rowLength - k), lane));
+                    // The lanes of the row's strata. The scalar test's bound test is left out: a sample
+                    // that passes all three edge tests lies in the closed triangle, so in the bound.
+                    const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(rowLength - k), lane);
+                    const __m256i dxdy = _mm256_blend_epi16(dx, _mm256_slli_epi32(dy, 16), 0xAA);
                     __m256i w[2][2];
-                    const __m256i in0 = insideLanes(e0, dx, dy, w[0][0], w[0][1]);
-                    const __m256i in1 = insideLanes(e1, dx, dy, w[1][0], w[1][1]);
-                    // Sign bits: a real candidate in the bound, inside the first triangle, else the second
-                    // (the scalar test's order).
+                    const __m256i in0 = insideLanes(e0, dxdy, w[0][0], w[0][1]);
+                    const __m256i in1 = insideLanes(e1, dxdy, w[1][0], w[1][1]);
+                    // Sign bits: a real candidate inside the first triangle, else the second (the scalar
+                    // test's order).
                     const unsigned first =
                         unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(live, in0))));
                     const unsigned second =
