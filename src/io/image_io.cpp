@@ -167,7 +167,7 @@ std::vector<uint8_t> compressedPngData(const std::vector<uint8_t>& rgba, int wid
 void writePng(const std::string& path, const Image& image, const OutputEncoding& enc) {
     // Straight alpha: un-premultiply, then apply the exposure / transfer curve to the colour.
     // In parallel: the transfer curve's pow per channel was a tenth of the whole 1024 x 1024 teapot frame
-    // (issue 18), and zlib at level 3 costs about the same whatever the level from 1 to 3.
+    // (issue 18).
     const size_t pixels = size_t(image.width) * image.height;
     std::vector<uint8_t> bytes(pixels * 4);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, 16384), [&](const tbb::blocked_range<size_t>& r) {
@@ -197,8 +197,10 @@ void writePng(const std::string& path, const Image& image, const OutputEncoding&
         png_write_info(png, info);  // signature, IHDR, sRGB
         // The image data compressed in parallel (libpng's own path deflates on one thread: a tenth of the
         // 800x600 Reyes frame's wall time on 2 threads), written as IDAT chunks of up to 1 MB by libpng's
-        // chunk writer, then IEND. zlib level 3: about the cost of level 1, smaller files.
-        const std::vector<uint8_t> idat = compressedPngData(bytes, image.width, image.height, 3);
+        // chunk writer, then IEND. zlib level 1: on the Sub-filtered Killeroo and 24 Big Guys frames it
+        // deflates in 66% and 65% of level 3's time for files 7% and 5% larger (level 6, zlib's default:
+        // 2.6x level 3's time, files 10% smaller; docs/benchmarks/fixed_costs.md, session 25).
+        const std::vector<uint8_t> idat = compressedPngData(bytes, image.width, image.height, 1);
         constexpr size_t kChunkBytes = size_t(1) << 20;
         for (size_t at = 0; at < idat.size(); at += kChunkBytes)
             png_write_chunk(png, reinterpret_cast<png_const_bytep>("IDAT"), idat.data() + at,
