@@ -539,6 +539,70 @@ TEST(RibFiles, ArchiveReadAgainIsReplayedAsRead) {
     EXPECT_TRUE(contains(msg, "AttributeEnd")) << msg;
 }
 
+TEST(RibFiles, ReplayedPrimitivesReuseTheirShapeOnlyUnderTheSameState) {
+    // From its third read an archive's primitives keep the shape they were read as, reused while the
+    // declarations, the basis and the texture coordinates are the same. Every read must give the patches
+    // of the text written out in full: after a Basis change (a B-spline patch converts to other Bezier
+    // points), a TextureCoordinates change and a Declare; and when a replayed archive reads an archive for
+    // the first time (the search path changed), whose requests are parsed, not replayed: two patches there
+    // must not be taken for one.
+    fs::path d = testDir();
+    auto curved = [](float lift) {
+        std::string p = "Patch \"bicubic\" \"P\" [";
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i)
+                p += " " + std::to_string(i) + " " + std::to_string(j) + " " +
+                     std::to_string(lift + 0.25f * float(i * j % 3));
+        return p + " ]\n";
+    };
+    writeFile(d / "a" / "inner.rib", curved(1.f) + curved(2.f));
+    writeFile(d / "b" / "inner.rib", curved(3.f) + curved(4.f));
+    const std::string outer = std::string("ReadArchive \"inner.rib\"\n") + curved(5.f);
+    writeFile(d / "outer.rib", outer);
+    auto search = [&](const char* dir) {
+        return "Option \"searchpath\" \"archive\" [\"" + (d / dir).string() + ":" + d.string() + "\"]\n";
+    };
+    const std::string searchA = search("a"), searchB = search("b");
+    // Between reads: what the state changes to before each (an empty string: nothing).
+    const std::vector<std::string> before = {searchA,
+                                             "",
+                                             "",
+                                             "",
+                                             "Basis \"b-spline\" 1 \"b-spline\" 1\n",
+                                             "",
+                                             "TextureCoordinates 0 0 2 0 0 2 2 2\n",
+                                             "Declare \"P\" \"vertex point\"\n",
+                                             searchB,
+                                             ""};
+    std::string byArchive = "WorldBegin\n", inline_ = "WorldBegin\n";
+    const std::string innerA = curved(1.f) + curved(2.f), innerB = curved(3.f) + curved(4.f);
+    bool inB = false;
+    for (const std::string& b : before) {
+        byArchive += b + "ReadArchive \"outer.rib\"\n";
+        inB = inB || b == searchB;
+        inline_ += (b.rfind("Option", 0) == 0 ? "" : b) + (inB ? innerB : innerA) + curved(5.f);
+    }
+    const Scene a = loadScene(writeFile(d / "archive.rib", byArchive + "WorldEnd\n"), {});
+    const Scene e = loadScene(writeFile(d / "inline.rib", inline_ + "WorldEnd\n"), {});
+    ASSERT_EQ(a.patches.size(), 3 * before.size());
+    ASSERT_EQ(e.patches.size(), a.patches.size());
+    int differing = 0;
+    for (size_t i = 0; i < a.patches.size(); ++i) {
+        for (int k = 0; k < 16; ++k) {
+            EXPECT_EQ(a.patches[i].cp[k].x, e.patches[i].cp[k].x) << "patch " << i;
+            EXPECT_EQ(a.patches[i].cp[k].y, e.patches[i].cp[k].y) << "patch " << i;
+            EXPECT_EQ(a.patches[i].cp[k].z, e.patches[i].cp[k].z) << "patch " << i;
+        }
+        const PatchTexCoords ta = texCoordsOf(a, i), te = texCoordsOf(e, i);
+        for (int k = 0; k < 4; ++k) {
+            EXPECT_EQ(ta.st[k].x, te.st[k].x) << "patch " << i;
+            EXPECT_EQ(ta.st[k].y, te.st[k].y) << "patch " << i;
+        }
+        differing += i >= 3 && a.patches[i].cp[5].z != a.patches[i - 3].cp[5].z;
+    }
+    EXPECT_GT(differing, 0);  // the state changes did change the shapes read
+}
+
 TEST(RibFiles, ArchiveRecordedWhileSkippingAFrameIsCollectedStrictlyWhenLoaded) {
     // Frames not loaded are skipped with their arguments collected tolerantly. An archive holding a frame,
     // read three times while loading the third frame, is recorded on its second read, inside a skipped

@@ -31,11 +31,17 @@ std::optional<Decl> parseDecl(const std::string& text);
 class Declarations {
   public:
     Declarations();
-    void declare(const std::string& name, const Decl& d) { declared_[name] = d; }
+    void declare(const std::string& name, const Decl& d) {
+        declared_[name] = d;
+        ++version_;
+    }
     std::optional<Decl> find(const std::string& name) const;
+    // Changes with every declare: what was read under one version reads the same under it again.
+    uint64_t version() const { return version_; }
 
   private:
     std::map<std::string, Decl> declared_;
+    uint64_t version_ = 0;
 };
 
 struct Param {

@@ -116,7 +116,11 @@ class RibReader {
     }
     // Runs a recorded file's requests as parse ran them.
     void replay(const RecordedArchive& file) {
-        for (const ArchiveRequest& rr : file.requests) dispatch(rr.request, rr.handler);
+        for (const ArchiveRequest& rr : file.requests) {
+            replayedRequest_ = &rr.request;
+            dispatch(rr.request, rr.handler);
+        }
+        replayedRequest_ = nullptr;
         endOfFile(file.eofLine);
     }
     void dispatch(const Request& r, Handler h) {
@@ -1169,10 +1173,59 @@ class RibReader {
                 raster_.given() ? raster_.height : 0};
     }
     void primitive(const Request& r, const Arguments&) {
+        if (&r == replayedRequest_ && r.name != "SubdivisionMesh") {
+            // A replayed request whose shape was read under the same declarations, basis and texture
+            // coordinates: the same shape again (ShapeKey), without reading it.
+            const ShapeKey key = shapeKey();
+            const auto it = replayedShapes_.find(&r);
+            if (it != replayedShapes_.end() && it->second.key == key) {
+                primitiveContext();  // the primitive's object id, as reading it assigns one
+                addPrimitive(it->second.shape, {}, primitiveContext());
+                return;
+            }
+            std::vector<PrimitiveShape> shape;
+            shape.push_back(readPrimitiveShape(r, primitiveContext()));
+            addPrimitive(shape, {}, primitiveContext());
+            replayedShapes_[&r] = {key, std::move(shape)};
+            return;
+        }
         std::vector<PrimitiveShape> shape;
         shape.push_back(readPrimitiveShape(r, primitiveContext()));
         addPrimitive(shape, {}, primitiveContext());
     }
+    // What a primitive's shape (object space, before the CTM: rib_geometry.h) depends on besides its
+    // request: the declarations, the basis and texture coordinates of the graphics state and whether the
+    // reader is inside the world. SubdivisionMesh also depends on the CTM (it is refined for its size in
+    // the image), so it is never reused.
+    struct ShapeKey {
+        uint64_t declarations = 0;
+        Basis uBasis{}, vBasis{};
+        PatchTexCoords textureCoordinates;
+        bool inWorld = false;
+        bool operator==(const ShapeKey& o) const {
+            auto sameBasis = [](const Basis& a, const Basis& b) {
+                if (a.step != b.step) return false;
+                for (int i = 0; i < 4; ++i)
+                    for (int j = 0; j < 4; ++j)
+                        if (!(a.m[i][j] == b.m[i][j])) return false;
+                return true;
+            };
+            for (int k = 0; k < 4; ++k)
+                if (!(textureCoordinates.st[k].x == o.textureCoordinates.st[k].x) ||
+                    !(textureCoordinates.st[k].y == o.textureCoordinates.st[k].y))
+                    return false;
+            return declarations == o.declarations && inWorld == o.inWorld && sameBasis(uBasis, o.uBasis) &&
+                   sameBasis(vBasis, o.vBasis);
+        }
+    };
+    ShapeKey shapeKey() const {
+        const auto& a = state_.attributes();
+        return {decls_.version(), a.uBasis, a.vBasis, a.textureCoordinates, state_.inWorld()};
+    }
+    struct ReplayedShape {
+        ShapeKey key;
+        std::vector<PrimitiveShape> shape;
+    };
     void quadric(const Request& r, const Arguments&) { addQuadric(r, primitiveContext()); }
 
     // ---- motion blocks (RI spec 3.2, sec. 6) -----------------------------------------------------
@@ -1706,7 +1759,13 @@ class RibReader {
         std::unique_ptr<const RecordedArchive> requests;
         std::shared_ptr<const LexedFile> tokens;
     };
-    std::map<std::string, ArchiveReads> archives_;                          // by resolved path
+    std::map<std::string, ArchiveReads> archives_;  // by resolved path
+    // The recorded request being replayed (nullptr: none), and the shapes of replayed primitive requests
+    // (keyed by the recorded request, whose address is fixed once its archive is recorded; a request a
+    // nested read parses is not the one replayed, so it is never keyed): 24 Big Guys reads one archive
+    // 24 times, and reading its patches' parameters again was 30% of loading it.
+    const Request* replayedRequest_ = nullptr;
+    std::unordered_map<const Request*, ReplayedShape> replayedShapes_;
     std::optional<Definition> defining_;                                    // the open ObjectBegin
     std::map<std::string, std::shared_ptr<const RetainedObject>> objects_;  // by handle
     uint32_t objectDefinitions_ = 0;
