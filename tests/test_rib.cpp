@@ -506,148 +506,173 @@ TEST(RibFiles, ErrorInsideArchiveNamesTheArchive) {
     EXPECT_EQ(msg.rfind(expectFile + ":1: error:", 0), 0u) << msg;
 }
 
-TEST(RibFiles, ArchiveReadAgainIsReplayedAsRead) {
-    // From its second read on, an archive is replayed from its recorded requests (not lexed again): the
-    // same patches as the text written out in full, and errors that only its fourth use meets still name
-    // the archive and its line.
-    fs::path d = testDir();
-    const std::string part = std::string("# a square\n") + kUnitSquare + "AttributeEnd\n";
-    writeFile(d / "part.rib", part);
-    std::string byArchive = "WorldBegin\n", inline_ = "WorldBegin\n";
-    for (int i = 0; i < 4; ++i) {
-        const std::string open = "AttributeBegin\nTranslate " + std::to_string(i) + " 0.5 0\n";
-        byArchive += open + "ReadArchive \"part.rib\"\n";
-        inline_ += open + part;
+// Runs `body` with archives recorded on their first read (the default) and on their second (the path
+// of archives past the first-read budget).
+template <class Body>
+void withEitherRecording(Body&& body) {
+    for (const size_t bytes : {size_t(64) << 20, size_t(0)}) {
+        struct Restore {
+            size_t bytes;
+            ~Restore() { setArchiveFirstReadRecordBytes(bytes); }
+        } restore{setArchiveFirstReadRecordBytes(bytes)};
+        SCOPED_TRACE(bytes ? "archives recorded on their first read"
+                           : "archives recorded on their second read");
+        body();
     }
-    const Scene a = loadScene(writeFile(d / "archive.rib", byArchive + "WorldEnd\n"), {});
-    const Scene b = loadScene(writeFile(d / "inline.rib", inline_ + "WorldEnd\n"), {});
-    ASSERT_EQ(a.patches.size(), 4u);
-    ASSERT_EQ(b.patches.size(), 4u);
-    for (size_t i = 0; i < 4; ++i)
-        for (int k = 0; k < 16; ++k) {
-            EXPECT_EQ(a.patches[i].cp[k].x, b.patches[i].cp[k].x);
-            EXPECT_EQ(a.patches[i].cp[k].y, b.patches[i].cp[k].y);
-            EXPECT_EQ(a.patches[i].cp[k].z, b.patches[i].cp[k].z);
+}
+
+TEST(RibFiles, ArchiveReadAgainIsReplayedAsRead) {
+    withEitherRecording([&] {
+        // From its second read on, an archive is replayed from its recorded requests (not lexed again): the
+        // same patches as the text written out in full, and errors that only its fourth use meets still name
+        // the archive and its line.
+        fs::path d = testDir();
+        const std::string part = std::string("# a square\n") + kUnitSquare + "AttributeEnd\n";
+        writeFile(d / "part.rib", part);
+        std::string byArchive = "WorldBegin\n", inline_ = "WorldBegin\n";
+        for (int i = 0; i < 4; ++i) {
+            const std::string open = "AttributeBegin\nTranslate " + std::to_string(i) + " 0.5 0\n";
+            byArchive += open + "ReadArchive \"part.rib\"\n";
+            inline_ += open + part;
         }
-    // A fifth read closes an attribute block that is not open: the replayed tokens' file and line.
-    const std::string msg =
-        errorOfFile(writeFile(d / "bad.rib", byArchive + "ReadArchive \"part.rib\"\nWorldEnd\n"));
-    const int squareLines = int(std::count(kUnitSquare, kUnitSquare + std::strlen(kUnitSquare), '\n'));
-    EXPECT_EQ(msg.rfind((d / "part.rib").string() + ":" + std::to_string(2 + squareLines) + ": error:", 0),
-              0u)
-        << msg;
-    EXPECT_TRUE(contains(msg, "AttributeEnd")) << msg;
+        const Scene a = loadScene(writeFile(d / "archive.rib", byArchive + "WorldEnd\n"), {});
+        const Scene b = loadScene(writeFile(d / "inline.rib", inline_ + "WorldEnd\n"), {});
+        ASSERT_EQ(a.patches.size(), 4u);
+        ASSERT_EQ(b.patches.size(), 4u);
+        for (size_t i = 0; i < 4; ++i)
+            for (int k = 0; k < 16; ++k) {
+                EXPECT_EQ(a.patches[i].cp[k].x, b.patches[i].cp[k].x);
+                EXPECT_EQ(a.patches[i].cp[k].y, b.patches[i].cp[k].y);
+                EXPECT_EQ(a.patches[i].cp[k].z, b.patches[i].cp[k].z);
+            }
+        // A fifth read closes an attribute block that is not open: the replayed tokens' file and line.
+        const std::string msg =
+            errorOfFile(writeFile(d / "bad.rib", byArchive + "ReadArchive \"part.rib\"\nWorldEnd\n"));
+        const int squareLines = int(std::count(kUnitSquare, kUnitSquare + std::strlen(kUnitSquare), '\n'));
+        EXPECT_EQ(
+            msg.rfind((d / "part.rib").string() + ":" + std::to_string(2 + squareLines) + ": error:", 0), 0u)
+            << msg;
+        EXPECT_TRUE(contains(msg, "AttributeEnd")) << msg;
+    });
 }
 
 TEST(RibFiles, ReplayedPrimitivesReuseTheirShapeOnlyUnderTheSameState) {
-    // From its third read an archive's primitives keep the shape they were read as, reused while the
-    // declarations, the basis and the texture coordinates are the same. Every read must give the patches
-    // of the text written out in full: after a Basis change (a B-spline patch converts to other Bezier
-    // points), a TextureCoordinates change and a Declare; and when a replayed archive reads an archive for
-    // the first time (the search path changed), whose requests are parsed, not replayed: two patches there
-    // must not be taken for one.
-    fs::path d = testDir();
-    auto curved = [](float lift) {
-        std::string p = "Patch \"bicubic\" \"P\" [";
-        for (int j = 0; j < 4; ++j)
-            for (int i = 0; i < 4; ++i)
-                p += " " + std::to_string(i) + " " + std::to_string(j) + " " +
-                     std::to_string(lift + 0.25f * float(i * j % 3));
-        return p + " ]\n";
-    };
-    writeFile(d / "a" / "inner.rib", curved(1.f) + curved(2.f));
-    writeFile(d / "b" / "inner.rib", curved(3.f) + curved(4.f));
-    const std::string outer = std::string("ReadArchive \"inner.rib\"\n") + curved(5.f);
-    writeFile(d / "outer.rib", outer);
-    auto search = [&](const char* dir) {
-        return "Option \"searchpath\" \"archive\" [\"" + (d / dir).string() + ":" + d.string() + "\"]\n";
-    };
-    const std::string searchA = search("a"), searchB = search("b");
-    // Between reads: what the state changes to before each (an empty string: nothing).
-    const std::vector<std::string> before = {searchA,
-                                             "",
-                                             "",
-                                             "",
-                                             "Basis \"b-spline\" 1 \"b-spline\" 1\n",
-                                             "",
-                                             "TextureCoordinates 0 0 2 0 0 2 2 2\n",
-                                             "Declare \"P\" \"vertex point\"\n",
-                                             searchB,
-                                             ""};
-    std::string byArchive = "WorldBegin\n", inline_ = "WorldBegin\n";
-    const std::string innerA = curved(1.f) + curved(2.f), innerB = curved(3.f) + curved(4.f);
-    bool inB = false;
-    for (const std::string& b : before) {
-        byArchive += b + "ReadArchive \"outer.rib\"\n";
-        inB = inB || b == searchB;
-        inline_ += (b.rfind("Option", 0) == 0 ? "" : b) + (inB ? innerB : innerA) + curved(5.f);
-    }
-    const Scene a = loadScene(writeFile(d / "archive.rib", byArchive + "WorldEnd\n"), {});
-    const Scene e = loadScene(writeFile(d / "inline.rib", inline_ + "WorldEnd\n"), {});
-    ASSERT_EQ(a.patches.size(), 3 * before.size());
-    ASSERT_EQ(e.patches.size(), a.patches.size());
-    int differing = 0;
-    for (size_t i = 0; i < a.patches.size(); ++i) {
-        for (int k = 0; k < 16; ++k) {
-            EXPECT_EQ(a.patches[i].cp[k].x, e.patches[i].cp[k].x) << "patch " << i;
-            EXPECT_EQ(a.patches[i].cp[k].y, e.patches[i].cp[k].y) << "patch " << i;
-            EXPECT_EQ(a.patches[i].cp[k].z, e.patches[i].cp[k].z) << "patch " << i;
+    withEitherRecording([&] {
+        // From an archive's first replay its primitives keep the shape they were read as, reused while the
+        // declarations, the basis and the texture coordinates are the same. Every read must give the patches
+        // of the text written out in full: after a Basis change (a B-spline patch converts to other Bezier
+        // points), a TextureCoordinates change and a Declare; and when a replayed archive reads an archive
+        // for the first time (the search path changed), whose requests are parsed, not replayed: two patches
+        // there must not be taken for one.
+        fs::path d = testDir();
+        auto curved = [](float lift) {
+            std::string p = "Patch \"bicubic\" \"P\" [";
+            for (int j = 0; j < 4; ++j)
+                for (int i = 0; i < 4; ++i)
+                    p += " " + std::to_string(i) + " " + std::to_string(j) + " " +
+                         std::to_string(lift + 0.25f * float(i * j % 3));
+            return p + " ]\n";
+        };
+        writeFile(d / "a" / "inner.rib", curved(1.f) + curved(2.f));
+        writeFile(d / "b" / "inner.rib", curved(3.f) + curved(4.f));
+        const std::string outer = std::string("ReadArchive \"inner.rib\"\n") + curved(5.f);
+        writeFile(d / "outer.rib", outer);
+        auto search = [&](const char* dir) {
+            return "Option \"searchpath\" \"archive\" [\"" + (d / dir).string() + ":" + d.string() + "\"]\n";
+        };
+        const std::string searchA = search("a"), searchB = search("b");
+        // Between reads: what the state changes to before each (an empty string: nothing).
+        const std::vector<std::string> before = {searchA,
+                                                 "",
+                                                 "",
+                                                 "",
+                                                 "Basis \"b-spline\" 1 \"b-spline\" 1\n",
+                                                 "",
+                                                 "TextureCoordinates 0 0 2 0 0 2 2 2\n",
+                                                 "Declare \"P\" \"vertex point\"\n",
+                                                 searchB,
+                                                 ""};
+        std::string byArchive = "WorldBegin\n", inline_ = "WorldBegin\n";
+        const std::string innerA = curved(1.f) + curved(2.f), innerB = curved(3.f) + curved(4.f);
+        bool inB = false;
+        for (const std::string& b : before) {
+            byArchive += b + "ReadArchive \"outer.rib\"\n";
+            inB = inB || b == searchB;
+            inline_ += (b.rfind("Option", 0) == 0 ? "" : b) + (inB ? innerB : innerA) + curved(5.f);
         }
-        const PatchTexCoords ta = texCoordsOf(a, i), te = texCoordsOf(e, i);
-        for (int k = 0; k < 4; ++k) {
-            EXPECT_EQ(ta.st[k].x, te.st[k].x) << "patch " << i;
-            EXPECT_EQ(ta.st[k].y, te.st[k].y) << "patch " << i;
+        const Scene a = loadScene(writeFile(d / "archive.rib", byArchive + "WorldEnd\n"), {});
+        const Scene e = loadScene(writeFile(d / "inline.rib", inline_ + "WorldEnd\n"), {});
+        ASSERT_EQ(a.patches.size(), 3 * before.size());
+        ASSERT_EQ(e.patches.size(), a.patches.size());
+        int differing = 0;
+        for (size_t i = 0; i < a.patches.size(); ++i) {
+            for (int k = 0; k < 16; ++k) {
+                EXPECT_EQ(a.patches[i].cp[k].x, e.patches[i].cp[k].x) << "patch " << i;
+                EXPECT_EQ(a.patches[i].cp[k].y, e.patches[i].cp[k].y) << "patch " << i;
+                EXPECT_EQ(a.patches[i].cp[k].z, e.patches[i].cp[k].z) << "patch " << i;
+            }
+            const PatchTexCoords ta = texCoordsOf(a, i), te = texCoordsOf(e, i);
+            for (int k = 0; k < 4; ++k) {
+                EXPECT_EQ(ta.st[k].x, te.st[k].x) << "patch " << i;
+                EXPECT_EQ(ta.st[k].y, te.st[k].y) << "patch " << i;
+            }
+            differing += i >= 3 && a.patches[i].cp[5].z != a.patches[i - 3].cp[5].z;
         }
-        differing += i >= 3 && a.patches[i].cp[5].z != a.patches[i - 3].cp[5].z;
-    }
-    EXPECT_GT(differing, 0);  // the state changes did change the shapes read
+        EXPECT_GT(differing, 0);  // the state changes did change the shapes read
+    });
 }
 
 TEST(RibFiles, ArchiveRecordedWhileSkippingAFrameIsCollectedStrictlyWhenLoaded) {
-    // Frames not loaded are skipped with their arguments collected tolerantly. An archive holding a frame,
-    // read three times while loading the third frame, is recorded on its second read, inside a skipped
-    // frame: its third read, the frame loaded, must meet the stray ']' as the text does (a replay of the
-    // tolerantly collected requests would drop it silently), and without it load the frame's square.
-    fs::path d = testDir();
-    const std::string top =
-        "ReadArchive \"frame.rib\"\nReadArchive \"frame.rib\"\nReadArchive \"frame.rib\"\n";
-    auto frame = [&](const std::string& translate) {
-        return "FrameBegin 1\nWorldBegin\n" + translate + "\n" + kUnitSquare + "WorldEnd\nFrameEnd\n";
-    };
-    writeFile(d / "frame.rib", frame("Translate 1 2 ] 3"));
-    const std::string bad = writeFile(d / "top.rib", top);
-    try {
+    withEitherRecording([&] {
+        // Frames not loaded are skipped with their arguments collected tolerantly. An archive holding a
+        // frame, read three times while loading the third frame, is recorded on its second read, inside a
+        // skipped frame: its third read, the frame loaded, must meet the stray ']' as the text does (a replay
+        // of the tolerantly collected requests would drop it silently), and without it load the frame's
+        // square.
+        fs::path d = testDir();
+        const std::string top =
+            "ReadArchive \"frame.rib\"\nReadArchive \"frame.rib\"\nReadArchive \"frame.rib\"\n";
+        auto frame = [&](const std::string& translate) {
+            return "FrameBegin 1\nWorldBegin\n" + translate + "\n" + kUnitSquare + "WorldEnd\nFrameEnd\n";
+        };
+        writeFile(d / "frame.rib", frame("Translate 1 2 ] 3"));
+        const std::string bad = writeFile(d / "top.rib", top);
+        try {
+            Scene s;
+            readRibFrame(bad, 2, s, {});
+            ADD_FAILURE() << "the third read loaded the frame without meeting the stray ']'";
+        } catch (const InputError& e) {
+            const std::string msg = e.what();
+            EXPECT_EQ(msg.rfind((d / "frame.rib").string() + ":3: error:", 0), 0u) << msg;
+            EXPECT_TRUE(contains(msg, "Translate")) << msg;
+        }
+        writeFile(d / "frame.rib", frame("Translate 1 2 3"));
         Scene s;
-        readRibFrame(bad, 2, s, {});
-        ADD_FAILURE() << "the third read loaded the frame without meeting the stray ']'";
-    } catch (const InputError& e) {
-        const std::string msg = e.what();
-        EXPECT_EQ(msg.rfind((d / "frame.rib").string() + ":3: error:", 0), 0u) << msg;
-        EXPECT_TRUE(contains(msg, "Translate")) << msg;
-    }
-    writeFile(d / "frame.rib", frame("Translate 1 2 3"));
-    Scene s;
-    readRibFrame(writeFile(d / "good.rib", top), 2, s, {});
-    ASSERT_EQ(s.patches.size(), 1u);
-    expectVec(s.patches[0].at(0, 0), {1, 2, 3});
+        readRibFrame(writeFile(d / "good.rib", top), 2, s, {});
+        ASSERT_EQ(s.patches.size(), 1u);
+        expectVec(s.patches[0].at(0, 0), {1, 2, 3});
+    });
 }
 
 TEST(RibFiles, UnreadableArchiveIsAnErrorAtTheReadArchiveLine) {
-    // An archive that exists but cannot be read (a gzip header over garbage): the error names the
-    // including file and the ReadArchive line, not the archive; also after another archive's replays
-    // (which must hand the reader back to the including file).
-    fs::path d = testDir();
-    writeFile(d / "part.rib", std::string(kUnitSquare));
-    writeFile(d / "bad.rib", std::string("\x1f\x8b") + " not a gzip stream");
-    for (const char* text : {"WorldBegin\nReadArchive \"bad.rib\"\nWorldEnd\n",
-                             "WorldBegin\nReadArchive \"part.rib\"\nReadArchive \"part.rib\"\n"
-                             "ReadArchive \"part.rib\"\nReadArchive \"bad.rib\"\nWorldEnd\n"}) {
-        const std::string top = writeFile(d / "top.rib", text);
-        const std::string msg = errorOfFile(top);
-        const int line = int(std::count(text, text + std::strlen(text), '\n'));  // the line before WorldEnd
-        EXPECT_EQ(msg.rfind(top + ":" + std::to_string(line - 1) + ": error:", 0), 0u) << msg;
-        EXPECT_TRUE(contains(msg, "cannot read")) << msg;
-    }
+    withEitherRecording([&] {
+        // An archive that exists but cannot be read (a gzip header over garbage): the error names the
+        // including file and the ReadArchive line, not the archive; also after another archive's replays
+        // (which must hand the reader back to the including file).
+        fs::path d = testDir();
+        writeFile(d / "part.rib", std::string(kUnitSquare));
+        writeFile(d / "bad.rib", std::string("\x1f\x8b") + " not a gzip stream");
+        for (const char* text : {"WorldBegin\nReadArchive \"bad.rib\"\nWorldEnd\n",
+                                 "WorldBegin\nReadArchive \"part.rib\"\nReadArchive \"part.rib\"\n"
+                                 "ReadArchive \"part.rib\"\nReadArchive \"bad.rib\"\nWorldEnd\n"}) {
+            const std::string top = writeFile(d / "top.rib", text);
+            const std::string msg = errorOfFile(top);
+            const int line =
+                int(std::count(text, text + std::strlen(text), '\n'));  // the line before WorldEnd
+            EXPECT_EQ(msg.rfind(top + ":" + std::to_string(line - 1) + ": error:", 0), 0u) << msg;
+            EXPECT_TRUE(contains(msg, "cannot read")) << msg;
+        }
+    });
 }
 
 TEST(RibFiles, RecursiveArchiveIsAnError) {

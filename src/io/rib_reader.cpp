@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -30,6 +31,14 @@
 #include "shading/texture.h"
 
 namespace tessera {
+
+namespace {
+std::atomic<size_t> gFirstReadRecordBytes{size_t(64) << 20};
+}  // namespace
+
+size_t setArchiveFirstReadRecordBytes(size_t bytes) {
+    return gFirstReadRecordBytes.exchange(bytes);
+}
 
 namespace {
 
@@ -1616,10 +1625,11 @@ class RibReader {
                 diag_.fail(r.line, "ReadArchive: cannot open \"" + printable(name, 200) +
                                        "\": not found in the archive search path " + where);
         }
-        // A file read a second time is recorded as it is parsed, and replayed from then on: the same
-        // requests, so the same scene and messages (the file is taken not to change during one load). Its
-        // requests are run again as collected (no lexing, no argument collection: 28% of loading 24 Big
-        // Guys from one archive); a file whose recording was skipped in part replays its tokens instead.
+        // A file is recorded as it is parsed (on its first read while the budget below allows, else on its
+        // second), and replayed from then on: the same requests, so the same scene and messages (the file is
+        // taken not to change during one load). Its requests are run again as collected (no lexing, no
+        // argument collection: 28% of loading 24 Big Guys from one archive); a file whose recording was
+        // skipped in part replays its tokens instead.
         ArchiveReads& reads = archives_[path];
         // Read before the reader moves into the file: a failure is the ReadArchive line's.
         std::string text;
@@ -1642,10 +1652,17 @@ class RibReader {
             if (reads.tokens) {
                 lexer.emplace(reads.tokens, path);
             } else {
-                lexer.emplace(std::move(text), path);
-                if (reads.count > 0) {
+                // Recorded on its second read; on its first too while the text of archives recorded on
+                // their first read stays within firstReadRecordBytes_ (an archive read only once holds its
+                // recording until loading ends for nothing, so their total is bounded).
+                const bool firstRecorded = reads.count == 0 && text.size() <= firstReadRecordBytes_;
+                if (reads.count > 0 || firstRecorded) {
+                    if (firstRecorded) firstReadRecordBytes_ -= text.size();
+                    lexer.emplace(std::move(text), path);
                     lexer->record((tokens = std::make_unique<LexedFile>()).get());
                     requests = std::make_unique<RecordedArchive>();
+                } else {
+                    lexer.emplace(std::move(text), path);
                 }
             }
             ++reads.count;
@@ -1765,6 +1782,9 @@ class RibReader {
     // nested read parses is not the one replayed, so it is never keyed): 24 Big Guys reads one archive
     // 24 times, and reading its patches' parameters again was 30% of loading it.
     const Request* replayedRequest_ = nullptr;
+    // What is left of the archive text that may be recorded on its first read (64 MB unless the tests set
+    // it). Lexing the 24 Big Guys' archive a second time, to record it, was a fifth of loading that scene.
+    size_t firstReadRecordBytes_ = gFirstReadRecordBytes.load(std::memory_order_relaxed);
     std::unordered_map<const Request*, ReplayedShape> replayedShapes_;
     std::optional<Definition> defining_;                                    // the open ObjectBegin
     std::map<std::string, std::shared_ptr<const RetainedObject>> objects_;  // by handle

@@ -45,4 +45,9 @@ std::vector<RibFrame> ribFrames(const std::string& path);
 void readRibText(std::string text, const std::string& path, Scene& scene, const WarningSink& warn,
                  RasterOverride raster = {});
 
+// How much archive text the readers may record on an archive's first read, in all (the rest are
+// recorded on their second read; default 64 MB). The tests set 0 to exercise the second-read path.
+// Returns the previous value.
+size_t setArchiveFirstReadRecordBytes(size_t bytes);
+
 }  // namespace tessera
