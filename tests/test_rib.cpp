@@ -256,6 +256,25 @@ TEST(RibAttributes, SurfaceColorAndMaterials) {
     EXPECT_EQ(g.Ks, defaultMaterial(MaterialType::Metal).Ks);
 }
 
+TEST(RibAttributes, EqualMaterialsShareOneEntryAmongMany) {
+    // 3,000 patches cycling through 1,000 colours: one material per colour, each patch with its colour's
+    // (the index that replaced the linear search per primitive).
+    std::string body;
+    for (int i = 0; i < 3000; ++i) {
+        const int c = i % 1000;
+        body += "Color 0 " + std::to_string(c) + " 1\n" + kUnitSquare;
+    }
+    Loaded l = load(scene("", body));
+    ASSERT_EQ(l.scene.patches.size(), 3001u);
+    ASSERT_EQ(l.scene.materials.size(), 1000u);  // the last square keeps colour 999's
+    for (size_t i = 0; i < 3000; ++i) {
+        const Material& m = l.scene.materials[l.scene.attributes[i].material];
+        EXPECT_EQ(m.Cs.y, float(i % 1000)) << i;
+        EXPECT_EQ(l.scene.attributes[i].material, l.scene.attributes[i % 1000].material) << i;
+    }
+    EXPECT_EQ(l.scene.attributes[3000].material, l.scene.attributes[2999].material);
+}
+
 TEST(RibAttributes, MirrorGlassAndInlineDeclarations) {
     Loaded l = load(scene("", "Surface \"glass\" \"uniform float eta\" 1.33 \"float Kt\" [0.5]"));
     const Material& m = l.scene.materials[l.scene.attributes[0].material];

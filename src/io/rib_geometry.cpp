@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -32,7 +33,9 @@ bool isBezier(const Basis& b) {
     return true;
 }
 
-uint32_t materialIndex(Scene& scene, const Material& m) {
+uint32_t materialIndex(const PrimitiveContext& c, const Material& m) {
+    Scene& scene = c.scene;
+    if (c.materials) return c.materials->indexOf(scene, m);
     for (size_t i = 0; i < scene.materials.size(); ++i)
         if (sameMaterial(scene.materials[i], m)) return uint32_t(i);
     scene.materials.push_back(m);
@@ -1466,7 +1469,7 @@ namespace {
 PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& ctm) {
     Scene& scene = c.scene;
     PatchAttributes a;
-    a.material = materialIndex(scene, c.state.attributes().surface);
+    a.material = materialIndex(c, c.state.attributes().surface);
     a.object = c.state.attributes().object.value_or(scene.objectCount);
     scene.objectCount = std::max(scene.objectCount, a.object + 1);
     a.shadingRate = c.state.attributes().shadingRate;
@@ -1482,6 +1485,30 @@ PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& 
 }
 
 }  // namespace
+
+size_t MaterialTable::Hash::operator()(const Material& m) const {
+    // Equal materials hash alike: -0 and +0 compare equal, so zeros hash as +0.
+    Fnv1a64 h;
+    auto add = [&](float f) {
+        const uint32_t bits = f == 0.f ? 0u : std::bit_cast<uint32_t>(f);
+        h.bytes(&bits, sizeof bits);
+    };
+    const uint32_t kind = uint32_t(m.type);
+    h.bytes(&kind, sizeof kind);
+    for (const Color& col : {m.Cs, m.Os, m.specularColor}) add(col.x), add(col.y), add(col.z);
+    for (float f : {m.Ka, m.Kd, m.Ks, m.roughness, m.Kr, m.Kt, m.eta, m.glossSamples, m.spread}) add(f);
+    h.bytes(&m.texture, sizeof m.texture);
+    return size_t(h.h);
+}
+
+uint32_t MaterialTable::indexOf(Scene& scene, const Material& m) {
+    for (; indexed_ < scene.materials.size(); ++indexed_)  // materials added elsewhere: the first one wins
+        index_.try_emplace(scene.materials[indexed_], uint32_t(indexed_));
+    if (const auto it = index_.find(m); it != index_.end()) return it->second;
+    scene.materials.push_back(m);
+    index_.try_emplace(m, uint32_t(indexed_));
+    return uint32_t(indexed_++);
+}
 
 void addQuadric(const Request& r, const PrimitiveContext& c) {
     if (!c.state.inWorld()) c.diag.fail(r.line, r.name + " outside WorldBegin/WorldEnd");
@@ -1666,7 +1693,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
             if (added) {
                 Material m = c.state.attributes().surface;
                 m.Cs = col;
-                it->second = materialIndex(scene, m);
+                it->second = materialIndex(c, m);
             }
             patchMaterial.push_back(it->second);
         }
@@ -1691,7 +1718,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
                 if (!haveWhite) {
                     Material m = c.state.attributes().surface;
                     m.Cs = Color{1, 1, 1};
-                    whiteMaterial = materialIndex(scene, m);
+                    whiteMaterial = materialIndex(c, m);
                     haveWhite = true;
                 }
                 pa.material = whiteMaterial;
