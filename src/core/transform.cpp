@@ -145,6 +145,20 @@ Vec3 Mat4::point(Vec3 p) const {
     return {float(x), float(y), float(z)};
 }
 
+void Mat4::points(const Vec3* in, Vec3* out, size_t n) const {
+    if (!(m[3][0] == 0 && m[3][1] == 0 && m[3][2] == 0 && m[3][3] == 1)) {
+        for (size_t i = 0; i < n; ++i) out[i] = point(in[i]);
+        return;
+    }
+    for (size_t i = 0; i < n; ++i) {
+        const Vec3 p = in[i];
+        const double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
+        const double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
+        const double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
+        out[i] = {float(x), float(y), float(z)};
+    }
+}
+
 Vec3 Mat4::vector(Vec3 v) const {
     return {float(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z),
             float(m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z),

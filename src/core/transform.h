@@ -1,6 +1,7 @@
 // 4x4 transforms in double precision (composed from many RIB requests, so keep the error down).
 // Convention: column vectors, p' = M * p. RIB matrices (row-vector convention) are transposed on input.
 #pragma once
+#include <cstddef>
 #include "core/vec.h"
 
 namespace tessera {
@@ -25,6 +26,10 @@ struct Mat4 {
     double maxStretch() const;
 
     Vec3 point(Vec3 p) const;   // with homogeneous divide
+    // point() of n points. For an affine matrix (last row 0 0 0 1) the divide is left out: point() skips
+    // it too, as w is exactly 1 for a finite point, so the results are the same (for a non-finite one
+    // point() gives NaN, this the infinity; both fail a finiteness check).
+    void points(const Vec3* in, Vec3* out, size_t n) const;
     Vec3 vector(Vec3 v) const;  // no translation
     // Normals transform with the inverse transpose; callers pass this matrix's inverse.
     static Vec3 normalWithInverse(const Mat4& inv, Vec3 n);

@@ -27,7 +27,8 @@ class MaterialTable {
         size_t operator()(const Material& m) const;
     };
     std::unordered_map<Material, uint32_t, Hash> index_;
-    size_t indexed_ = 0;  // scene.materials[0, indexed_) are in index_
+    size_t indexed_ = 0;          // scene.materials[0, indexed_) are in index_
+    uint32_t last_ = UINT32_MAX;  // the index last returned
 };
 
 // What a primitive request reads and where its patches go.

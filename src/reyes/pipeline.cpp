@@ -11,7 +11,7 @@ namespace tessera {
 PatchArray patchesInCameraSpace(const Scene& scene, const Mat4& cameraFromWorld) {
     PatchArray patches(scene.patches.size());  // every patch written below
     tbb::parallel_for(size_t(0), patches.size(), [&](size_t i) {
-        for (int k = 0; k < 16; ++k) patches[i].cp[k] = cameraFromWorld.point(scene.patches[i].cp[k]);
+        cameraFromWorld.points(scene.patches[i].cp, patches[i].cp, 16);
     });
     return patches;
 }
