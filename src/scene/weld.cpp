@@ -92,18 +92,36 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     auto repId = [](const Rep& r) { return r.patch * 4u + (r.cp & 3u ? 1u : 0u) + (r.cp >= 12 ? 2u : 0u); };
     // That pass over corners `ids` (patch * 4 + corner, ascending) with its own table of representatives.
     // Corner c of patch pi (at p) takes representative r: recorded in the plan; 1 when p moved.
-    auto snapOnto = [](const Rep& r, uint32_t pi, int c, Vec3& p, WeldPlan* out) -> size_t {
+    // p: the corner's position (a copy; the patch is written only when the corner moves).
+    auto snapOnto = [&](const Rep& r, uint32_t pi, int c, Vec3 p, WeldPlan* out) -> size_t {
         if (out) out->push_back({pi, r.patch, uint8_t(c), r.cp});
         if (r.p == p) return 0;
-        p = r.p;
+        patches[pi].cp[c] = r.p;
         return 1;
+    };
+    const float blockSide = cell * 16.f;
+    // A corner as the corner pass sorts it, 32 bytes: its block in 32 bits per axis, clamped (a clamped
+    // corner is never "inside": it goes to the pass in patch order), its id with its "inside" flag in the
+    // lowest bit, and its position, so that the pass reads the corners in their sorted order instead of
+    // from the patches (a cache miss each: the closed blocks' pass took 17 of 70 ms of welding 24 Big Guys).
+    // Each corner is snapped once and only its own snap moves it, so the copy is the patch's value then.
+    struct CornerItem {
+        int32_t bx, by, bz;
+        uint32_t idInside;  // (patch * 4 + corner) * 2 + inside
+        Vec3 p;
+        uint32_t id() const { return idInside >> 1; }
+        bool inside() const { return idInside & 1u; }
+        bool sameBlock(const CornerItem& o) const { return bx == o.bx && by == o.by && bz == o.bz; }
+        bool operator<(const CornerItem& o) const {
+            return std::tie(bx, by, bz, idInside) < std::tie(o.bx, o.by, o.bz, o.idInside);
+        }
     };
     // A block of a few corners (24 Big Guys: 73 K closed blocks of 4 on average) is searched linearly: a
     // hash table per block cost more in allocation than the search and did not scale with threads. The
     // representative taken is the one the table's search finds first: in the point's own cell, else in the
     // first neighbour cell of its (dx, dy, dz) loop; within a cell the earliest made.
     constexpr size_t kLinearCorners = 32;
-    auto snapFew = [&](const uint32_t* ids, size_t count, WeldPlan* out) {
+    auto snapFew = [&](const CornerItem* items, size_t count, WeldPlan* out) {
         size_t moved = 0;
         struct CellRep {
             Rep rep;
@@ -112,9 +130,9 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
         CellRep reps[kLinearCorners];
         size_t nReps = 0;
         for (size_t n = 0; n < count; ++n) {
-            const uint32_t pi = ids[n] / 4;
-            const int c = kCorners[ids[n] % 4];
-            Vec3& p = patches[pi].cp[c];
+            const uint32_t id = items[n].id(), pi = id / 4;
+            const int c = kCorners[id % 4];
+            const Vec3 p = items[n].p;
             const CellKey k = keyOf(p);
             const Rep* found = nullptr;
             int bestRank = 27;
@@ -126,21 +144,21 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 if (rank < bestRank && near(reps[r].rep.p, p, tol)) bestRank = rank, found = &reps[r].rep;
             }
             if (found)
-                moved += snapOnto(*found, pi, c, p, out), repOf[ids[n]] = repId(*found);
+                moved += snapOnto(*found, pi, c, p, out), repOf[id] = repId(*found);
             else
                 reps[nReps++] = {{p, pi, uint8_t(c)}, k};
         }
         return moved;
     };
-    auto snapCorners = [&](const uint32_t* ids, size_t count, WeldPlan* out) {
-        if (count <= kLinearCorners) return snapFew(ids, count, out);
+    auto snapCorners = [&](const CornerItem* items, size_t count, WeldPlan* out) {
+        if (count <= kLinearCorners) return snapFew(items, count, out);
         size_t moved = 0;
         std::unordered_map<CellKey, std::vector<Rep>, CellHash> reps;
         reps.reserve(count);
         for (size_t n = 0; n < count; ++n) {
-            const uint32_t pi = ids[n] / 4;
-            const int c = kCorners[ids[n] % 4];
-            Vec3& p = patches[pi].cp[c];
+            const uint32_t id = items[n].id(), pi = id / 4;
+            const int c = kCorners[id % 4];
+            const Vec3 p = items[n].p;
             CellKey k = keyOf(p);
             const Rep* found = nullptr;
             auto search = [&](CellKey cellKey) {
@@ -171,7 +189,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                     for (int64_t dz = z0; dz <= z1 && !found; ++dz)
                         if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
             if (found)
-                moved += snapOnto(*found, pi, c, p, out), repOf[ids[n]] = repId(*found);
+                moved += snapOnto(*found, pi, c, p, out), repOf[id] = repId(*found);
             else
                 reps[k].push_back({p, pi, uint8_t(c)});
         }
@@ -183,21 +201,6 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     // (24 Big Guys: 343 K corners.)
     // (A scope of its own: its scratch arrays are freed before the edge pass makes its own.)
     {
-        const float blockSide = cell * 16.f;
-        // 16 bytes a corner (on big scenes this pass's arrays are the weld's memory peak): the block in
-        // 32 bits per axis, clamped (a clamped corner is never "inside": it goes to the pass in patch
-        // order), and the corner's id with its "inside" flag in the lowest bit.
-        struct CornerItem {
-            int32_t bx, by, bz;
-            uint32_t idInside;  // (patch * 4 + corner) * 2 + inside
-            uint32_t id() const { return idInside >> 1; }
-            bool inside() const { return idInside & 1u; }
-            bool sameBlock(const CornerItem& o) const { return bx == o.bx && by == o.by && bz == o.bz; }
-            bool operator<(const CornerItem& o) const {
-                return std::tie(bx, by, bz, idInside) < std::tie(o.bx, o.by, o.bz, o.idInside);
-            }
-        };
-        static_assert(sizeof(CornerItem) == 16);
         // Scratch arrays of several MB: on huge pages (core/buffer_allocator.h), else their first touch, one
         // page fault per 4 KB, costs more than the pass (24 Big Guys: 55 of 95 ms in the edge keys); the
         // items are not zero-filled first (only those flagged in `finite` / `valid`, all written, are kept).
@@ -221,6 +224,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 CornerItem& item = corners[pi * 4 + size_t(ci)];
                 item.bx = axis(p.x), item.by = axis(p.y), item.bz = axis(p.z);
                 item.idInside = uint32_t(pi * 4 + size_t(ci)) * 2u + (inside ? 1u : 0u);
+                item.p = p;
                 finite[pi * 4 + size_t(ci)] = 1;
             }
         });
@@ -263,12 +267,9 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                               });
         }
         std::vector<size_t> blockStart, closedBlocks;  // each block's first item; the blocks decided alone
-        std::vector<uint32_t, DefaultInitAllocator<uint32_t>> ids(corners.size());
-        std::vector<uint32_t> rest;
-        for (size_t i = 0; i < corners.size(); ++i) {
-            ids[i] = corners[i].id();
+        std::vector<CornerItem> rest;
+        for (size_t i = 0; i < corners.size(); ++i)
             if (i == 0 || !corners[i].sameBlock(corners[i - 1])) blockStart.push_back(i);
-        }
         blockStart.push_back(corners.size());
         for (size_t g = 0; g + 1 < blockStart.size(); ++g) {
             bool closed = true;
@@ -276,10 +277,11 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
             if (closed)
                 closedBlocks.push_back(g);
             else
-                rest.insert(rest.end(), ids.begin() + std::ptrdiff_t(blockStart[g]),
-                            ids.begin() + std::ptrdiff_t(blockStart[g + 1]));
+                rest.insert(rest.end(), corners.begin() + std::ptrdiff_t(blockStart[g]),
+                            corners.begin() + std::ptrdiff_t(blockStart[g + 1]));
         }
-        std::sort(rest.begin(), rest.end());
+        std::sort(rest.begin(), rest.end(),
+                  [](const CornerItem& a, const CornerItem& b) { return a.idInside < b.idInside; });
         std::vector<WeldPlan> blockPlans(plan ? closedBlocks.size() : 0);
         std::atomic<size_t> cornersMoved{0};
         // One atomic add per range, not per block (an add per block of 4 corners kept the pass from scaling).
@@ -288,7 +290,7 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 size_t moved = 0;
                 for (size_t b = r.begin(); b != r.end(); ++b) {
                     const size_t g = closedBlocks[b];
-                    moved += snapCorners(ids.data() + blockStart[g], blockStart[g + 1] - blockStart[g],
+                    moved += snapCorners(corners.data() + blockStart[g], blockStart[g + 1] - blockStart[g],
                                          plan ? &blockPlans[b] : nullptr);
                 }
                 cornersMoved += moved;
