@@ -344,9 +344,14 @@ TESSERA_HD void filmSamplesFixed(const FilmPattern& fp, int px, int py, int32_t*
         // for every sample of every tile, in chunks the compiler vectorizes (8 lanes per SSE2 register),
         // then the points go to their strata's slots.
         // The stratum slot of each point is computed in the same vector loop (nx = 2^lx: shifts only).
+        // Up to 256 samples (16 x 16) the points go to their slots as one packed word each (the offsets
+        // and the sample index), unpacked into x, y and index by a loop the compiler vectorizes: the
+        // scatter of three words per sample was 40% of this function on a 16-sample frame.
         const uint16_t sx16 = uint16_t(sx), sy16 = uint16_t(sy);
         constexpr int kChunk = 64;
         uint16_t both[kChunk], slotOf[kChunk];
+        uint32_t packed[256];
+        const bool pack = spp <= 256;
         for (int first = 0; first < spp; first += kChunk) {
             const int count = spp - first < kChunk ? spp - first : kChunk;
             for (int k = 0; k < count; ++k) {
@@ -357,6 +362,11 @@ TESSERA_HD void filmSamplesFixed(const FilmPattern& fp, int px, int py, int32_t*
                 both[k] = b;
                 slotOf[k] = uint16_t(((b >> 8) >> (8 - ly)) << lx | (b & 0xffu) >> (8 - lx));
             }
+            if (pack) {
+                for (int k = 0; k < count; ++k)
+                    packed[slotOf[k]] = uint32_t(both[k]) | uint32_t(first + k) << 16;
+                continue;
+            }
             for (int k = 0; k < count; ++k) {
                 const int slot = slotOf[k];
                 x[slot] = x0 + int32_t(both[k] & 0xffu);
@@ -364,6 +374,12 @@ TESSERA_HD void filmSamplesFixed(const FilmPattern& fp, int px, int py, int32_t*
                 index[slot] = uint32_t(first + k);
             }
         }
+        if (pack)
+            for (int s = 0; s < spp; ++s) {
+                x[s] = x0 + int32_t(packed[s] & 0xffu);
+                y[s] = y0 + int32_t((packed[s] >> 8) & 0xffu);
+                index[s] = packed[s] >> 16;
+            }
         return;
     }
     for (int s = 0; s < spp; ++s) {
