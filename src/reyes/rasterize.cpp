@@ -257,6 +257,29 @@ __attribute__((target("avx2"))) inline HitLanes hitLanes(const Micropolygon& m, 
     return h;
 }
 
+// hitLanes when every hit lane lies in triangle t (edge values w[0], w[1]): the same operations on t's
+// values, without choosing per lane.
+__attribute__((target("avx2"))) inline void interpolateLanesOf(const TriangleSetup& t, __m256 l0, __m256 l1,
+                                                               __m256 l2, const std::vector<float>& v,
+                                                               float* out) {
+    _mm256_store_ps(out, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(l0, _mm256_set1_ps(v[size_t(t.v[0])])),
+                                                     _mm256_mul_ps(l1, _mm256_set1_ps(v[size_t(t.v[1])]))),
+                                       _mm256_mul_ps(l2, _mm256_set1_ps(v[size_t(t.v[2])]))));
+}
+__attribute__((target("avx2"))) inline HitLanes hitLanesOf(const TriangleSetup& t, const Grid& g,
+                                                           const __m256i (&w)[2]) {
+    const __m256 inv = _mm256_set1_ps(t.e.invArea);
+    const __m256 l1 = _mm256_mul_ps(_mm256_cvtepi32_ps(w[0]), inv),
+                 l2 = _mm256_mul_ps(_mm256_cvtepi32_ps(w[1]), inv);
+    const __m256 l0 = _mm256_sub_ps(_mm256_sub_ps(_mm256_set1_ps(1.f), l1), l2);
+    HitLanes h;
+    interpolateLanesOf(t, l0, l1, l2, g.Z, h.z);
+    interpolateLanesOf(t, l0, l1, l2, g.R, h.r);
+    interpolateLanesOf(t, l0, l1, l2, g.G, h.g);
+    interpolateLanesOf(t, l0, l1, l2, g.B, h.b);
+    return h;
+}
+
 // value where the sign bit of `pass` is set, else what `to` holds.
 __attribute__((target("avx2"))) inline void writeLanes(float* to, __m256 value, __m256 pass) {
     _mm256_storeu_ps(to, _mm256_blendv_ps(_mm256_loadu_ps(to), value, pass));
@@ -338,7 +361,9 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                         // operations in its order, so the same bits. The lanes' strata are contiguous in
                         // the stratum-ordered depth and colour: the depth test (the scalar path's: written
                         // where z < the old depth and not z < nearZ) and the writes are vector operations.
-                        const HitLanes h = hitLanes(m, g, in0, w);
+                        const HitLanes h = !second  ? hitLanesOf(m.t0, g, w[0])
+                                           : !first ? hitLanesOf(m.t1, g, w[1])
+                                                    : hitLanes(m, g, in0, w);
                         const __m256i covered =
                             _mm256_or_si256(_mm256_and_si256(live, in0), _mm256_and_si256(live, in1));
                         const size_t at = base + size_t(k);
