@@ -4,6 +4,7 @@
 // the write of a covered sample.
 #pragma once
 #include <cstdint>
+#include <type_traits>
 #include <utility>
 
 #include "film/film.h"
@@ -13,8 +14,10 @@ namespace tessera {
 
 // Edge a->b owns samples exactly on it when it is a "top" or "left" edge; the neighbouring triangle walks
 // the same edge the other way, so a sample on a shared edge belongs to exactly one of them.
-inline int64_t fillBias(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
-    const int64_t dy = by - ay, dx = bx - ax;
+template <class Int = int64_t>
+inline Int fillBias(std::type_identity_t<Int> ax, std::type_identity_t<Int> ay, std::type_identity_t<Int> bx,
+                    std::type_identity_t<Int> by) {
+    const Int dy = by - ay, dx = bx - ax;
     return (dy > 0 || (dy == 0 && dx < 0)) ? 0 : 1;
 }
 
@@ -22,16 +25,23 @@ inline int64_t fillBias(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
 // (b.y-a.y)(p.x-a.x) = A*p.x + B*p.y + C, made positive inside by orienting the triangle counter-clockwise
 // (positive area): when the given order is clockwise, vertices 1 and 2 are swapped (`swapped`). Edge e runs
 // from vertex e+1 to e+2 of the oriented triangle, so its function is the weight of oriented vertex e.
-struct TriangleEdges {
-    int64_t A[3], B[3], C[3];
+// Int = int32_t: for coordinates relative to a nearby origin whose products fit 32 bits (the AVX2
+// rasterizer's micropolygons under 2^13 units: the same A, B, area and weights, and C relative to it).
+template <class Int>
+struct TriangleEdgesOf {
+    Int A[3], B[3], C[3];
     float invArea;
     bool valid, swapped;
 };
+using TriangleEdges = TriangleEdgesOf<int64_t>;
 
-inline TriangleEdges setupTriangleEdges(int64_t x0, int64_t y0, int64_t x1, int64_t y1, int64_t x2,
-                                        int64_t y2) {
-    TriangleEdges t;
-    int64_t area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+// Int is never deduced from the arguments (int32 grid coordinates still set up in 64 bits).
+template <class Int = int64_t>
+inline TriangleEdgesOf<Int> setupTriangleEdges(std::type_identity_t<Int> x0, std::type_identity_t<Int> y0,
+                                               std::type_identity_t<Int> x1, std::type_identity_t<Int> y1,
+                                               std::type_identity_t<Int> x2, std::type_identity_t<Int> y2) {
+    TriangleEdgesOf<Int> t;
+    Int area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
     t.valid = area != 0;
     t.swapped = area < 0;
     if (area < 0) {
@@ -39,12 +49,12 @@ inline TriangleEdges setupTriangleEdges(int64_t x0, int64_t y0, int64_t x1, int6
         std::swap(y1, y2);
         area = -area;
     }
-    const int64_t xs[3] = {x0, x1, x2}, ys[3] = {y0, y1, y2};
+    const Int xs[3] = {x0, x1, x2}, ys[3] = {y0, y1, y2};
     for (int e = 0; e < 3; ++e) {
         const int a = (e + 1) % 3, b = (e + 2) % 3;
         t.A[e] = -(ys[b] - ys[a]);
         t.B[e] = xs[b] - xs[a];
-        t.C[e] = -(t.A[e] * xs[a] + t.B[e] * ys[a]) - fillBias(xs[a], ys[a], xs[b], ys[b]);
+        t.C[e] = -(t.A[e] * xs[a] + t.B[e] * ys[a]) - fillBias<Int>(xs[a], ys[a], xs[b], ys[b]);
     }
     t.invArea = t.valid ? 1.f / float(area) : 0.f;
     return t;

@@ -15,16 +15,22 @@ namespace tessera {
 namespace {
 
 // One triangle of a micropolygon: its edge functions (edge_functions.h) and the grid vertices of its oriented
-// corners (v[0] weight from edge 0 etc.).
-struct TriangleSetup {
-    TriangleEdges e;
+// corners (v[0] weight from edge 0 etc.). Int = int32_t: in coordinates relative to (ox, oy), for the AVX2
+// path's small micropolygons (the same A, B and weights; C relative to the origin).
+template <class Int>
+struct TriangleSetupOf {
+    TriangleEdgesOf<Int> e;
     int v[3];
     bool valid;
 };
+using TriangleSetup = TriangleSetupOf<int64_t>;
 
-inline TriangleSetup setupTriangle(const Grid& g, int i0, int i1, int i2) {
-    TriangleSetup t;
-    t.e = setupTriangleEdges(g.X[i0], g.Y[i0], g.X[i1], g.Y[i1], g.X[i2], g.Y[i2]);
+template <class Int = int64_t>
+inline TriangleSetupOf<Int> setupTriangle(const Grid& g, int i0, int i1, int i2, int64_t ox = 0,
+                                          int64_t oy = 0) {
+    TriangleSetupOf<Int> t;
+    t.e = setupTriangleEdges<Int>(Int(g.X[i0] - ox), Int(g.Y[i0] - oy), Int(g.X[i1] - ox), Int(g.Y[i1] - oy),
+                                  Int(g.X[i2] - ox), Int(g.Y[i2] - oy));
     t.valid = t.e.valid;
     if (t.e.swapped) std::swap(i1, i2);
     t.v[0] = i0, t.v[1] = i1, t.v[2] = i2;
@@ -65,15 +71,18 @@ struct StrataLattice {
 };
 
 // One micropolygon (grid quad a, b = a + 1, c = a + stride + 1, d = a + stride): its bound, the strata the
-// bound overlaps and its two triangles.
+// bound overlaps and its two triangles (t0, t1: 64-bit; r0, r1: 32-bit relative to the bound's corner, the
+// AVX2 path's).
 struct Micropolygon {
     int64_t minX, maxX, minY, maxY, qx0, qx1, qy0, qy1;
     TriangleSetup t0, t1;
+    TriangleSetupOf<int32_t> r0, r1;
     size_t strata() const { return size_t(qx1 - qx0 + 1) * size_t(qy1 - qy0 + 1); }
 };
 
-// false when the micropolygon faces away (one-sided grid), overlaps no stratum of the tile or is degenerate.
-[[gnu::always_inline]] inline bool setupMicropolygon(const Grid& g, int a, int stride, const StrataLattice& s,
+// false when the micropolygon faces away (one-sided grid) or overlaps no stratum of the tile; else its
+// bound and strata are set.
+[[gnu::always_inline]] inline bool boundMicropolygon(const Grid& g, int a, int stride, const StrataLattice& s,
                                                      Micropolygon& m) {
     const int b = a + 1, c = a + stride + 1, d = a + stride;
     if (!g.twoSided && !(g.front[a] | g.front[b] | g.front[c] | g.front[d])) return false;
@@ -86,10 +95,21 @@ struct Micropolygon {
     m.qx1 = std::min(s.sx1, (m.maxX * s.nx) >> kSubpixelBits);
     m.qy0 = std::max(s.sy0, (m.minY * s.ny) >> kSubpixelBits);
     m.qy1 = std::min(s.sy1, (m.maxY * s.ny) >> kSubpixelBits);
-    if (m.qx0 > m.qx1 || m.qy0 > m.qy1) return false;
-    m.t0 = setupTriangle(g, a, b, c);
-    m.t1 = setupTriangle(g, a, c, d);
+    return m.qx0 <= m.qx1 && m.qy0 <= m.qy1;
+}
+
+// The micropolygon's 64-bit triangles; false when both are degenerate.
+[[gnu::always_inline]] inline bool setupTriangles(const Grid& g, int a, int stride, Micropolygon& m) {
+    m.t0 = setupTriangle(g, a, a + 1, a + stride + 1);
+    m.t1 = setupTriangle(g, a, a + stride + 1, a + stride);
     return m.t0.valid || m.t1.valid;
+}
+
+// boundMicropolygon, then setupTriangles: false when it faces away, overlaps no stratum of the tile or is
+// degenerate.
+[[gnu::always_inline]] inline bool setupMicropolygon(const Grid& g, int a, int stride, const StrataLattice& s,
+                                                     Micropolygon& m) {
+    return boundMicropolygon(g, a, stride, s, m) && setupTriangles(g, a, stride, m);
 }
 
 // visit(pixel, sample index) for the sample of each stratum the micropolygon's bound overlaps, in rows.
@@ -177,15 +197,15 @@ struct EdgeLanes {
     int valid;
 };
 
-__attribute__((target("avx2"))) inline EdgeLanes edgeLanes(const TriangleSetup& t, int64_t ox, int64_t oy) {
+// t set up relative to the bound's corner: the edge function at (corner + dx, corner + dy) is A dx + B dy +
+// C.
+__attribute__((target("avx2"))) inline EdgeLanes edgeLanes(const TriangleSetupOf<int32_t>& t) {
     EdgeLanes e;
     e.valid = t.valid;
     for (int k = 0; k < 3; ++k) {
-        // C relative to (ox, oy): the edge function at (ox + dx, oy + dy) is A dx + B dy + (A ox + B oy + C).
-        const int64_t c = t.e.A[k] * ox + t.e.B[k] * oy + t.e.C[k];
         e.AB[k] = _mm256_set1_epi32(
             int32_t(uint32_t(uint16_t(int16_t(t.e.A[k]))) | uint32_t(uint16_t(int16_t(t.e.B[k]))) << 16));
-        e.C[k] = _mm256_set1_epi32(int32_t(c));
+        e.C[k] = _mm256_set1_epi32(t.e.C[k]);
     }
     return e;
 }
@@ -205,10 +225,9 @@ __attribute__((target("avx2"))) inline __m256i insideLanes(const EdgeLanes& e, _
 
 // A sample inside triangle t with edge values w1, w2 (insideTriangle's, from the AVX2 lanes): the weights,
 // depth test and write as shadeSampleIfInside does them.
-template <bool kAttributes>
-[[gnu::always_inline]] inline void shadeInsideSample(const TriangleSetup& t, const Grid& g, int64_t w1,
-                                                     int64_t w2, size_t i, size_t pix, SampleTile& tile,
-                                                     float nearZ) {
+template <bool kAttributes, class Setup>
+[[gnu::always_inline]] inline void shadeInsideSample(const Setup& t, const Grid& g, int64_t w1, int64_t w2,
+                                                     size_t i, size_t pix, SampleTile& tile, float nearZ) {
     const float l1 = float(w1) * t.e.invArea, l2 = float(w2) * t.e.invArea, l0 = 1.f - l1 - l2;
     const int a = t.v[0], b = t.v[1], c = t.v[2];
     const float z = l0 * g.Z[a] + l1 * g.Z[b] + l2 * g.Z[c];
@@ -235,7 +254,7 @@ __attribute__((target("avx2"))) inline void interpolateLanes(const Micropolygon&
     __m256 at[3];
     for (int k = 0; k < 3; ++k)
         at[k] =
-            pickLanes(onFirst, _mm256_set1_ps(v[size_t(m.t0.v[k])]), _mm256_set1_ps(v[size_t(m.t1.v[k])]));
+            pickLanes(onFirst, _mm256_set1_ps(v[size_t(m.r0.v[k])]), _mm256_set1_ps(v[size_t(m.r1.v[k])]));
     _mm256_store_ps(out, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(l0, at[0]), _mm256_mul_ps(l1, at[1])),
                                        _mm256_mul_ps(l2, at[2])));
 }
@@ -244,7 +263,7 @@ __attribute__((target("avx2"))) inline HitLanes hitLanes(const Micropolygon& m, 
                                                          const __m256i (&w)[2][2]) {
     const __m256 onFirst = _mm256_castsi256_ps(in0);
     // Edge values fit 32 bits, so converting them from 32 bits rounds as the scalar path's 64-bit ones.
-    const __m256 inv = pickLanes(onFirst, _mm256_set1_ps(m.t0.e.invArea), _mm256_set1_ps(m.t1.e.invArea));
+    const __m256 inv = pickLanes(onFirst, _mm256_set1_ps(m.r0.e.invArea), _mm256_set1_ps(m.r1.e.invArea));
     const __m256 w1 = pickLanes(onFirst, _mm256_cvtepi32_ps(w[0][0]), _mm256_cvtepi32_ps(w[1][0]));
     const __m256 w2 = pickLanes(onFirst, _mm256_cvtepi32_ps(w[0][1]), _mm256_cvtepi32_ps(w[1][1]));
     const __m256 l1 = _mm256_mul_ps(w1, inv), l2 = _mm256_mul_ps(w2, inv);
@@ -259,14 +278,14 @@ __attribute__((target("avx2"))) inline HitLanes hitLanes(const Micropolygon& m, 
 
 // hitLanes when every hit lane lies in triangle t (edge values w[0], w[1]): the same operations on t's
 // values, without choosing per lane.
-__attribute__((target("avx2"))) inline void interpolateLanesOf(const TriangleSetup& t, __m256 l0, __m256 l1,
-                                                               __m256 l2, const std::vector<float>& v,
-                                                               float* out) {
+__attribute__((target("avx2"))) inline void interpolateLanesOf(const TriangleSetupOf<int32_t>& t, __m256 l0,
+                                                               __m256 l1, __m256 l2,
+                                                               const std::vector<float>& v, float* out) {
     _mm256_store_ps(out, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(l0, _mm256_set1_ps(v[size_t(t.v[0])])),
                                                      _mm256_mul_ps(l1, _mm256_set1_ps(v[size_t(t.v[1])]))),
                                        _mm256_mul_ps(l2, _mm256_set1_ps(v[size_t(t.v[2])]))));
 }
-__attribute__((target("avx2"))) inline HitLanes hitLanesOf(const TriangleSetup& t, const Grid& g,
+__attribute__((target("avx2"))) inline HitLanes hitLanesOf(const TriangleSetupOf<int32_t>& t, const Grid& g,
                                                            const __m256i (&w)[2]) {
     const __m256 inv = _mm256_set1_ps(t.e.invArea);
     const __m256 l1 = _mm256_mul_ps(_mm256_cvtepi32_ps(w[0]), inv),
@@ -312,9 +331,11 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
     Micropolygon m;
     for (int j = 0; j < g.nv; ++j) {
         for (int i = 0; i < g.nu; ++i) {
-            if (!setupMicropolygon(g, j * stride + i, stride, lattice, m)) continue;
-            tests += m.strata();
+            const int a = j * stride + i;
+            if (!boundMicropolygon(g, a, stride, lattice, m)) continue;
             if (m.maxX - m.minX >= kAvx2Span || m.maxY - m.minY >= kAvx2Span) {
+                if (!setupTriangles(g, a, stride, m)) continue;
+                tests += m.strata();
                 if constexpr (kAttributes) {
                     forEachStratum(m, lattice, [&](size_t pix, size_t si) {
                         testSample<kAttributes>(m, g, pix, si, tile, nearZ);
@@ -328,7 +349,12 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                 }
                 continue;
             }
-            const EdgeLanes e0 = edgeLanes(m.t0, m.minX, m.minY), e1 = edgeLanes(m.t1, m.minX, m.minY);
+            // Small enough for 32 bits relative to the bound's corner (see kAvx2Span).
+            m.r0 = setupTriangle<int32_t>(g, a, a + 1, a + stride + 1, m.minX, m.minY);
+            m.r1 = setupTriangle<int32_t>(g, a, a + stride + 1, a + stride, m.minX, m.minY);
+            if (!m.r0.valid && !m.r1.valid) continue;
+            tests += m.strata();
+            const EdgeLanes e0 = edgeLanes(m.r0), e1 = edgeLanes(m.r1);
             const __m256i ox = _mm256_set1_epi32(int32_t(m.minX)), oy = _mm256_set1_epi32(int32_t(m.minY));
             const size_t col0 = size_t(m.qx0 - lattice.sx0);
             const int rowLength = int(m.qx1 - m.qx0 + 1);
@@ -361,8 +387,8 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                         // operations in its order, so the same bits. The lanes' strata are contiguous in
                         // the stratum-ordered depth and colour: the depth test (the scalar path's: written
                         // where z < the old depth and not z < nearZ) and the writes are vector operations.
-                        const HitLanes h = !second  ? hitLanesOf(m.t0, g, w[0])
-                                           : !first ? hitLanesOf(m.t1, g, w[1])
+                        const HitLanes h = !second  ? hitLanesOf(m.r0, g, w[0])
+                                           : !first ? hitLanesOf(m.r1, g, w[1])
                                                     : hitLanes(m, g, in0, w);
                         const __m256i covered =
                             _mm256_or_si256(_mm256_and_si256(live, in0), _mm256_and_si256(live, in1));
@@ -393,7 +419,7 @@ __attribute__((target("avx2"))) uint64_t rasterizeGridAvx2(const Grid& g, Sample
                         const int l = __builtin_ctz(mask), t = (first >> l) & 1u ? 0 : 1;
                         const SampleTile::StrataLine column = columns[col0 + size_t(k + l)];
                         const size_t pix = size_t(rows[row].pixel + column.pixel);
-                        shadeInsideSample<kAttributes>(t ? m.t1 : m.t0, g, wv[t][0][l], wv[t][1][l],
+                        shadeInsideSample<kAttributes>(t ? m.r1 : m.r0, g, wv[t][0][l], wv[t][1][l],
                                                        pix * spp + size_t(rows[row].slot + column.slot), pix,
                                                        tile, nearZ);
                     }
