@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <utility>
 
 #include "film/film.h"
 #include "io/scene_loader.h"
@@ -182,10 +183,12 @@ TEST(Film, Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths) {
     base.camera.height = 120;
     for (int spp : {4, 3, 1})
         for (bool lens : {false, true})
-            for (float width : {2.f, 4.f}) {
+            // Radii 1 and 2, and unequal ones (the AVX2 path tabulates the X and Y factors apart).
+            for (auto [widthX, widthY] : {std::pair{2.f, 2.f}, {4.f, 4.f}, {4.f, 2.f}}) {
                 Scene s = base;
                 s.image.pixelSamplesX = s.image.pixelSamplesY = spp;
-                s.image.filterWidthX = s.image.filterWidthY = width;
+                s.image.filterWidthX = widthX;
+                s.image.filterWidthY = widthY;
                 if (!lens) s.camera.fStop = INFINITY;
                 RenderSettings rs;
                 rs.engine = "reyes";
@@ -195,8 +198,9 @@ TEST(Film, Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths) {
                 filmUseAvx2(false);
                 const RenderResult b = render(s, rs);
                 filmUseAvx2(true);
-                EXPECT_TRUE(a.image.rgba == b.image.rgba) << "spp " << spp * spp << " lens " << lens
-                                                          << " width " << width << " (AVX2 " << avx2 << ")";
+                EXPECT_TRUE(a.image.rgba == b.image.rgba)
+                    << "spp " << spp * spp << " lens " << lens << " width " << widthX << " x " << widthY
+                    << " (AVX2 " << avx2 << ")";
                 double covered = 0;
                 for (size_t i = 3; i < a.image.rgba.size(); i += 4) covered += a.image.rgba[i];
                 EXPECT_GT(covered, 1000.0);

@@ -388,6 +388,15 @@ inline void addSample(LaneSums& l, int lane, float w, const SampleTile& tile, si
     l.v[4][lane] += w;
 }
 
+// A pixel's RGBA from its sums: the colour divided by the weight, the alpha clamped to [0, 1].
+inline void writePixel(float* o, const float sums[5]) {
+    const float k = sums[4] != 0.f ? 1.f / sums[4] : 0.f;
+    o[0] = sums[0] * k;
+    o[1] = sums[1] * k;
+    o[2] = sums[2] * k;
+    o[3] = std::clamp(sums[3] * k, 0.f, 1.f);
+}
+
 void pixelSumsScalar(const SampleTile& tile, const PixelFilter& filter, int rx, int ry, int px, int py,
                      float sums[5]) {
     const ReachWindow win = reachWindow(tile, rx, ry, px, py);
@@ -403,44 +412,112 @@ void pixelSumsScalar(const SampleTile& tile, const PixelFilter& filter, int rx, 
 }
 
 #if TESSERA_FILM_AVX2
-// pixelSumsScalar eight samples at a time: the weights by table gathers, the lanes' sums as the scalar
-// loop's (a row's last, partial group of eight by the scalar step on the same lanes).
-__attribute__((target("avx2"))) void pixelSumsAvx2(const SampleTile& tile, const PixelFilter& filter, int rx,
-                                                   int ry, int px, int py, float sums[5]) {
-    const ReachWindow win = reachWindow(tile, rx, ry, px, py);
-    const int cx = win.cx, cy = win.cy;
-    const __m256i biasX = _mm256_set1_epi32(filter.tableBiasX - cx),
-                  biasY = _mm256_set1_epi32(filter.tableBiasY - cy);
-    __m256 acc[5] = {_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(),
-                     _mm256_setzero_ps()};
-    LaneSums tail;
-    for (int row = 0; row < win.rows; ++row) {
-        const size_t begin = win.first + size_t(row) * win.stride, end = begin + win.length;
-        size_t i = begin;
-        for (; i + 8 <= end; i += 8) {
-            const __m256i ox =
-                _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(&tile.sx[i])), biasX);
-            const __m256i oy =
-                _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(&tile.sy[i])), biasY);
-            const __m256 w = _mm256_mul_ps(_mm256_i32gather_ps(filter.tableX.data(), ox, 4),
-                                           _mm256_i32gather_ps(filter.tableY.data(), oy, 4));
-            acc[0] = _mm256_add_ps(acc[0], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.r[i])));
-            acc[1] = _mm256_add_ps(acc[1], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.g[i])));
-            acc[2] = _mm256_add_ps(acc[2], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.b[i])));
-            acc[3] = _mm256_add_ps(acc[3], _mm256_mul_ps(w, _mm256_loadu_ps(&tile.a[i])));
-            acc[4] = _mm256_add_ps(acc[4], w);
+// reconstruct's colour for the pixels of `target` with reach (a pixel without: transparent black),
+// pixelSumsScalar's sums eight samples at a time with the same bits. A sample's weight is tabX(dx) *
+// tabY(dy), separable (filter.h), and each factor is shared: a sample's X factor toward pixel column px is
+// the same for all 2 ry + 1 rows of target pixels it reaches, its Y factor toward row py the same for all
+// 2 rx + 1 columns. So each target row first tabulates the factors it needs: the Y factors of the tile rows
+// in its reach toward it (rowY), and the X factors of each tile row toward every target column, kept in a
+// ring of 2 ry + 1 tile rows (a row's are tabulated once, when the first target row reaches it). The sums
+// then load both factors instead of gathering them from the tables per window sample: (2 rx + 1) + (2 ry
+// + 1) table gathers a sample instead of 2 (2 rx + 1)(2 ry + 1).
+// table[from[j] + offset] for j < n, into to[j] (8 at a time by gathers, the rest one by one).
+__attribute__((target("avx2"))) void tabulateAvx2(const std::vector<float>& table, const int32_t* from,
+                                                  int offset, size_t n, float* to) {
+    const __m256i bias = _mm256_set1_epi32(offset);
+    size_t j = 0;
+    for (; j + 8 <= n; j += 8) {
+        const __m256i o =
+            _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(from + j)), bias);
+        _mm256_storeu_ps(to + j, _mm256_i32gather_ps(table.data(), o, 4));
+    }
+    for (; j < n; ++j) to[j] = table[size_t(from[j] + offset)];
+}
+
+__attribute__((target("avx2"))) void reconstructColourAvx2(const SampleTile& tile, const PixelFilter& filter,
+                                                           Rect target, const uint8_t* reach, Image& out) {
+    const Rect& reg = tile.region;
+    const int rx = filter.radiusX(), ry = filter.radiusY();
+    const int tw = reg.width(), spp = tile.spp, targetWidth = target.width();
+    const int windowRows = 2 * ry + 1;
+    const size_t rowSamples = size_t(tw) * size_t(spp);
+    const size_t xStride = size_t(2 * rx + 1) * size_t(spp);  // a target pixel's window row, at most
+    const size_t xRingRow = size_t(targetWidth) * xStride;
+    thread_local std::vector<float> rowY, ringX;
+    thread_local std::vector<int> ringRow;
+    rowY.resize(size_t(windowRows) * rowSamples + 8);
+    ringX.resize(size_t(windowRows) * xRingRow + 8);
+    ringRow.assign(size_t(windowRows), INT32_MIN);
+    const int32_t* sx = tile.sx.data();
+    const int32_t* sy = tile.sy.data();
+    for (int py = target.y0; py < target.y1; ++py) {
+        const uint8_t* rowReach = reach + size_t(py - reg.y0) * tw + (target.x0 - reg.x0);
+        bool anyReach = false;
+        for (int x = 0; x < targetWidth; ++x) anyReach |= rowReach[x] != 0;
+        float* o = out.pixel(target.x0, py);
+        if (!anyReach) {
+            std::fill(o, o + 4 * size_t(targetWidth), 0.f);
+            continue;
         }
-        if (i < end) {  // the row's last samples on lanes 0 .. end - i - 1, as the scalar loop adds them
-            for (int c = 0; c < 5; ++c) _mm256_storeu_ps(tail.v[c], acc[c]);
-            for (int lane = 0; i < end; ++i, ++lane)
-                addSample(tail, lane, filter.tabulatedX(tile.sx[i] - cx) * filter.tabulatedY(tile.sy[i] - cy),
-                          tile, i);
-            for (int c = 0; c < 5; ++c) acc[c] = _mm256_loadu_ps(tail.v[c]);
+        const int qy0 = std::max(py - ry, reg.y0), qy1 = std::min(py + ry, reg.y1 - 1);
+        const int cy = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+        for (int qy = qy0; qy <= qy1; ++qy) {
+            const size_t rowStart = size_t(qy - reg.y0) * rowSamples;
+            tabulateAvx2(filter.tableY, sy + rowStart, filter.tableBiasY - cy, rowSamples,
+                         rowY.data() + size_t(qy - qy0) * rowSamples);
+            float* ring = ringX.data() + size_t((qy - reg.y0) % windowRows) * xRingRow;
+            int& ringHolds = ringRow[size_t((qy - reg.y0) % windowRows)];
+            if (ringHolds == qy) continue;
+            ringHolds = qy;
+            for (int px = target.x0; px < target.x1; ++px) {
+                const int qx0 = std::max(px - rx, reg.x0), qx1 = std::min(px + rx, reg.x1 - 1);
+                const int cx = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
+                tabulateAvx2(filter.tableX, sx + rowStart + size_t(qx0 - reg.x0) * spp,
+                             filter.tableBiasX - cx, size_t(qx1 - qx0 + 1) * spp,
+                             ring + size_t(px - target.x0) * xStride);
+            }
+        }
+        for (int px = target.x0; px < target.x1; ++px, o += 4) {
+            if (!rowReach[px - target.x0]) {
+                o[0] = o[1] = o[2] = o[3] = 0.f;
+                continue;
+            }
+            const int qx0 = std::max(px - rx, reg.x0), qx1 = std::min(px + rx, reg.x1 - 1);
+            const size_t length = size_t(qx1 - qx0 + 1) * size_t(spp),
+                         columnOffset = size_t(qx0 - reg.x0) * spp;
+            __m256 acc[5] = {_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(),
+                             _mm256_setzero_ps(), _mm256_setzero_ps()};
+            LaneSums tail;
+            for (int qy = qy0; qy <= qy1; ++qy) {
+                const float* wy = rowY.data() + size_t(qy - qy0) * rowSamples + columnOffset;
+                const float* wx = ringX.data() + size_t((qy - reg.y0) % windowRows) * xRingRow +
+                                  size_t(px - target.x0) * xStride;
+                const size_t begin = size_t(qy - reg.y0) * rowSamples + columnOffset;
+                const float *r = tile.r.data() + begin, *g = tile.g.data() + begin,
+                            *b = tile.b.data() + begin, *a = tile.a.data() + begin;
+                size_t j = 0;
+                for (; j + 8 <= length; j += 8) {
+                    const __m256 w = _mm256_mul_ps(_mm256_loadu_ps(wx + j), _mm256_loadu_ps(wy + j));
+                    acc[0] = _mm256_add_ps(acc[0], _mm256_mul_ps(w, _mm256_loadu_ps(r + j)));
+                    acc[1] = _mm256_add_ps(acc[1], _mm256_mul_ps(w, _mm256_loadu_ps(g + j)));
+                    acc[2] = _mm256_add_ps(acc[2], _mm256_mul_ps(w, _mm256_loadu_ps(b + j)));
+                    acc[3] = _mm256_add_ps(acc[3], _mm256_mul_ps(w, _mm256_loadu_ps(a + j)));
+                    acc[4] = _mm256_add_ps(acc[4], w);
+                }
+                if (j < length) {  // the row's last samples on lanes 0 .. length - j - 1, as the scalar loop
+                    for (int c = 0; c < 5; ++c) _mm256_storeu_ps(tail.v[c], acc[c]);
+                    for (int lane = 0; j < length; ++j, ++lane)
+                        addSample(tail, lane, wx[j] * wy[j], tile, begin + j);
+                    for (int c = 0; c < 5; ++c) acc[c] = _mm256_loadu_ps(tail.v[c]);
+                }
+            }
+            LaneSums l;
+            for (int c = 0; c < 5; ++c) _mm256_storeu_ps(l.v[c], acc[c]);
+            float sums[5];
+            reduceLanes(l, sums);
+            writePixel(o, sums);
         }
     }
-    LaneSums l;
-    for (int c = 0; c < 5; ++c) _mm256_storeu_ps(l.v[c], acc[c]);
-    reduceLanes(l, sums);
 }
 #endif
 
@@ -484,7 +561,12 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
             for (int x = 0; x < tw; ++x) dst[x] |= src[x];
         }
     }
-    const bool avx2 = filmAvx2Active();
+#if TESSERA_FILM_AVX2
+    if (filmAvx2Active()) {
+        reconstructColourAvx2(tile, filter, target, reach.data(), out);
+        return;
+    }
+#endif
     for (int py = target.y0; py < target.y1; ++py) {
         for (int px = target.x0; px < target.x1; ++px) {
             float* o = out.pixel(px, py);
@@ -493,17 +575,8 @@ void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target,
                 continue;
             }
             float sums[5];
-#if TESSERA_FILM_AVX2
-            if (avx2)
-                pixelSumsAvx2(tile, filter, rx, ry, px, py, sums);
-            else
-#endif
-                pixelSumsScalar(tile, filter, rx, ry, px, py, sums);
-            const float k = sums[4] != 0.f ? 1.f / sums[4] : 0.f;
-            o[0] = sums[0] * k;
-            o[1] = sums[1] * k;
-            o[2] = sums[2] * k;
-            o[3] = std::clamp(sums[3] * k, 0.f, 1.f);
+            pixelSumsScalar(tile, filter, rx, ry, px, py, sums);
+            writePixel(o, sums);
         }
     }
 }
