@@ -2,7 +2,9 @@
 // normals and shadow counts are filtered over covered samples.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <utility>
 
 #include "film/film.h"
@@ -134,6 +136,61 @@ TEST(Film, ReconstructionFiltersShadowCountsAndTakesIdsFromTheNearestSample) {
     plain.reset(Rect{0, 0, 3, 3}, 2, 2, 7, 1.f, SamplerKind::Sobol);
     EXPECT_TRUE(plain.objectId.empty());
     EXPECT_TRUE(plain.normalX.empty());
+}
+
+TEST(Film, DeferredFillReachesEitherOrderAndIsNeverReconstructedUnfilled) {
+    // A Reyes tile (deferPixelFill) is reset without filling its depth and colour; whichever order is
+    // asked for first gets reset's fill, also over a previous tile's values, as an undeferred tile has it.
+    const Rect region{3, 5, 9, 10};
+    const float farZ = 1e30f;
+    SampleTile filled;
+    filled.reset(region, 4, 4, 11, farZ, SamplerKind::Sobol);
+    auto dirty = [](SampleTile& t) {
+        for (std::vector<float>* v : {&t.z, &t.r, &t.g, &t.b, &t.a}) std::fill(v->begin(), v->end(), 7.f);
+        t.enterStrataOrder();
+        for (std::vector<float>* v : {&t.strataZ, &t.strataR, &t.strataG, &t.strataB, &t.strataA})
+            std::fill(v->begin(), v->end(), 7.f);
+        t.leaveStrataOrder();
+    };
+    auto expectFill = [&](const SampleTile& t, const char* what) {
+        EXPECT_FALSE(t.pixelFillPending) << what;
+        EXPECT_TRUE(t.z == filled.z) << what;
+        for (const std::vector<float>* v : {&t.r, &t.g, &t.b, &t.a}) EXPECT_TRUE(*v == filled.r) << what;
+        EXPECT_TRUE(t.sx == filled.sx && t.sy == filled.sy) << what;
+    };
+    ASSERT_EQ(filled.z.front(), farZ);
+    ASSERT_EQ(filled.r.back(), 0.f);
+
+    SampleTile pixelFirst;
+    pixelFirst.deferPixelFill = true;
+    pixelFirst.reset(region, 4, 4, 11, farZ, SamplerKind::Sobol);
+    dirty(pixelFirst);
+    pixelFirst.reset(region, 4, 4, 11, farZ, SamplerKind::Sobol);
+    EXPECT_TRUE(pixelFirst.pixelFillPending);
+    pixelFirst.leaveStrataOrder();
+    expectFill(pixelFirst, "pixel order first");
+
+    SampleTile strataFirst;
+    strataFirst.deferPixelFill = true;
+    strataFirst.reset(region, 4, 4, 11, farZ, SamplerKind::Sobol);
+    dirty(strataFirst);
+    strataFirst.reset(region, 4, 4, 11, farZ, SamplerKind::Sobol);
+    strataFirst.enterStrataOrder();
+    const size_t n = strataFirst.sampleCount();
+    for (size_t i = 0; i < n; ++i) {
+        ASSERT_EQ(strataFirst.strataZ[i], farZ) << i;
+        ASSERT_EQ(strataFirst.strataA[i], 0.f) << i;
+        ASSERT_EQ(strataFirst.strataCovered[i], 0) << i;
+    }
+    strataFirst.leaveStrataOrder();
+    expectFill(strataFirst, "stratum order first");
+    for (uint8_t hit : strataFirst.pixelHit) EXPECT_EQ(hit, 0);
+
+    SampleTile pending;
+    pending.deferPixelFill = true;
+    pending.reset(region, 4, 4, 11, farZ, SamplerKind::Sobol);
+    Image img(region);
+    EXPECT_THROW(reconstruct(pending, makeFilter(ImageOptions{}), region, img), std::logic_error);
 }
 
 TEST(Film, ARegionRendersTheSamePixelsAsTheWholeImage) {

@@ -23,18 +23,24 @@ void SampleTile::reset(Rect reg, int nx_, int ny_, uint32_t seed, float farZ, Sa
     nx = nx_;
     ny = ny_;
     spp = nx * ny;
-    strataX.clear();
+    strataPositionsBuilt = false;
     strataWrites = false;
     size_t pixels = size_t(reg.width()) * reg.height();
     size_t n = pixels * spp;
     sx.resize(n);
     sy.resize(n);
     sampleIndex.resize(n);
-    z.assign(n, farZ);
-    r.assign(n, 0.f);
-    g.assign(n, 0.f);
-    b.assign(n, 0.f);
-    a.assign(n, 0.f);
+    farDepth = farZ;
+    pixelFillPending = deferPixelFill;
+    if (deferPixelFill) {
+        for (std::vector<float>* v : {&z, &r, &g, &b, &a}) v->resize(n);
+    } else {
+        z.assign(n, farZ);
+        r.assign(n, 0.f);
+        g.assign(n, 0.f);
+        b.assign(n, 0.f);
+        a.assign(n, 0.f);
+    }
     pixelHit.assign(pixels, 0);
     channels = channels_;
     auto sized = [&](auto& v, uint32_t bit, auto value) {
@@ -129,7 +135,7 @@ inline void copySlots(T* __restrict to, const T* __restrict from, int rowLength)
 void SampleTile::buildStrataOrder() {
     const int tw = region.width(), th = region.height(), w = tw * nx, h = th * ny;
     const size_t n = sampleCount();
-    strataX.resize(n + 8);
+    strataX.resize(n + 8);  // no fill when the size is kept: every slot is written below
     strataY.resize(n + 8);
     strataColumn.resize(size_t(w));
     strataRow.resize(size_t(h));
@@ -142,6 +148,7 @@ void SampleTile::buildStrataOrder() {
                        copySlots<kNx>(strataY.data() + k, sy.data() + s0, len);
                    });
     for (size_t i = n; i < n + 8; ++i) strataX[i] = strataY[i] = 0;
+    strataPositionsBuilt = true;
 }
 
 void SampleTile::enterStrataOrder() {
@@ -150,6 +157,14 @@ void SampleTile::enterStrataOrder() {
     const size_t n = sampleCount();
     for (std::vector<float>* v : {&strataZ, &strataR, &strataG, &strataB, &strataA}) v->resize(n + 8);
     strataCovered.assign(n + 8, 0);
+    if (pixelFillPending) {  // reset's fill, straight into stratum order; leaveStrataOrder writes every slot
+        std::fill(strataZ.begin(), strataZ.end(), farDepth);
+        for (std::vector<float>* v : {&strataR, &strataG, &strataB, &strataA})
+            std::fill(v->begin(), v->end(), 0.f);
+        pixelFillPending = false;
+        strataWrites = true;
+        return;
+    }
     forEachSlotRow(region.width(), region.height(), nx, ny,
                    [&]<int kNx>(size_t s0, size_t k, std::integral_constant<int, kNx>, int len) {
                        copySlots<kNx>(strataZ.data() + k, z.data() + s0, len);
@@ -162,6 +177,11 @@ void SampleTile::enterStrataOrder() {
 }
 
 void SampleTile::leaveStrataOrder() {
+    if (pixelFillPending) {  // nothing rasterized in stratum order: reset's deferred fill
+        std::fill(z.begin(), z.end(), farDepth);
+        for (std::vector<float>* v : {&r, &g, &b, &a}) std::fill(v->begin(), v->end(), 0.f);
+        pixelFillPending = false;
+    }
     if (!strataWrites) return;
     const size_t spp_ = size_t(spp);
     forEachSlotRow(region.width(), region.height(), nx, ny,
@@ -533,8 +553,8 @@ bool filmUseAvx2(bool allow) {
 }
 
 void reconstruct(const SampleTile& tile, const PixelFilter& filter, Rect target, Image& out) {
-    if (tile.strataWrites)
-        throw std::logic_error("reconstruct: the tile's samples are still in stratum order");
+    if (tile.strataWrites || tile.pixelFillPending)
+        throw std::logic_error("reconstruct: the tile's samples are still in stratum order or unfilled");
     if (!out.planes.empty()) reconstructPlanes(tile, filter, target, out);
     const int rx = filter.radiusX(), ry = filter.radiusY();
     const int tw = tile.region.width(), th = tile.region.height();

@@ -123,8 +123,8 @@ struct SampleTile {
     std::vector<float> z, r, g, b, a;
     std::vector<uint8_t> pixelHit;  // per pixel: any sample covered (lets reconstruction skip background)
     // The positions again in stratum order (row of strata, then column, over the whole tile; built by
-    // buildStrataOrder once the positions are final, emptied by reset: a copy, so positions written after it
-    // is built would not reach it), padded by 8, and where the lattice's columns and rows lie: the
+    // buildStrataOrder once the positions are final, invalidated by reset: a copy, so positions written after
+    // it is built would not reach it), padded by 8, and where the lattice's columns and rows lie: the
     // stratum (column, row) is slot row.slot + column.slot of pixel row.pixel + column.pixel. A rasterizer
     // reads a micropolygon's row of strata as contiguous memory.
     struct StrataLine {
@@ -132,6 +132,7 @@ struct SampleTile {
     };
     std::vector<int32_t> strataX, strataY;
     std::vector<StrataLine> strataColumn, strataRow;
+    bool strataPositionsBuilt = false;  // (the arrays keep their memory from tile to tile)
     // While `strataWrites` (enterStrataOrder .. leaveStrataOrder): the depth, colour, alpha and coverage
     // live in stratum order, padded by 8, where a rasterizer tests and writes a micropolygon's row of 8
     // strata as vectors (the pixel-ordered arrays would scatter each hit). strataCovered: -1 where a
@@ -140,6 +141,14 @@ struct SampleTile {
     std::vector<float> strataZ, strataR, strataG, strataB, strataA;
     std::vector<int32_t> strataCovered;
     bool strataWrites = false;
+    // Set by an engine all of whose pixel-order reads and writes follow a leaveStrataOrder() call (Reyes):
+    // reset then leaves z, r, g, b and a unfilled (`pixelFillPending`), and the first enterStrataOrder fills
+    // the stratum-ordered arrays instead of copying the fill there, or leaveStrataOrder fills them. A tile
+    // rasterized in stratum order from its first grid (the usual case) so writes its depth and colour twice
+    // instead of four times. reconstruct refuses a tile whose fill is still pending.
+    bool deferPixelFill = false;
+    bool pixelFillPending = false;
+    float farDepth = 0.f;  // the depth reset filled (or deferred)
     // Per-sample attributes, present only for the FilmChannel bits in `channels` (empty otherwise).
     uint32_t channels = 0;
     std::vector<uint32_t> objectId;
@@ -160,10 +169,10 @@ struct SampleTile {
     size_t sampleCount() const { return sx.size(); }
     // Fills strataX, strataY, strataColumn and strataRow for the current samples.
     void buildStrataOrder();
-    bool hasStrataOrder() const { return !strataX.empty(); }
+    bool hasStrataOrder() const { return strataPositionsBuilt; }
     // Moves the depth, colour and alpha into stratum order (building the positions' order if needed), with
     // no stratum covered yet; and back, marking pixelHit where a stratum was covered. No-ops when already
-    // in the asked order.
+    // in the asked order, except that leaveStrataOrder does a pending fill (deferPixelFill).
     void enterStrataOrder();
     void leaveStrataOrder();
     bool has(uint32_t channel) const { return (channels & channel) != 0; }

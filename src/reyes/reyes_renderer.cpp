@@ -214,6 +214,7 @@ RenderResult renderReyes(const Scene& scene, const RenderSettings& settings,
         pieces.forEach(b, dice, [&](const Piece&, const Grid& grid) {
             if (!started) {
                 const auto tt = EngineClock::now();
+                tc.tile.deferPixelFill = true;  // every pixel-order access below follows leaveStrataOrder
                 frame.resetTile(tc.tile, layout.samples(b, rx, ry, cam.width, cam.height), settings);
                 if (useStrata) {
                     tc.strata.configure(frame.blur, motion.knots);

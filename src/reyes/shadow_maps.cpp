@@ -116,6 +116,7 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
         };
         pieces.forEach(b, dice, [&](const Piece&, const Grid& grid) {
             if (!started) {
+                w.tile.deferPixelFill = true;  // the depth is read after leaveStrataOrder
                 w.tile.reset(t, 1, 1, 0, kInf, SamplerKind::Jittered);
                 // One sample at each texel's centre: the lookups read the depth there.
                 size_t i = 0;
