@@ -41,6 +41,25 @@ Vec2 pieceVertexUV(const Piece& piece, int i, int j, int nu, int nv, const Piece
     return uv;
 }
 
+// The canonical control points of a piece's patch-boundary edges, derived once per grid (latticePosition
+// derives them again for each vertex it places: half of a small grid's vertices lie on its edges). On an
+// edge inside the patch the lattice point is the patch at latticeUV(edge, k), which is the vertex's own
+// (u, v), so `atUV` (evalPatchAt / evalPatchDerivAt there: evalPatch's bits, bezier.h) is that point.
+struct EdgeCurves {
+    Vec3 cp[4][4];
+    EdgeCurves(const BezierPatch& patch, const PieceEdge* edges, bool bezier) {
+        for (int ed = 0; ed < 4 && bezier; ++ed)
+            if (edges[ed].boundary >= 0) {
+                Vec2 a, b;
+                canonicalBoundary(patch, edges[ed].boundary, cp[ed], a, b);
+            }
+    }
+    // = latticePosition(patch, owner, k) for the owner edges of a vertex at (u, v) = latticeUV(owner, k).
+    Vec3 position(const PieceEdge* edges, const PieceEdge& owner, int k, const Vec3& atUV) const {
+        return owner.boundary >= 0 ? evalCurve(cp[&owner - edges], owner.param(k)) : atUV;
+    }
+};
+
 // Dice and shade a piece of a bicubic Bezier patch or, with shade.quadric, of a quadric.
 void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
     const BezierPatch& patch = view.patches[piece.patch];
@@ -100,6 +119,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     thread_local std::vector<uint32_t> columnU;  // the u bits columnRows[i] holds
     columnRows.resize(size_t(nu) + 1);
     columnU.assign(size_t(nu) + 1, 0xffffffffu);  // a NaN: no u has these bits
+    const EdgeCurves edgeCurves(patch, e, /*bezier=*/!shade.quadric);
     auto rowsAt = [&](int i, float u) -> const PatchRowsAtU& {
         uint32_t bits;
         std::memcpy(&bits, &u, sizeof bits);
@@ -114,9 +134,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);
             const int v = j * (nu + 1) + i;
             if (shade.depthOnly) {  // a shadow map's pass: positions only
-                Vec3 P = quadric ? quadricPoint(*quadric, uv)
-                                 : (owner ? latticePosition(patch, *owner, k)
-                                          : evalPatchAt(rowsAt(i, uv.x), uv.y));
+                Vec3 P = quadric                         ? quadricPoint(*quadric, uv)
+                         : owner && owner->boundary >= 0 ? edgeCurves.position(e, *owner, k, Vec3{})
+                                                         : evalPatchAt(rowsAt(i, uv.x), uv.y);
                 if (displaced)
                     P = displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P,
                                        shade.flipNormal,
@@ -136,7 +156,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 evalPlacedQuadric(*quadric, uv.x, uv.y, &N);
             } else {
                 sp = evalPatchDerivAt(rowsAt(i, uv.x), uv.y);
-                P = owner ? latticePosition(patch, *owner, k) : sp.p;
+                P = owner ? edgeCurves.position(e, *owner, k, sp.p) : sp.p;
                 N = cross(sp.dpdu, sp.dpdv);
                 float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);
                 if (!(dot(N, N) > 1e-12f * scale * scale)) N = patchNormal(patch, uv.x, uv.y);
