@@ -138,6 +138,41 @@ TEST(Film, ReconstructionFiltersShadowCountsAndTakesIdsFromTheNearestSample) {
     EXPECT_TRUE(plain.normalX.empty());
 }
 
+TEST(Film, Avx2TilePositionsEqualThePerPixelLoop) {
+    // Lattices of 1, 2 and 4 strata a pixel take the AVX2 path (8 samples at a time); its positions and
+    // sample indices must be filmSamplesFixed's, pixel by pixel, including rows whose last pixels do not
+    // fill a group of 8 samples and pixel coordinates past 16 bits (the seed keeps their low 16 bits).
+    const std::pair<int, int> lattices[] = {{1, 1}, {2, 1}, {1, 2}, {2, 2}, {4, 1}, {1, 4}};
+    const Rect regions[] = {{0, 0, 37, 5}, {1021, 3, 1030, 9}, {65530, 65533, 65541, 65537}};
+    size_t compared = 0;
+    for (const auto& [nx, ny] : lattices)
+        for (const Rect& region : regions)
+            for (uint32_t seed : {0u, 7u, 12345u}) {
+                SampleTile tile;
+                const bool avx2 = filmUseAvx2(true);
+                tile.reset(region, nx, ny, seed, 1.f, SamplerKind::Sobol);
+                filmUseAvx2(true);
+                const FilmPattern pattern = filmPattern(nx, ny, seed);
+                const size_t spp = size_t(nx * ny);
+                std::vector<int32_t> x(spp), y(spp);
+                std::vector<uint32_t> index(spp);
+                size_t i = 0;
+                for (int py = region.y0; py < region.y1; ++py)
+                    for (int px = region.x0; px < region.x1; ++px, i += spp) {
+                        filmSamplesFixed(pattern, px, py, x.data(), y.data(), index.data());
+                        for (size_t s = 0; s < spp; ++s) {
+                            ASSERT_EQ(tile.sx[i + s], x[s]) << nx << "x" << ny << " pixel " << px << "," << py
+                                                            << " slot " << s << " (AVX2 " << avx2 << ")";
+                            ASSERT_EQ(tile.sy[i + s], y[s])
+                                << nx << "x" << ny << " pixel " << px << "," << py;
+                            ASSERT_EQ(tile.sampleIndex[i + s], index[s]) << nx << "x" << ny;
+                            ++compared;
+                        }
+                    }
+            }
+    EXPECT_GT(compared, 10000u);
+}
+
 TEST(Film, DeferredFillReachesEitherOrderAndIsNeverReconstructedUnfilled) {
     // A Reyes tile (deferPixelFill) is reset without filling its depth and colour; whichever order is
     // asked for first gets reset's fill, also over a previous tile's values, as an undeferred tile has it.
