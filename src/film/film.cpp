@@ -609,7 +609,6 @@ __attribute__((target("avx2"))) void reconstructColourAvx2(const SampleTile& til
                          columnOffset = size_t(qx0 - reg.x0) * spp;
             __m256 acc[5] = {_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps(),
                              _mm256_setzero_ps(), _mm256_setzero_ps()};
-            LaneSums tail;
             for (int qy = qy0; qy <= qy1; ++qy) {
                 const float* wy = rowY.data() + size_t(qy - qy0) * rowSamples + columnOffset;
                 const float* wx = ringX.data() + size_t((qy - reg.y0) % windowRows) * xRingRow +
@@ -626,11 +625,19 @@ __attribute__((target("avx2"))) void reconstructColourAvx2(const SampleTile& til
                     acc[3] = _mm256_add_ps(acc[3], _mm256_mul_ps(w, _mm256_loadu_ps(a + j)));
                     acc[4] = _mm256_add_ps(acc[4], w);
                 }
-                if (j < length) {  // the row's last samples on lanes 0 .. length - j - 1, as the scalar loop
-                    for (int c = 0; c < 5; ++c) _mm256_storeu_ps(tail.v[c], acc[c]);
-                    for (int lane = 0; j < length; ++j, ++lane)
-                        addSample(tail, lane, wx[j] * wy[j], tile, begin + j);
-                    for (int c = 0; c < 5; ++c) acc[c] = _mm256_loadu_ps(tail.v[c]);
+                if (j < length) {
+                    // The row's last samples on lanes 0 .. length - j - 1, as the scalar loop adds them; the
+                    // other lanes load zeros and add +0, which leaves every sum as it is (a sum that starts
+                    // at +0 is never -0 under round-to-nearest).
+                    const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(length - j)),
+                                                            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+                    const __m256 w =
+                        _mm256_mul_ps(_mm256_maskload_ps(wx + j, live), _mm256_maskload_ps(wy + j, live));
+                    acc[0] = _mm256_add_ps(acc[0], _mm256_mul_ps(w, _mm256_maskload_ps(r + j, live)));
+                    acc[1] = _mm256_add_ps(acc[1], _mm256_mul_ps(w, _mm256_maskload_ps(g + j, live)));
+                    acc[2] = _mm256_add_ps(acc[2], _mm256_mul_ps(w, _mm256_maskload_ps(b + j, live)));
+                    acc[3] = _mm256_add_ps(acc[3], _mm256_mul_ps(w, _mm256_maskload_ps(a + j, live)));
+                    acc[4] = _mm256_add_ps(acc[4], w);
                 }
             }
             LaneSums l;
