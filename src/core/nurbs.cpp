@@ -193,6 +193,7 @@ std::vector<BezierPatch> nurbsToBezier(const NurbsSurface& s) {
     std::vector<std::vector<double>> uSegs = bezierSegments(cu, ulo, uhi);
 
     std::vector<BezierPatch> out;
+    out.reserve(uSegs.size() * (breakpoints(s.vknot, vlo, vhi).size() - 1));  // one patch per (u, v) span
     for (const std::vector<double>& useg : uSegs) {
         // v direction: point j holds row j of the 4 Bezier columns of this u span (4 x 3 numbers).
         Curve cv;

@@ -26,6 +26,7 @@
 #include <optional>
 #include <stdexcept>
 
+#include "core/buffer_allocator.h"
 #include "io/diagnostics.h"
 
 namespace tessera {
@@ -106,13 +107,13 @@ namespace {
 // the last with the final block; their concatenation is one valid deflate stream, inside the zlib header
 // and the Adler-32 of the whole data (adler32_combine). RFC 1950, 1951; PNG spec. 10-11. Each row gets the
 // Sub filter (one cheap filter instead of libpng's adaptive search).
-std::vector<uint8_t> compressedPngData(const std::vector<uint8_t>& rgba, int width, int height, int level) {
+std::vector<uint8_t> compressedPngData(const uint8_t* rgba, int width, int height, int level) {
     const size_t rowBytes = size_t(width) * 4, lineBytes = rowBytes + 1;
     constexpr size_t kBlockBytes = size_t(1) << 17;  // 128 KB of filtered data a block
     const size_t rowsPerBlock = std::max<size_t>(1, kBlockBytes / lineBytes);
     const size_t blocks = (size_t(height) + rowsPerBlock - 1) / rowsPerBlock;
     struct Block {
-        std::vector<uint8_t> out;
+        std::vector<uint8_t, DefaultInitAllocator<uint8_t, false>> out;  // no zero fill before deflate writes
         uLong adler = 0;
         size_t rawBytes = 0;
         bool ok = false;
@@ -120,7 +121,7 @@ std::vector<uint8_t> compressedPngData(const std::vector<uint8_t>& rgba, int wid
     std::vector<Block> block(blocks);
     tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
         const size_t y0 = b * rowsPerBlock, y1 = std::min(size_t(height), y0 + rowsPerBlock);
-        std::vector<uint8_t> lines((y1 - y0) * lineBytes);
+        std::vector<uint8_t, DefaultInitAllocator<uint8_t, false>> lines((y1 - y0) * lineBytes);
         for (size_t y = y0; y < y1; ++y) {  // filter type 1 (Sub): each byte minus the one 4 bytes before
             uint8_t* line = &lines[(y - y0) * lineBytes];
             const uint8_t* row = &rgba[y * rowBytes];
@@ -169,7 +170,8 @@ void writePng(const std::string& path, const Image& image, const OutputEncoding&
     // In parallel: the transfer curve's pow per channel was a tenth of the whole 1024 x 1024 teapot frame
     // (issue 18).
     const size_t pixels = size_t(image.width) * image.height;
-    std::vector<uint8_t> bytes(pixels * 4);
+    // Every byte is written below (in parallel): no serial zero fill first.
+    std::vector<uint8_t, DefaultInitAllocator<uint8_t>> bytes(pixels * 4);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, 16384), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i < r.end(); ++i) {
             const float* p = &image.rgba[i * 4];
@@ -200,7 +202,7 @@ void writePng(const std::string& path, const Image& image, const OutputEncoding&
         // chunk writer, then IEND. zlib level 1: on the Sub-filtered Killeroo and 24 Big Guys frames it
         // deflates in 66% and 65% of level 3's time for files 7% and 5% larger (level 6, zlib's default:
         // 2.6x level 3's time, files 10% smaller; docs/benchmarks/fixed_costs.md, session 25).
-        const std::vector<uint8_t> idat = compressedPngData(bytes, image.width, image.height, 1);
+        const std::vector<uint8_t> idat = compressedPngData(bytes.data(), image.width, image.height, 1);
         constexpr size_t kChunkBytes = size_t(1) << 20;
         for (size_t at = 0; at < idat.size(); at += kChunkBytes)
             png_write_chunk(png, reinterpret_cast<png_const_bytep>("IDAT"), idat.data() + at,
