@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/buffer_allocator.h"
 #include "core/vec.h"
 #include "rt/intersect.h"
 #include "rt/subpatch_tree.h"
@@ -47,22 +48,27 @@ inline constexpr uint32_t kNone = UINT32_MAX;
 inline constexpr size_t kChunk = 128;  // rays per parallel work item
 inline constexpr int kHistBins = 18;   // Newton iteration counts 0..17
 
-// Ray list, structure of arrays.
+// Ray list, structure of arrays. The arrays are per-thread scratch refilled for every tile: `resize` leaves
+// new elements unset (DefaultInitAllocator) for the caller to write, as the camera rays' set-up writes
+// every field of every ray (a zero fill first was a quarter of the rt frame's memset).
+template <class T>
+using RayArray = std::vector<T, DefaultInitAllocator<T, false>>;
 struct RayList {
-    std::vector<Vec3> o, d;
-    std::vector<float> tmin, tmax;
-    std::vector<uint32_t> owner;   // primary/secondary: sample index in the tile; shadow: unused
-    std::vector<Color> weight;     // throughput to the sample
-    std::vector<uint32_t> ignore;  // originating patch (self-intersection guard)
-    std::vector<Vec2> ignoreUV;    // (u,v) of the ray's origin on `ignore` (x < 0: unknown)
+    RayArray<Vec3> o, d;
+    RayArray<float> tmin, tmax;
+    RayArray<uint32_t> owner;   // primary/secondary: sample index in the tile; shadow: unused
+    RayArray<Color> weight;     // throughput to the sample
+    RayArray<uint32_t> ignore;  // originating patch (self-intersection guard)
+    RayArray<Vec2> ignoreUV;    // (u,v) of the ray's origin on `ignore` (x < 0: unknown)
     // Secondary rays: the unit normal n the origin was offset along (o = P + offset n, with d.n > 0), so
     // the ray stays on the far side of the plane through o orthogonal to n; zero when unknown.
-    std::vector<Vec3> originN;
-    std::vector<uint8_t> kind, depth;
+    RayArray<Vec3> originN;
+    RayArray<uint8_t> kind, depth;
     // Normalised shutter time in [0,1] (paper 002, sec. 5.3.3): camera rays get their sample's, shadow,
     // reflection and refraction rays their parent's. Read only for moving patches.
-    std::vector<float> time;
+    RayArray<float> time;
     size_t size() const { return o.size(); }
+    // New elements are left unset: the caller writes every field of them.
     void resize(size_t n) {
         o.resize(n), d.resize(n), tmin.resize(n), tmax.resize(n), owner.resize(n), weight.resize(n);
         ignore.resize(n), ignoreUV.resize(n), originN.resize(n), kind.resize(n), depth.resize(n);
