@@ -151,7 +151,6 @@ TEST(Film, Avx2TilePositionsEqualThePerPixelLoop) {
                 SampleTile tile;
                 const bool avx2 = filmUseAvx2(true);
                 tile.reset(region, nx, ny, seed, 1.f, SamplerKind::Sobol);
-                filmUseAvx2(true);
                 const FilmPattern pattern = filmPattern(nx, ny, seed);
                 const size_t spp = size_t(nx * ny);
                 std::vector<int32_t> x(spp), y(spp);

@@ -264,17 +264,16 @@ void SampleTile::enterStrataOrder() {
         for (std::vector<float>* v : {&strataR, &strataG, &strataB, &strataA})
             std::fill(v->begin(), v->end(), 0.f);
         pixelFillPending = false;
-        strataWrites = true;
-        return;
+    } else {
+        forEachSlotRow(region.width(), region.height(), nx, ny,
+                       [&]<int kNx>(size_t s0, size_t k, std::integral_constant<int, kNx>, int len) {
+                           copySlots<kNx>(strataZ.data() + k, z.data() + s0, len);
+                           copySlots<kNx>(strataR.data() + k, r.data() + s0, len);
+                           copySlots<kNx>(strataG.data() + k, g.data() + s0, len);
+                           copySlots<kNx>(strataB.data() + k, b.data() + s0, len);
+                           copySlots<kNx>(strataA.data() + k, a.data() + s0, len);
+                       });
     }
-    forEachSlotRow(region.width(), region.height(), nx, ny,
-                   [&]<int kNx>(size_t s0, size_t k, std::integral_constant<int, kNx>, int len) {
-                       copySlots<kNx>(strataZ.data() + k, z.data() + s0, len);
-                       copySlots<kNx>(strataR.data() + k, r.data() + s0, len);
-                       copySlots<kNx>(strataG.data() + k, g.data() + s0, len);
-                       copySlots<kNx>(strataB.data() + k, b.data() + s0, len);
-                       copySlots<kNx>(strataA.data() + k, a.data() + s0, len);
-                   });
     strataWrites = true;
 }
 
@@ -534,15 +533,6 @@ void pixelSumsScalar(const SampleTile& tile, const PixelFilter& filter, int rx, 
 }
 
 #if TESSERA_FILM_AVX2
-// reconstruct's colour for the pixels of `target` with reach (a pixel without: transparent black),
-// pixelSumsScalar's sums eight samples at a time with the same bits. A sample's weight is tabX(dx) *
-// tabY(dy), separable (filter.h), and each factor is shared: a sample's X factor toward pixel column px is
-// the same for all 2 ry + 1 rows of target pixels it reaches, its Y factor toward row py the same for all
-// 2 rx + 1 columns. So each target row first tabulates the factors it needs: the Y factors of the tile rows
-// in its reach toward it (rowY), and the X factors of each tile row toward every target column, kept in a
-// ring of 2 ry + 1 tile rows (a row's are tabulated once, when the first target row reaches it). The sums
-// then load both factors instead of gathering them from the tables per window sample: (2 rx + 1) + (2 ry
-// + 1) table gathers a sample instead of 2 (2 rx + 1)(2 ry + 1).
 // table[from[j] + offset] for j < n, into to[j] (8 at a time by gathers, the rest one by one).
 __attribute__((target("avx2"))) void tabulateAvx2(const std::vector<float>& table, const int32_t* from,
                                                   int offset, size_t n, float* to) {
@@ -556,6 +546,15 @@ __attribute__((target("avx2"))) void tabulateAvx2(const std::vector<float>& tabl
     for (; j < n; ++j) to[j] = table[size_t(from[j] + offset)];
 }
 
+// reconstruct's colour for the pixels of `target` with reach (a pixel without: transparent black),
+// pixelSumsScalar's sums eight samples at a time with the same bits. A sample's weight is tabX(dx) *
+// tabY(dy), separable (filter.h), and each factor is shared: a sample's X factor toward pixel column px is
+// the same for all 2 ry + 1 rows of target pixels it reaches, its Y factor toward row py the same for all
+// 2 rx + 1 columns. So each target row first tabulates the factors it needs: the Y factors of the tile rows
+// in its reach toward it (rowY), and the X factors of each tile row toward every target column, kept in a
+// ring of 2 ry + 1 tile rows (a row's are tabulated once, when the first target row reaches it). The sums
+// then load both factors instead of gathering them from the tables per window sample: (2 rx + 1) + (2 ry
+// + 1) table gathers a sample instead of 2 (2 rx + 1)(2 ry + 1).
 __attribute__((target("avx2"))) void reconstructColourAvx2(const SampleTile& tile, const PixelFilter& filter,
                                                            Rect target, const uint8_t* reach, Image& out) {
     const Rect& reg = tile.region;
