@@ -42,7 +42,7 @@ std::string patchText(int degreeU = 3, int degreeV = 3) {
 }  // namespace
 
 TEST(Bpt, TeapotPatchesAndBounds) {
-    Scene s = loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", {});
+    Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", {});
     ASSERT_EQ(s.patches.size(), 32u);
     EXPECT_EQ(s.attributes.size(), 32u);
     Bounds3 b = s.worldBounds();

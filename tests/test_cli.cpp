@@ -188,7 +188,7 @@ TEST(Cli, FailedRenderKeepsThePreviousImage) {
 TEST(Cli, ConvertWritesARibThatRendersTheSameImage) {
     fs::path dir = tempDir() / "convert";
     fs::create_directories(dir);
-    const std::string bpt = std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt";
+    const std::string bpt = std::string(TESSERA_TEST_DATA) + "/teapot.bpt";
     const std::string rib = (dir / "teapot.rib").string();
     ASSERT_EQ(run("convert " + bpt + " -o " + rib).exitCode, 0);
     CommandResult info = run("info " + rib);

@@ -67,7 +67,7 @@ TEST(Micropolis, Errors) {
 
 TEST(Micropolis, TeapotEqualsBpt) {
     std::string mp = std::string(TESSERA_SHARED_DATA) + "/teapot/micropolis/teapot";
-    std::string bpt = std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt";
+    std::string bpt = std::string(TESSERA_TEST_DATA) + "/teapot.bpt";
     if (!fs::exists(mp) || !fs::exists(bpt)) GTEST_SKIP() << "shared data not found";
     EXPECT_EQ(detectSceneFormat(mp), SceneFormat::Micropolis);
     Scene a = loadScene(mp, {});

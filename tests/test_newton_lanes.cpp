@@ -24,7 +24,7 @@ struct Start {
 // exist), from random directions, plus starts that miss (shifted rays).
 std::vector<Start> makeStarts(int count) {
     const Scene s =
-        loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+        loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     std::mt19937 rng(7);
     std::uniform_real_distribution<float> U(0.f, 1.f), S(-1.f, 1.f);
     std::vector<Start> out;
@@ -116,7 +116,7 @@ TEST(NewtonLanes, BitIdenticalToScalarNewton) {
 // lane l's column only, and each control point's distance along the ray as the scalar formula.
 TEST(NewtonLanes, ProjectIntoLaneEqualsProjectPatch) {
     const Scene s =
-        loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+        loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     std::mt19937 rng(11);
     std::uniform_real_distribution<float> S(-1.f, 1.f);
     int compared = 0;

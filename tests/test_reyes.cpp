@@ -152,7 +152,7 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(ReyesWatertight, TeapotBodyHasNoPinholesAtManyRates) {
     // The teapot's body and bottom are closed and share edges exactly. Render only those patches
     // (the first 4 body patches x 2 rows and the 4 bottom ones) over black and look for holes inside.
-    Scene s = loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     Scene body = s;
     body.patches.clear();
     body.attributes.clear();
@@ -176,7 +176,7 @@ TEST(ReyesWatertight, TeapotBodyHasNoPinholesAtManyRates) {
 }
 
 TEST(ReyesSampling, TeapotCoverageConvergesWithSpp) {
-    Scene s = loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     s.camera.width = 200;
     s.camera.height = 150;
     auto coverage = [&](int n) {
@@ -197,7 +197,7 @@ TEST(ReyesSampling, TeapotCoverageConvergesWithSpp) {
 }
 
 TEST(ReyesDeterminism, SameImageForAnyThreadCount) {
-    Scene s = loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     s.camera.width = 160;
     s.camera.height = 120;
     RenderResult a = renderWith(s, 1), b = renderWith(s, 2);
@@ -247,7 +247,7 @@ TEST(ReyesRasterize, Avx2SampleTestsEqualTheScalarLoop) {
 TEST(ReyesWatertight, EdgesSharedOnlyUpToRoundingAreWelded) {
     // Perturb every patch independently by ~1e-6 relative, as a basis conversion's rounding would: shared
     // edges are then equal only approximately. The weld pass must restore watertightness.
-    Scene s = loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     Scene body = s;
     body.patches.clear();
     body.attributes.clear();

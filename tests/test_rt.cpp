@@ -19,7 +19,7 @@ namespace tessera::test::rt_tests {
 namespace {
 
 Scene loadTeapotBpt() {
-    return loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+    return loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
 }
 
 // A patch with its own one-patch forest.

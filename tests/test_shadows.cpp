@@ -171,7 +171,7 @@ WorldEnd
 TEST(ShadowAttribute, TheDefaultLightsOfInputsWithoutARibCastShadows) {
     // What the ray tracer always did for .bpt, OBJ and Micropolis inputs (docs/inputs.md).
     const Scene s =
-        loadScene(std::string(TESSERA_SHARED_DATA) + "/teapot/teapot.bpt", [](const std::string&) {});
+        loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     int casting = 0;
     for (const Light& l : s.lights) {
         EXPECT_EQ(l.castsShadows, l.type != LightType::Ambient);
