@@ -536,3 +536,57 @@ TEST(Cli, TexturesLoadTheOpenImageIOModuleOnlyWhenNeeded) {
 }
 
 }  // namespace tessera::test::cli_tests
+
+namespace tessera::test::cli_tests {
+
+// OpenEXR is a module as well (io/exr_module.h): the executable does not link it, a PNG render never loads
+// it (it runs with the module's path pointing nowhere), and an .exr output with the module missing fails
+// before the render, naming the file, the module and each place tried: exit 2 and no file.
+TEST(Cli, ExrFilesLoadTheOpenEXRModuleOnlyWhenNeeded) {
+    const std::string deps = std::string("readelf -d ") + TESSERA_BINARY + " > /tmp/tessera_needed_exr_" +
+                             std::to_string(getpid()) + " 2>&1";
+    ASSERT_EQ(std::system(deps.c_str()), 0);
+    std::ifstream f("/tmp/tessera_needed_exr_" + std::to_string(getpid()));
+    std::stringstream needed;
+    needed << f.rdbuf();
+    fs::remove("/tmp/tessera_needed_exr_" + std::to_string(getpid()));
+    EXPECT_NE(needed.str().find("NEEDED"), std::string::npos) << needed.str();
+    EXPECT_EQ(needed.str().find("OpenEXR"), std::string::npos) << needed.str();
+    EXPECT_EQ(needed.str().find("Imath"), std::string::npos) << needed.str();
+
+    fs::path dir = tempDir();
+    const std::string absent = (dir / "absent.so").string();
+    const std::string noModule = "TESSERA_EXR_MODULE='" + absent + "'";
+    const std::string png = (dir / "t.png").string(), exr = (dir / "t.exr").string();
+    const std::string base = "render " + kTeapot + " --res 48x36 --quiet -o ";
+    CommandResult r = run(base + png, "", noModule);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_EQ(readPng(png).width, 48);
+
+    r = run(base + exr, "", noModule);
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find(exr + ": error: OpenEXR files need Tessera's OpenEXR module"), std::string::npos)
+        << r.output;
+    EXPECT_NE(r.output.find(absent + ": not found"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(exr));
+
+    // With the module: the same render writes the .exr, whose pixels match the PNG's.
+    r = run(base + exr);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const Image a = readPng(png), b = readExr(exr);
+    ASSERT_EQ(b.width, 48);
+    ASSERT_EQ(b.height, 36);
+    float maxDiff = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4)
+        maxDiff = std::max(maxDiff, std::abs(a.rgba[i + 3] - b.rgba[i + 3]));
+    EXPECT_LT(maxDiff, 1.f / 255 + 1e-3f) << "alpha differs between the PNG and the EXR";
+
+    // assemble checks the module before it reads any tile.
+    r = run("assemble " + exr + " -o " + (dir / "joined.exr").string(), "", noModule);
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_NE(r.output.find("OpenEXR module"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir / "joined.exr"));
+    fs::remove_all(dir);
+}
+
+}  // namespace tessera::test::cli_tests

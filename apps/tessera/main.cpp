@@ -122,6 +122,12 @@ void checkWritableOrFail(const std::string& path, const char* what) {
     if (!why.empty()) fail(fmt::format("{}: error: cannot write the {} there: {}", path, what, why));
 }
 
+// An OpenEXR file to be written: checked before the render that the OpenEXR module loads (io/image_io.h).
+void checkExrOrFail(const std::string& path) {
+    const std::string why = exrSupportError();
+    if (!why.empty()) fail(fmt::format("{}: error: {}", path, why));
+}
+
 // Writes `text` to a temporary file beside `path` and returns its name; the caller renames it into place.
 std::string writeTemporary(const std::string& path, const std::string& text) {
     fs::path p(path);
@@ -473,6 +479,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
                          output, scene.image.displayType));
     if (!aovs->names.empty() && (depthDisplay || fs::path(output).extension() != ".exr"))
         fail(fmt::format("error: --aov needs an OpenEXR output (-o NAME.exr): '{}' holds RGBA only", output));
+    if (!output.empty() && (depthDisplay || fs::path(output).extension() == ".exr")) checkExrOrFail(output);
     // RIB Display "+name" type mode: further files of this render, each the beauty plus the layers its mode
     // names (--aov's names; "rgba" or "rgb": the beauty alone). Checked now, before the render.
     struct Secondary {
@@ -498,6 +505,7 @@ int renderFrame(const RenderArgs& a, std::optional<int> ribFrameOrdinal) {
             fail(fmt::format("{}: mode '{}' needs an OpenEXR file (.exr): a .png holds RGBA only", where,
                              d.mode));
         checkWritableOrFail(path.string(), "image");
+        if (path.extension() == ".exr") checkExrOrFail(path.string());
         wanted.channels |= layers->channels;
         for (const std::string& pl : layers->planes)
             if (std::find(wanted.planes.begin(), wanted.planes.end(), pl) == wanted.planes.end())
@@ -839,6 +847,7 @@ int runAssemble(const std::vector<std::string>& tiles, const std::string& out) {
     for (const std::string& t : tiles)
         if (!fs::exists(t)) fail(fmt::format("{}: error: no such tile file", t));
     checkWritableOrFail(out, "assembled image");
+    checkExrOrFail(out);
     assembleExrTiles(tiles, out);  // InputError: exit 2 (main)
     fmt::print(stderr, "{}: {} tiles assembled\n", out, tiles.size());
     return 0;

@@ -84,4 +84,8 @@ DepthMap readDepthMap(const std::string& path);
 // True if the extension is one writeImage understands (.png, .exr).
 bool isSupportedImageExtension(const std::string& path);
 
+// "" when .exr files can be read and written, otherwise why not: OpenEXR is a module loaded on the first
+// .exr (io/exr_module.h), and this loads it, so that a run that will write one can check before rendering.
+std::string exrSupportError();
+
 }  // namespace tessera

@@ -1,78 +1,36 @@
 #include "shading/texture.h"
 
-#include <dlfcn.h>
-
 #include <cstdlib>
 #include <filesystem>
 #include <stdexcept>
 
+#include "core/module_loader.h"
 #include "shading/texture_module.h"
 
 namespace tessera {
 
 namespace {
-constexpr const char* kModuleFile = "libtessera_texture_oiio.so";
-
-// The directory of the running executable ("" when /proc is not mounted).
-std::string executableDir() {
-    std::error_code ec;
-    const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-    return ec ? std::string() : exe.parent_path().string();
-}
-
 struct LoadedModule {
     const TextureModuleApi* api = nullptr;
     std::string error;  // why it could not be loaded (when api is nullptr)
 };
 
-// Loads the OpenImageIO module once per process: $TESSERA_TEXTURE_MODULE (a path) when set, otherwise
-// in turn the executable's directory (the build tree's top, where tessera is), ../lib/tessera beside it (an
-// install) and the path the build tree put it at (tests and tools in subdirectories). Never unloaded: OIIO
-// keeps threads and statics that outlive any one render.
-LoadedModule loadModule() {
-    std::vector<std::string> candidates;
-    if (const char* env = std::getenv("TESSERA_TEXTURE_MODULE"); env && *env) {
-        candidates.emplace_back(env);  // the user's choice, and the only one
-    } else if (const std::string dir = executableDir(); !dir.empty()) {
-        candidates.push_back(dir + "/" + kModuleFile);
-        candidates.push_back(dir + "/../lib/tessera/" + kModuleFile);
-    }
+LoadedModule loadTextureModule() {
 #ifdef TESSERA_TEXTURE_MODULE_PATH
-    if (candidates.size() != 1 || !std::getenv("TESSERA_TEXTURE_MODULE"))
-        candidates.emplace_back(TESSERA_TEXTURE_MODULE_PATH);
+    const char* builtPath = TESSERA_TEXTURE_MODULE_PATH;
+#else
+    const char* builtPath = nullptr;
 #endif
+    const ModuleSpec spec{
+        "libtessera_texture_oiio.so", "TESSERA_TEXTURE_MODULE", builtPath,
+        kTextureModuleEntry,          kTextureModuleVersion,    "textures need Tessera's OpenImageIO module"};
     LoadedModule m;
-    std::string tried;
-    for (const std::string& path : candidates) {
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec)) {
-            tried += "\n  " + path + ": not found";
-            continue;
-        }
-        void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
-        if (!handle) {
-            const char* why = dlerror();
-            tried += "\n  " + path + ": " + (why ? why : "dlopen failed");
-            continue;
-        }
-        using Entry = const TextureModuleApi* (*)();
-        auto entry = reinterpret_cast<Entry>(dlsym(handle, kTextureModuleEntry));
-        const TextureModuleApi* api = entry ? entry() : nullptr;
-        if (!api || api->version != kTextureModuleVersion) {
-            tried += "\n  " + path + ": not a texture module of this version of Tessera";
-            dlclose(handle);
-            continue;
-        }
-        m.api = api;
-        return m;
-    }
-    m.error = std::string("textures need Tessera's OpenImageIO module (") + kModuleFile +
-              "), which could not be loaded; tried:" + tried;
+    m.api = static_cast<const TextureModuleApi*>(loadModule(spec, m.error));
     return m;
 }
 
 const LoadedModule& textureModule() {
-    static const LoadedModule module = loadModule();
+    static const LoadedModule module = loadTextureModule();
     return module;
 }
 

@@ -1,7 +1,8 @@
 // The seam between Tessera and OpenImageIO. OIIO and what it links (some 260 shared libraries, bound at
 // load time) cost every `tessera` run 0.1-0.8 s of dynamic relocation before main, whether the scene has
 // textures or not; so the OIIO side lives in a module (modules/texture_oiio.cpp, built as
-// libtessera_texture_oiio.so) that texture.cpp loads with dlopen the first time a scene needs a texture.
+// libtessera_texture_oiio.so) that texture.cpp loads (core/module_loader.h) the first time a scene needs
+// a texture.
 //
 // The interface is a table of plain functions over an opaque handle: no vtables or type_info cross the
 // seam, so the module needs no symbols from the executable (which exports none) and sanitizer builds
@@ -47,6 +48,7 @@ struct TextureModuleApi {
 
 }  // namespace tessera
 
-// The one symbol the module exports.
-extern "C" const tessera::TextureModuleApi* tessera_texture_module();
+// The one symbol the module exports: its TextureModuleApi (core/module_loader.h: every module's entry has
+// this one type, so that the loader calls it through its own type).
+extern "C" const void* tessera_texture_module();
 inline constexpr const char* kTextureModuleEntry = "tessera_texture_module";

@@ -170,6 +170,6 @@ const TextureModuleApi kApi{
 }  // namespace
 }  // namespace tessera
 
-extern "C" __attribute__((visibility("default"))) const tessera::TextureModuleApi* tessera_texture_module() {
+extern "C" __attribute__((visibility("default"))) const void* tessera_texture_module() {
     return &tessera::kApi;
 }
