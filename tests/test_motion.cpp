@@ -608,3 +608,68 @@ TEST(MotionBlur, MotionFactorCoarsensOnlyBlurredGeometry) {
 }
 
 }  // namespace tessera::test::motion_tests
+
+namespace tessera::test::motion_tests {
+
+// LazyPieces dices into recycled grids (Grid::clearKeepingStorage): a grid that held a blurred piece with
+// normals, diced again for a still piece without them, equals a grid diced fresh: no knots, normals or
+// blur flag left over from its previous piece.
+TEST(MotionBlur, RecycledGridEqualsAFreshOne) {
+    Scene s = cameraSpaceScene(96, 72, 40.f);
+    const BezierPatch square = flatSquare(1.4f, 5.f, 0.2f, 0.1f);
+    BezierPatch turned;
+    const Mat4 r = Mat4::rotate(20, 0, 0, 1);
+    for (int c = 0; c < 16; ++c) turned.cp[c] = r.point(square.cp[c] - Vec3{0, 0, 5.f}) + Vec3{0, 0, 5.f};
+    ReyesView moving(s.camera);
+    const BezierPatch* knots[2] = {&square, &turned};
+    moving.patches = &square;
+    moving.knotPatches = {knots[0], knots[1]};
+    const std::vector<uint32_t> movingIds{0};
+    moving.moving = &movingIds;
+    moving.cullX0 = -100, moving.cullY0 = -100, moving.cullX1 = 200, moving.cullY1 = 200;
+    ReyesView still(s.camera);
+    still.patches = &turned;
+    still.cullX0 = -100, still.cullY0 = -100, still.cullX1 = 200, still.cullY1 = 200;
+    std::vector<Piece> movingPieces, stillPieces;
+    SplitCounters counters;
+    splitPatch(moving, 0, 1.f, movingPieces, counters);
+    splitPatch(still, 0, 1.f, stillPieces, counters);
+    ASSERT_FALSE(movingPieces.empty());
+    ASSERT_FALSE(stillPieces.empty());
+    const Material m = defaultMaterial(MaterialType::Plastic);
+    const Light light{LightType::Distant, {1, 1, 1}, {0, 0, 0}, {0.3f, -0.4f, 1.f}};
+    const std::vector<ShadingLight> lights{prepareLight(light, Mat4{})};
+    ShadeInputs withNormals{SurfaceKind::BicubicBezier, &m, false, false, lights, 3, true};
+    ShadeInputs plain{SurfaceKind::BicubicBezier, &m, true, false, lights, 1, false};
+
+    Grid recycled;
+    diceAndShade(moving, movingPieces[0], withNormals, recycled);
+    ASSERT_TRUE(recycled.blurred);
+    ASSERT_EQ(recycled.knots, 2);
+    ASSERT_FALSE(recycled.NX.empty());
+    const size_t capacity = recycled.X.capacity();
+    recycled.clearKeepingStorage();
+    EXPECT_GE(recycled.X.capacity(), capacity);  // the storage stays
+    diceAndShade(still, stillPieces[0], plain, recycled);
+    Grid fresh;
+    diceAndShade(still, stillPieces[0], plain, fresh);
+
+    EXPECT_EQ(recycled.nu, fresh.nu);
+    EXPECT_EQ(recycled.nv, fresh.nv);
+    EXPECT_EQ(recycled.twoSided, fresh.twoSided);
+    EXPECT_EQ(recycled.objectId, fresh.objectId);
+    EXPECT_EQ(recycled.knots, fresh.knots);
+    EXPECT_EQ(recycled.blurred, fresh.blurred);
+    EXPECT_EQ(recycled.allKnotsValid, fresh.allKnotsValid);
+    EXPECT_EQ(recycled.motionPixels, fresh.motionPixels);
+    int arrays = 0;
+    fresh.forEachArray([&](auto& freshArray, auto Grid::*member) {
+        EXPECT_TRUE(freshArray == recycled.*member) << "array " << arrays;
+        ++arrays;
+    });
+    EXPECT_EQ(arrays, 19);
+    EXPECT_TRUE(recycled.NX.empty());
+    EXPECT_TRUE(recycled.knotX.empty());
+}
+
+}  // namespace tessera::test::motion_tests

@@ -54,7 +54,31 @@ struct Grid {
     bool allKnotsValid = true;  // every vertex in front of the near plane at every knot
     bool blurred = false;
     int vertexCount() const { return (nu + 1) * (nv + 1); }
+
+    // Back to a default grid that keeps its arrays' storage, so that dicing into a recycled grid
+    // (LazyPieces' spare grids) allocates nothing: every array empty, every other field its default.
+    void clearKeepingStorage() {
+        Grid fresh;
+        forEachArray([&](auto& mine, auto Grid::*member) {
+            mine.clear();
+            (fresh.*member).swap(mine);
+        });
+        *this = std::move(fresh);
+    }
+
+    // Calls f(array, pointer to member) for every array member; a member added to Grid must be added here
+    // too (the static_assert after the struct counts the bytes).
+    template <class F>
+    void forEachArray(F&& f) {
+        f(X, &Grid::X), f(Y, &Grid::Y), f(Z, &Grid::Z), f(R, &Grid::R), f(G, &Grid::G), f(B, &Grid::B);
+        f(front, &Grid::front), f(NX, &Grid::NX), f(NY, &Grid::NY), f(NZ, &Grid::NZ);
+        f(albedo, &Grid::albedo), f(P, &Grid::P), f(Cs, &Grid::Cs), f(shadowedLights, &Grid::shadowedLights);
+        f(knotX, &Grid::knotX), f(knotY, &Grid::knotY), f(knotZ, &Grid::knotZ), f(knotC, &Grid::knotC);
+        f(knotValid, &Grid::knotValid);
+    }
 };
+// 19 arrays and the scalars: a new member changes the size; add it to forEachArray, then update this.
+static_assert(sizeof(Grid) == 19 * sizeof(std::vector<float>) + 40, "Grid changed: update forEachArray");
 
 struct ShadeInputs {
     SurfaceKind kind;

@@ -3,6 +3,8 @@
 // space with shared edges welded, split and cull into pieces, the pieces binned into buckets, and the cache
 // that dices each piece once for all the buckets that need it.
 #pragma once
+#include <tbb/enumerable_thread_specific.h>
+
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -117,7 +119,7 @@ class LazyPieces {
                 if (bx < r.bx0 || bx > r.bx1 || by < r.by0 || by > r.by1) continue;
                 GridSlot& g = sp.grids[i];
                 detail::fillOnce(g.state, [&] {
-                    g.grid = std::make_unique<Grid>();
+                    g.grid = takeSpareGrid();
                     try {
                         dice(sp.pieces[i], *g.grid);
                     } catch (...) {
@@ -126,7 +128,7 @@ class LazyPieces {
                     }
                 });
                 visit(static_cast<const Piece&>(sp.pieces[i]), static_cast<const Grid&>(*g.grid));
-                if (g.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) g.grid.reset();
+                if (g.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) keepSpareGrid(std::move(g.grid));
             }
             if (slot.refs.fetch_sub(1, std::memory_order_acq_rel) == 1) release(slot);
         }
@@ -165,6 +167,23 @@ class LazyPieces {
     void split(uint32_t surface, SurfaceSlot& slot);
     void release(SurfaceSlot& slot);
 
+    // Freed grids are kept per thread and diced into again (Grid::clearKeepingStorage): a grid's ten-odd
+    // arrays were otherwise allocated and freed per piece, often by different threads, which glibc's
+    // allocator serves from locked arenas and fresh pages (issue 18: "reusing per-thread buffers").
+    static constexpr size_t kSpareGridsPerThread = 32;
+    std::unique_ptr<Grid> takeSpareGrid() {
+        std::vector<std::unique_ptr<Grid>>& spare = spareGrids_.local();
+        if (spare.empty()) return std::make_unique<Grid>();
+        std::unique_ptr<Grid> g = std::move(spare.back());
+        spare.pop_back();
+        g->clearKeepingStorage();
+        return g;
+    }
+    void keepSpareGrid(std::unique_ptr<Grid> g) {
+        std::vector<std::unique_ptr<Grid>>& spare = spareGrids_.local();
+        if (spare.size() < kSpareGridsPerThread) spare.push_back(std::move(g));
+    }
+
     ReyesView view_;  // with patchSide = sides_
     const Scene& scene_;
     const BucketLayout layout_;
@@ -176,6 +195,7 @@ class LazyPieces {
     std::unique_ptr<SurfaceSlot[]> slots_;
     std::atomic<uint64_t> splits_{0}, culled_{0}, surfacesCulled_{0}, pieces_{0}, alive_{0}, peak_{0};
     std::atomic<uint64_t> splitNs_{0}, beyond_{0};
+    tbb::enumerable_thread_specific<std::vector<std::unique_ptr<Grid>>> spareGrids_;
 };
 
 }  // namespace tessera
