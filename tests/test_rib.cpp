@@ -3,9 +3,12 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <bit>
+#include <charconv>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <set>
 #include <sstream>
 #include <string>
@@ -70,6 +73,52 @@ TEST(RibLexer, TokensAndLines) {
     EXPECT_EQ(t[9].type, TokenType::ArrayEnd);
     EXPECT_EQ(t[10].type, TokenType::Other);
     EXPECT_EQ(t[10].text, "-x");
+}
+
+// The lexer reads most numbers by a fast path (an exact integer divided by an exact power of ten); every
+// number must still be the double std::from_chars gives, bit for bit: random decimals of 1 to 18 digits
+// with the point anywhere, signs, leading zeros, and exponents (which take from_chars itself).
+TEST(RibLexer, NumbersEqualFromChars) {
+    std::mt19937 rng(18);
+    std::vector<std::string> words = {"0",
+                                      "-0",
+                                      "+0",
+                                      "0.",
+                                      ".0",
+                                      "-.5",
+                                      "1e3",
+                                      "2.5E-3",
+                                      "123456789012345",
+                                      "1234567890123456",
+                                      "0.000000000000001",
+                                      "999999999999999.",
+                                      "-7.",
+                                      "00012.500",
+                                      "0.1",
+                                      "0.2",
+                                      "0.3",
+                                      "9007199254740993"};
+    for (int i = 0; i < 20000; ++i) {
+        const int digits = 1 + int(rng() % 18), point = int(rng() % (digits + 1));
+        std::string w = rng() % 3 == 0 ? "-" : (rng() % 5 == 0 ? "+" : "");
+        for (int d = 0; d < digits; ++d) {
+            if (d == point) w += '.';
+            w += char('0' + rng() % 10);
+        }
+        if (rng() % 7 == 0) w += "e" + std::to_string(int(rng() % 21) - 10);
+        words.push_back(w);
+    }
+    std::string text;
+    for (const std::string& w : words) text += w + " ";
+    RibLexer lex(text, "numbers");
+    for (const std::string& w : words) {
+        const Token t = lex.next();
+        ASSERT_EQ(t.type, TokenType::Number) << w;
+        double expected = 0;
+        const char* first = w.data() + (w[0] == '+' ? 1 : 0);
+        std::from_chars(first, w.data() + w.size(), expected);
+        EXPECT_EQ(std::bit_cast<uint64_t>(t.number), std::bit_cast<uint64_t>(expected)) << w;
+    }
 }
 
 // ---- options ---------------------------------------------------------------------------------

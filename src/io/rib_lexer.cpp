@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -151,25 +152,44 @@ Token RibLexer::lexText() {
     } else if (isDigit(c) || c == '.' || c == '+' || c == '-') {
         // [+-]? (digits [. digits?] | . digits) ([eE] [+-]? digits)?
         size_t p = pos_;
+        const bool negative = text_[p] == '-';
         if (text_[p] == '+' || text_[p] == '-') ++p;
-        size_t digits = 0;
-        while (p < text_.size() && isDigit(text_[p])) ++p, ++digits;
+        // The digits as an integer while it stays exact (at most 15 of them: below 2^53), and how many
+        // follow the point, for the fast path below.
+        size_t digits = 0, fractionDigits = 0;
+        uint64_t mantissa = 0;
+        while (p < text_.size() && isDigit(text_[p]))
+            mantissa = mantissa * 10 + uint64_t(text_[p++] - '0'), ++digits;
         if (p < text_.size() && text_[p] == '.') {
             ++p;
-            while (p < text_.size() && isDigit(text_[p])) ++p, ++digits;
+            while (p < text_.size() && isDigit(text_[p]))
+                mantissa = mantissa * 10 + uint64_t(text_[p++] - '0'), ++digits, ++fractionDigits;
         }
+        bool hasExponent = false;
         if (digits > 0 && p < text_.size() && (text_[p] == 'e' || text_[p] == 'E')) {
             size_t q = p + 1;
             if (q < text_.size() && (text_[q] == '+' || text_[q] == '-')) ++q;
             if (q < text_.size() && isDigit(text_[q])) {
                 while (q < text_.size() && isDigit(text_[q])) ++q;
                 p = q;
+                hasExponent = true;
             }
         }
         if (digits > 0 && (p >= text_.size() || isDelimiter(text_[p]))) {
             t.type = TokenType::Number;
             t.text = text_.substr(start, p - start);
             pos_ = p;
+            // Clinger's fast path (1990): an integer below 2^53 and a power of ten up to 1e22 are exact
+            // doubles, so one IEEE division rounds their quotient correctly, the same double from_chars
+            // gives. Most RIB numbers qualify; the rest (exponents, long digit strings) go to from_chars.
+            static constexpr double kPowersOfTen[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                                      1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                                      1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+            if (!hasExponent && digits <= 15) {
+                const double magnitude = double(mantissa) / kPowersOfTen[fractionDigits];
+                t.number = negative ? -magnitude : magnitude;
+                return t;
+            }
             // from_chars rejects a leading '+'.
             const char* first = text_.data() + start + (text_[start] == '+' ? 1 : 0);
             auto [end, ec] = std::from_chars(first, text_.data() + p, t.number);
