@@ -4,7 +4,67 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/cpu.h"
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace tessera {
+
+namespace {
+#if defined(__x86_64__)
+// One output coordinate of four points: ((a x + b y) + c z) + d, as the scalar loop evaluates it.
+__attribute__((target("avx2"), always_inline)) inline __m128 affineRow(__m256d a, __m256d b, __m256d c,
+                                                                       __m256d d, __m256d x, __m256d y,
+                                                                       __m256d z) {
+    return _mm256_cvtpd_ps(_mm256_add_pd(
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a, x), _mm256_mul_pd(b, y)), _mm256_mul_pd(c, z)), d));
+}
+
+static_assert(sizeof(Vec3) == 3 * sizeof(float), "affinePointsAvx2 reads and writes packed x, y, z");
+
+// Mat4::points' affine loop four points at a time: the same double operations in the same order (no FMA:
+// the target is AVX2 alone), converted to float with the same rounding, so the same bits. A quarter of a
+// RIB patch's loading cost on 24 Big Guys went to the scalar loop.
+__attribute__((target("avx2"))) size_t affinePointsAvx2(const double (&m)[4][4], const Vec3* in, Vec3* out,
+                                                        size_t n) {
+    const __m256d m00 = _mm256_set1_pd(m[0][0]), m01 = _mm256_set1_pd(m[0][1]), m02 = _mm256_set1_pd(m[0][2]),
+                  m03 = _mm256_set1_pd(m[0][3]);
+    const __m256d m10 = _mm256_set1_pd(m[1][0]), m11 = _mm256_set1_pd(m[1][1]), m12 = _mm256_set1_pd(m[1][2]),
+                  m13 = _mm256_set1_pd(m[1][3]);
+    const __m256d m20 = _mm256_set1_pd(m[2][0]), m21 = _mm256_set1_pd(m[2][1]), m22 = _mm256_set1_pd(m[2][2]),
+                  m23 = _mm256_set1_pd(m[2][3]);
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+        // Three loads of the 12 floats a = (x0 y0 z0 x1), b = (y1 z1 x2 y2), c = (z2 x3 y3 z3), shuffled
+        // into x, y and z of the four points (and back in the same way below).
+        const float* f = &in[i].x;
+        const __m128 a = _mm_loadu_ps(f), b = _mm_loadu_ps(f + 4), c = _mm_loadu_ps(f + 8);
+        const __m128 x = _mm_blend_ps(_mm_shuffle_ps(a, b, _MM_SHUFFLE(2, 2, 3, 0)),
+                                      _mm_shuffle_ps(c, c, _MM_SHUFFLE(1, 1, 1, 1)), 0b1000);
+        const __m128 aabb = _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 0, 1, 1));  // a1 a1 b0 b3
+        const __m128 y = _mm_blend_ps(_mm_shuffle_ps(aabb, aabb, _MM_SHUFFLE(3, 3, 2, 0)),
+                                      _mm_shuffle_ps(c, c, _MM_SHUFFLE(2, 2, 2, 2)), 0b1000);
+        const __m128 z =
+            _mm_shuffle_ps(_mm_shuffle_ps(a, b, _MM_SHUFFLE(1, 1, 2, 2)), c, _MM_SHUFFLE(3, 0, 2, 0));
+        const __m256d px = _mm256_cvtps_pd(x), py = _mm256_cvtps_pd(y), pz = _mm256_cvtps_pd(z);
+        const __m128 ox = affineRow(m00, m01, m02, m03, px, py, pz);
+        const __m128 oy = affineRow(m10, m11, m12, m13, px, py, pz);
+        const __m128 oz = affineRow(m20, m21, m22, m23, px, py, pz);
+        const __m128 xyLow = _mm_unpacklo_ps(ox, oy),
+                     xyHigh = _mm_unpackhi_ps(ox, oy);  // x0 y0 x1 y1, x2 y2 x3 y3
+        float* o = &out[i].x;
+        _mm_storeu_ps(o, _mm_shuffle_ps(xyLow, _mm_shuffle_ps(oz, xyLow, _MM_SHUFFLE(2, 2, 0, 0)),
+                                        _MM_SHUFFLE(2, 0, 1, 0)));
+        _mm_storeu_ps(o + 4, _mm_shuffle_ps(_mm_shuffle_ps(xyLow, oz, _MM_SHUFFLE(1, 1, 3, 3)), xyHigh,
+                                            _MM_SHUFFLE(1, 0, 2, 0)));
+        const __m128 zzxy = _mm_shuffle_ps(oz, xyHigh, _MM_SHUFFLE(3, 2, 3, 2));  // z2 z3 x3 y3
+        _mm_storeu_ps(o + 8, _mm_shuffle_ps(zzxy, zzxy, _MM_SHUFFLE(1, 3, 2, 0)));
+    }
+    return i;
+}
+#endif
+}  // namespace
 
 Mat4 Mat4::translate(double x, double y, double z) {
     Mat4 r;
@@ -150,7 +210,11 @@ void Mat4::points(const Vec3* in, Vec3* out, size_t n) const {
         for (size_t i = 0; i < n; ++i) out[i] = point(in[i]);
         return;
     }
-    for (size_t i = 0; i < n; ++i) {
+    size_t i = 0;
+#if defined(__x86_64__)
+    if (cpuHasAvx2()) i = affinePointsAvx2(m, in, out, n);
+#endif
+    for (; i < n; ++i) {
         const Vec3 p = in[i];
         const double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
         const double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
