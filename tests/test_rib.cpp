@@ -281,6 +281,19 @@ TEST(RibAttributes, OrientationAndHandedness) {
     EXPECT_FALSE(l.scene.attributes[4].flipNormal);  // "inside" and mirrored
 }
 
+// The reader remembers the last transformation's handedness (OrientationCache): transformations that
+// alternate between mirrored and not each get their own answer.
+TEST(RibAttributes, HandednessFollowsEveryTransformationChange) {
+    std::string p = kUnitSquare;
+    const std::string mirrored = "AttributeBegin\nScale -1 1 1\n" + p + "AttributeEnd\n";
+    Loaded l = load(scene("", p + mirrored + p + mirrored + mirrored + "Scale 2 2 2\n" + p +
+                                  "Scale 1 -1 1\n" + p + "Scale 1 1 -1\n" + p));
+    std::vector<bool> flips;
+    for (const PatchAttributes& a : l.scene.attributes) flips.push_back(a.flipNormal);
+    // scene() adds a last square under the world's final transformation (two mirrors: not mirrored).
+    EXPECT_EQ(flips, (std::vector<bool>{false, true, false, true, true, false, true, false, false}));
+}
+
 TEST(RibAttributes, SurfaceColorAndMaterials) {
     Loaded l =
         load(scene("", std::string("Color [1 0.5 0.25]\n"

@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <optional>
@@ -43,10 +44,16 @@ uint32_t materialIndex(const PrimitiveContext& c, const Material& m) {
 }
 
 // Huge coordinates or transformations can overflow single precision: reject them rather than render NaNs.
+// (An exponent of all ones is an infinity or a NaN: tested on the bits of all 48 numbers at once, a loop the
+// compiler vectorizes.)
 void checkFinite(const BezierPatch& b, int line, const Diagnostics& diag) {
-    for (const Vec3& c : b.cp)
-        if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z))
-            diag.fail(line, "control point out of range after transformation (overflows single precision)");
+    static_assert(sizeof(b.cp) == 48 * sizeof(float), "control points are 16 packed x, y, z");
+    uint32_t words[48];
+    std::memcpy(words, b.cp, sizeof(words));
+    uint32_t notFinite = 0;
+    for (uint32_t w : words) notFinite |= uint32_t((w & 0x7f800000u) == 0x7f800000u);
+    if (notFinite)
+        diag.fail(line, "control point out of range after transformation (overflows single precision)");
 }
 
 // Reads one primitive request: Patch and PatchMesh (RI spec 3.2, sec. 5.2), NuPatch (sec. 5.3),
@@ -1466,7 +1473,8 @@ namespace {
 
 // The primitive's attributes from the graphics state (the object id of its attribute block or name); the
 // orientation rule of RI spec 4.2.4 at shutter open.
-PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& ctm) {
+// `worldFromObject`: the CTM at shutter open.
+PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Mat4& worldFromObject) {
     Scene& scene = c.scene;
     PatchAttributes a;
     a.material = materialIndex(c, c.state.attributes().surface);
@@ -1479,7 +1487,9 @@ PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Transform& 
     a.displacement = c.state.attributes().displacement;
     a.displacementBound = c.state.attributes().displacementBound;
     a.areaLight = c.state.attributes().areaLight;
-    const bool mirrored = (scene.camera.cameraFromWorld * ctm.at(scene.camera.shutterOpen)).det3() < 0;
+    const bool mirrored = c.orientation
+                              ? c.orientation->mirrored(scene.camera.cameraFromWorld, worldFromObject)
+                              : (scene.camera.cameraFromWorld * worldFromObject).det3() < 0;
     a.flipNormal = c.state.attributes().rightHanded != mirrored;
     return a;
 }
@@ -1496,6 +1506,16 @@ size_t MaterialTable::Hash::operator()(const Material& m) const {
     for (float f : {m.Ka, m.Kd, m.Ks, m.roughness, m.Kr, m.Kt, m.eta, m.glossSamples, m.spread}) addFloat(f);
     add(uint32_t(m.texture));
     return size_t(h);
+}
+
+bool OrientationCache::mirrored(const Mat4& cameraFromWorld, const Mat4& worldFromObject) {
+    if (!valid_ || std::memcmp(camera_.m, cameraFromWorld.m, sizeof(camera_.m)) != 0 ||
+        std::memcmp(object_.m, worldFromObject.m, sizeof(object_.m)) != 0) {
+        camera_ = cameraFromWorld, object_ = worldFromObject;
+        mirrored_ = (cameraFromWorld * worldFromObject).det3() < 0;
+        valid_ = true;
+    }
+    return mirrored_;
 }
 
 uint32_t MaterialTable::indexOf(Scene& scene, const Material& m) {
@@ -1629,7 +1649,7 @@ void addQuadric(const Request& r, const PrimitiveContext& c) {
     sq.worldFromObject = ctm.at(scene.camera.shutterOpen);
     if (std::fabs(sq.worldFromObject.det3()) < 1e-30 || !std::isfinite(sq.worldFromObject.det3()))
         c.diag.fail(r.line, r.name + ": the current transformation is singular or not finite");
-    PatchAttributes attr = primitiveAttributes(c, ctm);
+    PatchAttributes attr = primitiveAttributes(c, sq.worldFromObject);
     attr.kind = surfaceKindOf(q.kind);
     attr.shape = uint32_t(scene.quadrics.size());
     // The surface's slot in Scene::patches: the hull of its box in world space (bounds, framing).
@@ -1653,7 +1673,8 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
     const int line = keys.front().line;
     // RI spec 4.2.4: the surface's outside depends on the orientation attribute and on the handedness of
     // the current (object-to-camera) transformation, here at shutter open.
-    const PatchAttributes a = primitiveAttributes(c, ctm);
+    const Mat4 atOpen = ctm.at(open);
+    const PatchAttributes a = primitiveAttributes(c, atOpen);
 
     // The key times: the deformation keys' and the CTM's (refined to 2 degrees per segment).
     std::optional<std::vector<double>> ctmTimes = ctm.sampleTimes();
@@ -1710,7 +1731,7 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         if (vertexValues.size() == n) {
             PatchVertexValues vv = vertexValues[j];
             if (vv.hasN) {
-                if (!objectFromWorld) objectFromWorld = ctm.at(open).inverse();
+                if (!objectFromWorld) objectFromWorld = atOpen.inverse();
                 for (Vec3& nrm : vv.N) nrm = Mat4::normalWithInverse(*objectFromWorld, nrm);
             }
             if (vv.hasCs) {
@@ -1733,9 +1754,8 @@ void addPrimitive(const std::vector<PrimitiveShape>& keys, const std::vector<dou
         scene.texCoords.push_back(st.size() == n ? st[j] : PatchTexCoords{});
     };
     if (T.size() < 2) {
-        const Mat4 m = ctm.at(open);
         for (size_t j = 0; j < n; ++j) {
-            scene.patches.push_back(transformed(m, keys.front().patches[j]));
+            scene.patches.push_back(transformed(atOpen, keys.front().patches[j]));
             scene.attributes.push_back(attributesOf(j));
             addTexCoords(j);
         }

@@ -31,6 +31,19 @@ class MaterialTable {
     uint32_t last_ = UINT32_MAX;  // the index last returned
 };
 
+// Whether a transformation into camera space mirrors a primitive (its handedness decides which side is
+// outside, RI spec 3.2, sec. 4.2.4), remembered for the last transformation: consecutive primitives mostly
+// share it, and the 4x4 product behind the answer was a sixth of loading one Patch. The matrices are
+// compared bit for bit, so the answer is always the product's.
+class OrientationCache {
+  public:
+    bool mirrored(const Mat4& cameraFromWorld, const Mat4& worldFromObject);
+
+  private:
+    bool valid_ = false, mirrored_ = false;
+    Mat4 camera_, object_;
+};
+
 // What a primitive request reads and where its patches go.
 struct PrimitiveContext {
     Scene& scene;
@@ -45,6 +58,8 @@ struct PrimitiveContext {
     int rasterWidth = 0, rasterHeight = 0;
     // The reader's index of scene.materials (nullptr: a linear search).
     MaterialTable* materials = nullptr;
+    // The reader's last orientation answer (nullptr: computed each time).
+    OrientationCache* orientation = nullptr;
 };
 
 // The object-space Bezier patches of one primitive request, before the CTM is applied: what a motion

@@ -1180,7 +1180,8 @@ class RibReader {
                 -1,
                 raster_.given() ? raster_.width : 0,
                 raster_.given() ? raster_.height : 0,
-                &materials_};
+                &materials_,
+                &orientation_};
     }
     void primitive(const Request& r, const Arguments&) {
         if (&r == replayedRequest_ && r.name != "SubdivisionMesh") {
@@ -1783,6 +1784,7 @@ class RibReader {
     // 24 times, and reading its patches' parameters again was 30% of loading it.
     const Request* replayedRequest_ = nullptr;
     rib::MaterialTable materials_;  // scene_.materials by value
+    rib::OrientationCache orientation_;
     // What is left of the archive text that may be recorded on its first read (64 MB unless the tests set
     // it). Lexing the 24 Big Guys' archive a second time, to record it, was a fifth of loading that scene.
     size_t firstReadRecordBytes_ = gFirstReadRecordBytes.load(std::memory_order_relaxed);
