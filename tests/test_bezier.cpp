@@ -2,6 +2,7 @@
 
 #include <bit>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -176,6 +177,31 @@ TEST(Mat4, AffinePointsEqualTheScalarFormula) {
                     << "trial " << trial << " point " << i << " axis " << k;
                 EXPECT_EQ(std::bit_cast<uint32_t>(inPlace[i][k]), std::bit_cast<uint32_t>(expected[k]));
             }
+        }
+    }
+}
+
+// hullBounds takes the control points' bounds with SSE min/max: the same bits as Bounds3::extend point by
+// point, for signed zeros, infinities and a NaN (which extend never takes) too.
+TEST(Bezier, HullBoundsEqualExtendingPointByPoint) {
+    std::mt19937 rng(7);
+    const float special[] = {0.f, -0.f, std::numeric_limits<float>::infinity(),
+                             -std::numeric_limits<float>::infinity(),
+                             std::numeric_limits<float>::quiet_NaN()};
+    std::uniform_real_distribution<float> coord(-10.f, 10.f);
+    for (int trial = 0; trial < 200; ++trial) {
+        BezierPatch p;
+        for (Vec3& c : p.cp) {
+            c = {coord(rng), coord(rng), coord(rng)};
+            for (int k = 0; k < 3; ++k)
+                if (rng() % 4 == 0) c[k] = special[rng() % (trial < 100 ? 2 : 5)];
+        }
+        Bounds3 expected;
+        for (const Vec3& c : p.cp) expected.extend(c);
+        const Bounds3 b = hullBounds(p);
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_EQ(std::bit_cast<uint32_t>(b.lo[k]), std::bit_cast<uint32_t>(expected.lo[k])) << trial;
+            EXPECT_EQ(std::bit_cast<uint32_t>(b.hi[k]), std::bit_cast<uint32_t>(expected.hi[k])) << trial;
         }
     }
 }

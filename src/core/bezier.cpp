@@ -199,7 +199,20 @@ BezierPatch subPatch(const BezierPatch& p, float u0, float u1, float v0, float v
 
 Bounds3 hullBounds(const BezierPatch& p) {
     Bounds3 b;
+#if defined(__SSE2__)
+    // minps(c, lo) is (c < lo ? c : lo), exactly std::min(lo, c) of Bounds3::extend (NaN and signed zeros
+    // included), and maxps likewise: the same bounds, x, y and z at once (the weld's tolerance and the
+    // framing take the hull of every patch).
+    __m128 lo = loadVec3(b.lo), hi = loadVec3(b.hi);
+    for (const Vec3& c : p.cp) {
+        const __m128 v = loadVec3(c);
+        lo = _mm_min_ps(v, lo);
+        hi = _mm_max_ps(v, hi);
+    }
+    b.lo = storeVec3(lo), b.hi = storeVec3(hi);
+#else
     for (const Vec3& c : p.cp) b.extend(c);
+#endif
     return b;
 }
 
