@@ -37,19 +37,19 @@ std::vector<double> breakpoints(const std::vector<double>& T, double lo, double 
 // raising every breakpoint to multiplicity p by knot insertion, but span by span from the p + 1 control
 // points each depends on, so the work grows linearly with the curve (inserting into the whole curve,
 // as before, was quadratic: 11% of a Killeroo frame).
-std::vector<std::vector<double>> bezierSegments(const Curve& c, double lo, double hi) {
+// Segments [s0, s1) of the curve between the breakpoints `bp` (breakpoints(knots, lo, hi)), written flat to
+// `out` (4 * c.dim numbers per segment, segment s0 first). Segments are independent: callers split them
+// among threads.
+void bezierSegments(const Curve& c, const std::vector<double>& bp, size_t s0, size_t s1, double* out) {
     const int p = c.degree, dim = c.dim;
     const std::vector<double>& T = c.knots;
-    const std::vector<double> bp = breakpoints(T, lo, hi);
-    std::vector<std::vector<double>> segs;
-    segs.reserve(bp.size() - 1);
     // levels[r]: de Boor's stage r, points i = k - p + r .. k at offsets (i - (k - p)) * dim. b_j's
     // arguments are b_{j-1}'s with the last a made a b, so b_j shares the first p - j stages with b_{j-1}
     // and recomputes only the rest: 16 point updates for a cubic span instead of 24, the same operations
     // in the same order on the same inputs, so the same bits.
     std::vector<double> levels(size_t(p + 1) * size_t(p + 1) * dim), bez(size_t(p + 1) * dim);
     auto level = [&](int r) { return &levels[size_t(r) * size_t(p + 1) * dim]; };
-    for (size_t s = 0; s + 1 < bp.size(); ++s) {
+    for (size_t s = s0; s < s1; ++s) {
         const double a = bp[s], b = bp[s + 1];
         const int k = int(std::upper_bound(T.begin(), T.end(), a) - T.begin()) - 1;  // T[k] <= a < T[k+1]
         std::copy_n(&c.pts[size_t(k - p) * dim], size_t(p + 1) * dim, level(0));
@@ -57,34 +57,32 @@ std::vector<std::vector<double>> bezierSegments(const Curve& c, double lo, doubl
             for (int r = j == 0 ? 1 : p - j + 1; r <= p; ++r) {
                 const double t = r <= p - j ? a : b;
                 const double* in = level(r - 1);
-                double* out = level(r);
+                double* next = level(r);
                 for (int i = k; i >= k - p + r; --i) {
                     // T[i] <= T[k] < T[k+1] <= T[i + p + 1 - r]: a positive denominator
                     const double alpha = (t - T[size_t(i)]) / (T[size_t(i + p + 1 - r)] - T[size_t(i)]);
                     const size_t o = size_t(i - (k - p)) * dim;
                     for (int e = 0; e < dim; ++e)
-                        out[o + e] = (1 - alpha) * in[o - dim + e] + alpha * in[o + e];
+                        next[o + e] = (1 - alpha) * in[o - dim + e] + alpha * in[o + e];
                 }
             }
             std::copy_n(level(p) + size_t(p) * dim, dim, &bez[size_t(j) * dim]);
         }
-        std::vector<double> seg(size_t(4) * dim);
+        double* seg = out + (s - s0) * size_t(4) * dim;
         for (int e = 0; e < dim; ++e) {
             double q[4];
             for (int i = 0; i <= p; ++i) q[i] = bez[size_t(i) * dim + e];
-            double out[4];
+            double o[4];
             if (p == 3) {
-                for (int i = 0; i < 4; ++i) out[i] = q[i];
+                for (int i = 0; i < 4; ++i) o[i] = q[i];
             } else if (p == 2) {  // exact degree elevation 2 -> 3
-                out[0] = q[0], out[1] = (q[0] + 2 * q[1]) / 3, out[2] = (2 * q[1] + q[2]) / 3, out[3] = q[2];
+                o[0] = q[0], o[1] = (q[0] + 2 * q[1]) / 3, o[2] = (2 * q[1] + q[2]) / 3, o[3] = q[2];
             } else {  // p == 1: a line, elevated 1 -> 3
-                out[0] = q[0], out[1] = (2 * q[0] + q[1]) / 3, out[2] = (q[0] + 2 * q[1]) / 3, out[3] = q[1];
+                o[0] = q[0], o[1] = (2 * q[0] + q[1]) / 3, o[2] = (q[0] + 2 * q[1]) / 3, o[3] = q[1];
             }
-            for (int i = 0; i < 4; ++i) seg[size_t(i) * dim + e] = out[i];
+            for (int i = 0; i < 4; ++i) seg[size_t(i) * dim + e] = o[i];
         }
-        segs.push_back(std::move(seg));
     }
-    return segs;
 }
 
 void validateDirection(const char* dir, int n, int order, const std::vector<double>& T, double& lo,
@@ -190,30 +188,38 @@ std::vector<BezierPatch> nurbsToBezier(const NurbsSurface& s) {
             double* o = &cu.pts[size_t(i) * cu.dim + size_t(j) * 3];
             o[0] = p.x, o[1] = p.y, o[2] = p.z;
         }
-    std::vector<std::vector<double>> uSegs = bezierSegments(cu, ulo, uhi);
+    const std::vector<double> bu = breakpoints(s.uknot, ulo, uhi), bv = breakpoints(s.vknot, vlo, vhi);
+    const size_t nu = bu.size() - 1, nv = bv.size() - 1;
+    // Both passes write their spans flat, one buffer each (not a vector per span).
+    const size_t useg = size_t(4) * size_t(cu.dim);
+    std::vector<double> uSegs(nu * useg);
+    bezierSegments(cu, bu, 0, nu, uSegs.data());
 
-    std::vector<BezierPatch> out;
-    out.reserve(uSegs.size() * (breakpoints(s.vknot, vlo, vhi).size() - 1));  // one patch per (u, v) span
-    for (const std::vector<double>& useg : uSegs) {
-        // v direction: point j holds row j of the 4 Bezier columns of this u span (4 x 3 numbers).
+    std::vector<BezierPatch> out(nu * nv);  // one patch per (u, v) span, u spans outer
+    {
         Curve cv;
         cv.knots = s.vknot;
         cv.degree = s.vorder - 1;
         cv.dim = 12;
         cv.pts.resize(size_t(s.nv) * 12);
-        for (int j = 0; j < s.nv; ++j)
-            for (int c = 0; c < 4; ++c)
-                for (int d = 0; d < 3; ++d)
-                    cv.pts[size_t(j) * 12 + size_t(c) * 3 + d] =
-                        useg[size_t(c) * 3 * s.nv + size_t(j) * 3 + d];
-        for (const std::vector<double>& vseg : bezierSegments(cv, vlo, vhi)) {
-            BezierPatch b;
-            for (int r = 0; r < 4; ++r)
-                for (int c = 0; c < 4; ++c) {
-                    const double* q = &vseg[size_t(r) * 12 + size_t(c) * 3];
-                    b.at(c, r) = {float(q[0]), float(q[1]), float(q[2])};
-                }
-            out.push_back(b);
+        std::vector<double> vSegs(nv * 48);
+        for (size_t us = 0; us < nu; ++us) {
+            // v direction: point j holds row j of the 4 Bezier columns of this u span (4 x 3 numbers).
+            const double* seg = &uSegs[us * useg];
+            for (int j = 0; j < s.nv; ++j)
+                for (int c = 0; c < 4; ++c)
+                    for (int d = 0; d < 3; ++d)
+                        cv.pts[size_t(j) * 12 + size_t(c) * 3 + d] =
+                            seg[size_t(c) * 3 * s.nv + size_t(j) * 3 + d];
+            bezierSegments(cv, bv, 0, nv, vSegs.data());
+            for (size_t vs = 0; vs < nv; ++vs) {
+                BezierPatch& b = out[us * nv + vs];
+                for (int row = 0; row < 4; ++row)
+                    for (int c = 0; c < 4; ++c) {
+                        const double* q = &vSegs[vs * 48 + size_t(row) * 12 + size_t(c) * 3];
+                        b.at(c, row) = {float(q[0]), float(q[1]), float(q[2])};
+                    }
+            }
         }
     }
     return out;
