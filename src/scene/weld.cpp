@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <tuple>
+#include <unordered_map>
 
 #include "core/buffer_allocator.h"
 
@@ -152,30 +153,8 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
     auto snapCorners = [&](const CornerItem* items, size_t count, WeldPlan* out) {
         if (count <= kLinearCorners) return snapFew(items, count, out);
         size_t moved = 0;
-        // The representatives of each cell in the order they were made: a list through `reps` from the
-        // cell's slot of an open-addressing table (a node-based map with a vector per cell allocated twice
-        // per new cell: most of this serial pass on 24 Big Guys).
-        constexpr uint32_t kEnd = 0xffffffffu;
-        struct Node {
-            Rep rep;
-            uint32_t next;
-        };
-        struct Slot {
-            CellKey key;
-            uint32_t head = kEnd, tail = kEnd;  // head kEnd: empty
-        };
-        std::vector<Node> reps;
-        reps.reserve(count);  // no reallocation: `found` points into it
-        size_t slotCount = 16;
-        while (slotCount < 2 * count) slotCount *= 2;
-        std::vector<Slot> slots(slotCount);
-        auto slotOf = [&](const CellKey& key) -> Slot& {
-            size_t h = (CellHash{}(key)*0x9E3779B97F4A7C15ull) >> 20;
-            for (;; ++h) {
-                Slot& sl = slots[h & (slotCount - 1)];
-                if (sl.head == kEnd || sl.key == key) return sl;
-            }
-        };
+        std::unordered_map<CellKey, std::vector<Rep>, CellHash> reps;
+        reps.reserve(count);
         for (size_t n = 0; n < count; ++n) {
             const uint32_t id = items[n].id(), pi = id / 4;
             const int c = kCorners[id % 4];
@@ -183,12 +162,20 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
             CellKey k = keyOf(p);
             const Rep* found = nullptr;
             auto search = [&](CellKey cellKey) {
-                for (uint32_t r = slotOf(cellKey).head; r != kEnd; r = reps[r].next)
-                    if (near(reps[r].rep.p, p, tol)) {
-                        found = &reps[r].rep;
+                auto it = reps.find(cellKey);
+                if (it == reps.end()) return;
+                for (const Rep& r : it->second)
+                    if (near(r.p, p, tol)) {
+                        found = &r;
                         return;
                     }
             };
+            // The point's own cell first (the common case), then those of the 26 neighbours that a point
+            // within tol can lie in: along each axis, the lower neighbour only when p is near the cell's
+            // lower side, the upper one only when near its upper side. "Near" is 1.5 tol, not tol, so
+            // that the float rounding of keyOf (about 1e-7 of the coordinate, against tol = 1e-5 of the
+            // scene's size) never hides a cell; the cells skipped hold no point within tol, so the same
+            // representative is found as when searching all 26.
             search(k);
             auto reach = [&](float v, int64_t kv, int64_t& lo, int64_t& hi) {
                 bool lower, upper;
@@ -201,18 +188,10 @@ WeldResult weldSharedEdges(std::span<BezierPatch> patches, float tol, WeldPlan* 
                 for (int64_t dy = y0; dy <= y1 && !found; ++dy)
                     for (int64_t dz = z0; dz <= z1 && !found; ++dz)
                         if (dx || dy || dz) search({k.x + dx, k.y + dy, k.z + dz});
-            if (found) {
+            if (found)
                 moved += snapOnto(*found, pi, c, p, out), repOf[id] = repId(*found);
-            } else {
-                const uint32_t r = uint32_t(reps.size());
-                reps.push_back({{p, pi, uint8_t(c)}, kEnd});
-                Slot& sl = slotOf(k);
-                if (sl.head == kEnd)
-                    sl.key = k, sl.head = r;
-                else
-                    reps[sl.tail].next = r;
-                sl.tail = r;
-            }
+            else
+                reps[k].push_back({p, pi, uint8_t(c)});
         }
         return moved;
     };
