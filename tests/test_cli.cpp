@@ -491,22 +491,27 @@ TEST(Cli, AdaptiveWritesItsMapAndRejectsBadOptions) {
     fs::remove_all(dir);
 }
 
+// The executable's own dynamic dependencies as `readelf -d` lists them (ldd would list theirs too).
+std::string neededLibraries() {
+    const std::string file = "/tmp/tessera_needed_" + std::to_string(getpid());
+    const std::string deps = std::string("readelf -d ") + TESSERA_BINARY + " > " + file + " 2>&1";
+    EXPECT_EQ(std::system(deps.c_str()), 0);
+    std::ifstream f(file);
+    std::stringstream needed;
+    needed << f.rdbuf();
+    fs::remove(file);
+    return needed.str();
+}
+
 // OpenImageIO lives in a module loaded on first use (shading/texture_module.h): the executable does not
 // link it (so a run without textures does not pay for its ~260 libraries), a textured scene loads it, and
 // a missing or wrong module is a clear input error (exit 2, no image) rather than a crash.
 TEST(Cli, TexturesLoadTheOpenImageIOModuleOnlyWhenNeeded) {
     CommandResult r = run("--version");
     ASSERT_EQ(r.exitCode, 0) << r.output;
-    // The executable's own dynamic dependencies (ldd lists their dependencies too).
-    const std::string deps = std::string("readelf -d ") + TESSERA_BINARY + " > /tmp/tessera_needed_" +
-                             std::to_string(getpid()) + " 2>&1";
-    ASSERT_EQ(std::system(deps.c_str()), 0);
-    std::ifstream f("/tmp/tessera_needed_" + std::to_string(getpid()));
-    std::stringstream needed;
-    needed << f.rdbuf();
-    fs::remove("/tmp/tessera_needed_" + std::to_string(getpid()));
-    EXPECT_NE(needed.str().find("NEEDED"), std::string::npos) << needed.str();
-    EXPECT_EQ(needed.str().find("OpenImageIO"), std::string::npos) << needed.str();
+    const std::string needed = neededLibraries();
+    EXPECT_NE(needed.find("NEEDED"), std::string::npos) << needed;
+    EXPECT_EQ(needed.find("OpenImageIO"), std::string::npos) << needed;
 
     fs::path dir = tempDir();
     const std::string out = (dir / "t.png").string();
@@ -535,24 +540,14 @@ TEST(Cli, TexturesLoadTheOpenImageIOModuleOnlyWhenNeeded) {
     fs::remove_all(dir);
 }
 
-}  // namespace tessera::test::cli_tests
-
-namespace tessera::test::cli_tests {
-
 // OpenEXR is a module as well (io/exr_module.h): the executable does not link it, a PNG render never loads
 // it (it runs with the module's path pointing nowhere), and an .exr output with the module missing fails
 // before the render, naming the file, the module and each place tried: exit 2 and no file.
 TEST(Cli, ExrFilesLoadTheOpenEXRModuleOnlyWhenNeeded) {
-    const std::string deps = std::string("readelf -d ") + TESSERA_BINARY + " > /tmp/tessera_needed_exr_" +
-                             std::to_string(getpid()) + " 2>&1";
-    ASSERT_EQ(std::system(deps.c_str()), 0);
-    std::ifstream f("/tmp/tessera_needed_exr_" + std::to_string(getpid()));
-    std::stringstream needed;
-    needed << f.rdbuf();
-    fs::remove("/tmp/tessera_needed_exr_" + std::to_string(getpid()));
-    EXPECT_NE(needed.str().find("NEEDED"), std::string::npos) << needed.str();
-    EXPECT_EQ(needed.str().find("OpenEXR"), std::string::npos) << needed.str();
-    EXPECT_EQ(needed.str().find("Imath"), std::string::npos) << needed.str();
+    const std::string needed = neededLibraries();
+    EXPECT_NE(needed.find("NEEDED"), std::string::npos) << needed;
+    EXPECT_EQ(needed.find("OpenEXR"), std::string::npos) << needed;
+    EXPECT_EQ(needed.find("Imath"), std::string::npos) << needed;
 
     fs::path dir = tempDir();
     const std::string absent = (dir / "absent.so").string();

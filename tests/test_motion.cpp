@@ -24,6 +24,14 @@ namespace tessera::test::motion_tests {
 
 namespace {
 
+// `p` turned by `degrees` about the view axis through depth `depth` (the line x = y = 0 there).
+BezierPatch turnedAboutViewAxis(const BezierPatch& p, double degrees, float depth) {
+    const Mat4 r = Mat4::rotate(degrees, 0, 0, 1);
+    BezierPatch turned;
+    for (int c = 0; c < 16; ++c) turned.cp[c] = r.point(p.cp[c] - Vec3{0, 0, depth}) + Vec3{0, 0, depth};
+    return turned;
+}
+
 // A patch moving linearly from `a` (time 0) to `b` (time 1).
 void addMovingPatch(Scene& s, const BezierPatch& a, const BezierPatch& b, uint32_t object = 0) {
     addPatch(s, a, object);
@@ -498,9 +506,7 @@ TEST(MotionBlur, LaterKnotsKeepTheEdgeLatticeOrder) {
     // a boundary row), and each knot's corner is the patch's corner at that knot.
     Scene s = cameraSpaceScene(96, 72, 40.f);
     const BezierPatch square = flatSquare(1.4f, 5.f, 0.2f, 0.1f);
-    BezierPatch turned;
-    const Mat4 r = Mat4::rotate(20, 0, 0, 1);
-    for (int c = 0; c < 16; ++c) turned.cp[c] = r.point(square.cp[c] - Vec3{0, 0, 5.f}) + Vec3{0, 0, 5.f};
+    const BezierPatch turned = turnedAboutViewAxis(square, 20, 5.f);
     const Projector pr(s.camera);
     ReyesView view(s.camera);
     const BezierPatch* knots[2] = {&square, &turned};
@@ -617,9 +623,7 @@ namespace tessera::test::motion_tests {
 TEST(MotionBlur, RecycledGridEqualsAFreshOne) {
     Scene s = cameraSpaceScene(96, 72, 40.f);
     const BezierPatch square = flatSquare(1.4f, 5.f, 0.2f, 0.1f);
-    BezierPatch turned;
-    const Mat4 r = Mat4::rotate(20, 0, 0, 1);
-    for (int c = 0; c < 16; ++c) turned.cp[c] = r.point(square.cp[c] - Vec3{0, 0, 5.f}) + Vec3{0, 0, 5.f};
+    const BezierPatch turned = turnedAboutViewAxis(square, 20, 5.f);
     ReyesView moving(s.camera);
     const BezierPatch* knots[2] = {&square, &turned};
     moving.patches = &square;

@@ -28,4 +28,18 @@ struct ModuleSpec {
 // executable's directory (the build tree's top), ../lib/tessera beside it (an install) and builtPath.
 const void* loadModule(const ModuleSpec& spec, std::string& error);
 
+// A module's table as its caller keeps it (once per process, in a function-local static): the table, or
+// nullptr and why it could not be loaded.
+template <class Api>
+struct LoadedModule {
+    const Api* api = nullptr;
+    std::string error;
+};
+template <class Api>
+LoadedModule<Api> loadModuleAs(const ModuleSpec& spec) {
+    LoadedModule<Api> m;
+    m.api = static_cast<const Api*>(loadModule(spec, m.error));
+    return m;
+}
+
 }  // namespace tessera

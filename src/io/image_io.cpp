@@ -207,30 +207,20 @@ void writePng(const std::string& path, const Image& image, const OutputEncoding&
 namespace {
 // The OpenEXR module (io/exr_module.h), loaded on the first .exr read or written; throws naming `path` when
 // it cannot be loaded.
-struct LoadedExrModule {
-    const ExrModuleApi* api = nullptr;
-    std::string error;
-};
-
-const LoadedExrModule& loadedExrModule() {
-    static const LoadedExrModule loaded = [] {
+const LoadedModule<ExrModuleApi>& loadedExrModule() {
 #ifdef TESSERA_EXR_MODULE_PATH
-        const char* builtPath = TESSERA_EXR_MODULE_PATH;
+    const char* builtPath = TESSERA_EXR_MODULE_PATH;
 #else
-        const char* builtPath = nullptr;
+    const char* builtPath = nullptr;
 #endif
-        const ModuleSpec spec{"libtessera_exr.so", "TESSERA_EXR_MODULE",
-                              builtPath,           kExrModuleEntry,
-                              kExrModuleVersion,   "OpenEXR files need Tessera's OpenEXR module"};
-        LoadedExrModule m;
-        m.api = static_cast<const ExrModuleApi*>(loadModule(spec, m.error));
-        return m;
-    }();
+    static const LoadedModule<ExrModuleApi> loaded =
+        loadModuleAs<ExrModuleApi>({"libtessera_exr.so", "TESSERA_EXR_MODULE", builtPath, kExrModuleEntry,
+                                    kExrModuleVersion, "OpenEXR files need Tessera's OpenEXR module"});
     return loaded;
 }
 
 const ExrModuleApi& exrModule(const std::string& path) {
-    const LoadedExrModule& loaded = loadedExrModule();
+    const LoadedModule<ExrModuleApi>& loaded = loadedExrModule();
     if (!loaded.api) throw std::runtime_error(path + ": " + loaded.error);
     return *loaded.api;
 }

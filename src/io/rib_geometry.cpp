@@ -1471,6 +1471,11 @@ bool isQuadricRequest(const std::string& name) {
 
 namespace {
 
+// Whether object space maps into camera space mirrored (a negative determinant of the linear part).
+bool mirrorsIntoCamera(const Mat4& cameraFromWorld, const Mat4& worldFromObject) {
+    return (cameraFromWorld * worldFromObject).det3() < 0;
+}
+
 // The primitive's attributes from the graphics state (the object id of its attribute block or name); the
 // orientation rule of RI spec 4.2.4 at shutter open.
 // `worldFromObject`: the CTM at shutter open.
@@ -1489,7 +1494,7 @@ PatchAttributes primitiveAttributes(const PrimitiveContext& c, const Mat4& world
     a.areaLight = c.state.attributes().areaLight;
     const bool mirrored = c.orientation
                               ? c.orientation->mirrored(scene.camera.cameraFromWorld, worldFromObject)
-                              : (scene.camera.cameraFromWorld * worldFromObject).det3() < 0;
+                              : mirrorsIntoCamera(scene.camera.cameraFromWorld, worldFromObject);
     a.flipNormal = c.state.attributes().rightHanded != mirrored;
     return a;
 }
@@ -1512,7 +1517,7 @@ bool OrientationCache::mirrored(const Mat4& cameraFromWorld, const Mat4& worldFr
     if (!valid_ || std::memcmp(camera_.m, cameraFromWorld.m, sizeof(camera_.m)) != 0 ||
         std::memcmp(object_.m, worldFromObject.m, sizeof(object_.m)) != 0) {
         camera_ = cameraFromWorld, object_ = worldFromObject;
-        mirrored_ = (cameraFromWorld * worldFromObject).det3() < 0;
+        mirrored_ = mirrorsIntoCamera(cameraFromWorld, worldFromObject);
         valid_ = true;
     }
     return mirrored_;

@@ -167,8 +167,8 @@ class LazyPieces {
     void split(uint32_t surface, SurfaceSlot& slot);
     void release(SurfaceSlot& slot);
 
-    // Freed grids are kept per thread and diced into again (Grid::clearKeepingStorage): a grid's ten-odd
-    // arrays were otherwise allocated and freed per piece, often by different threads, which glibc's
+    // Freed grids are kept per thread and diced into again (Grid::clearKeepingStorage): a grid's arrays
+    // (up to 19) were otherwise allocated and freed per piece, often by different threads, which glibc's
     // allocator serves from locked arenas and fresh pages (issue 18: "reusing per-thread buffers").
     static constexpr size_t kSpareGridsPerThread = 32;
     std::unique_ptr<Grid> takeSpareGrid() {

@@ -10,32 +10,20 @@
 namespace tessera {
 
 namespace {
-struct LoadedModule {
-    const TextureModuleApi* api = nullptr;
-    std::string error;  // why it could not be loaded (when api is nullptr)
-};
-
-LoadedModule loadTextureModule() {
+const LoadedModule<TextureModuleApi>& textureModule() {
 #ifdef TESSERA_TEXTURE_MODULE_PATH
     const char* builtPath = TESSERA_TEXTURE_MODULE_PATH;
 #else
     const char* builtPath = nullptr;
 #endif
-    const ModuleSpec spec{
-        "libtessera_texture_oiio.so", "TESSERA_TEXTURE_MODULE", builtPath,
-        kTextureModuleEntry,          kTextureModuleVersion,    "textures need Tessera's OpenImageIO module"};
-    LoadedModule m;
-    m.api = static_cast<const TextureModuleApi*>(loadModule(spec, m.error));
-    return m;
-}
-
-const LoadedModule& textureModule() {
-    static const LoadedModule module = loadTextureModule();
+    static const LoadedModule<TextureModuleApi> module = loadModuleAs<TextureModuleApi>(
+        {"libtessera_texture_oiio.so", "TESSERA_TEXTURE_MODULE", builtPath, kTextureModuleEntry,
+         kTextureModuleVersion, "textures need Tessera's OpenImageIO module"});
     return module;
 }
 
 const TextureModuleApi& requireTextureModule() {
-    const LoadedModule& m = textureModule();
+    const LoadedModule<TextureModuleApi>& m = textureModule();
     if (!m.api) throw std::runtime_error(m.error);
     return *m.api;
 }
@@ -110,13 +98,13 @@ Color surfaceTextureColor(const Textures& textures, const Material& m, const Pro
 }
 
 std::string textureReadError(const std::string& path) {
-    const LoadedModule& m = textureModule();
+    const LoadedModule<TextureModuleApi>& m = textureModule();
     return m.api ? m.api->readError(path) : m.error;
 }
 
 std::string makeTexture(const std::string& picture, const std::string& texture, const std::string& swrap,
                         const std::string& twrap) {
-    const LoadedModule& m = textureModule();
+    const LoadedModule<TextureModuleApi>& m = textureModule();
     return m.api ? m.api->makeTexture(picture, texture, swrap, twrap) : m.error;
 }
 
