@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <map>
 #include <numbers>
 
@@ -242,6 +244,108 @@ TEST(ReyesRasterize, Avx2SampleTestsEqualTheScalarLoop) {
                     EXPECT_GT(a.stats["sample_tests"].get<uint64_t>(), 0u);
                 }
         }
+}
+
+// A shadow map's depth pass writes straight into the map (rasterizeGridDepth) instead of going through a
+// sample tile: against rasterizeGrid on a tile whose samples sit at the texel centres (the AVX2 and the
+// scalar path), the same depth in every texel, bit for bit, with fewer sample tests (the centres inside each
+// micropolygon's bound, not every texel the bound overlaps). The grids
+// overlap one another, reach past the bucket, hold micropolygons from a third of a texel to 100 texels
+// wide (past the AVX2 path's 32), degenerate ones, vertices exactly on texel centres (the fill rule
+// decides), vertices nearer than the near plane and one one-sided grid; rows of 1 to 20 micropolygons (the
+// AVX2 path takes 8 at a time).
+TEST(ReyesRasterize, DepthPassEqualsTheSampleTileRasterizer) {
+    const int width = 128, height = 96;
+    const Rect target{16, 8, 80, 72};
+    const float nearZ = 0.5f;
+    uint32_t state = 7;
+    auto uniform = [&] {
+        state = state * 1664525u + 1013904223u;
+        return float(state >> 8) / 16777216.f;
+    };
+    std::vector<Grid> grids;
+    for (float texels : {0.35f, 1.f, 1.f, 2.5f, 8.f, 40.f, 100.f})
+        for (int copy = 0; copy < 3; ++copy) {
+            Grid g;
+            g.nu = 1 + int(uniform() * 20.f), g.nv = 1 + int(uniform() * 9.f);  // rows of 8 and fewer
+            const float x0 = target.x0 - 6.f + uniform() * (target.width() + 12.f - texels * g.nu * 0.5f);
+            const float y0 = target.y0 - 6.f + uniform() * (target.height() + 12.f - texels * g.nv * 0.5f);
+            const bool onCentres = copy == 1;  // every vertex on a texel centre (integer steps only)
+            const bool collapsedRow = copy == 2;
+            for (int j = 0; j <= g.nv; ++j)
+                for (int i = 0; i <= g.nu; ++i) {
+                    float x = x0 + texels * (i + 0.3f * (uniform() - 0.5f));
+                    float y = y0 + texels * ((collapsedRow && j == 1 ? 0 : j) + 0.3f * (uniform() - 0.5f));
+                    if (onCentres) x = std::floor(x) + 0.5f, y = std::floor(y) + 0.5f;
+                    g.X.push_back(rasterToFixed(x)), g.Y.push_back(rasterToFixed(y));
+                    g.Z.push_back(0.3f + 4.f * uniform());  // some in front of the near plane
+                    g.front.push_back(uint8_t(uniform() < 0.5f));
+                }
+            g.R.assign(g.X.size(), 0.f), g.G = g.R, g.B = g.R;
+            g.twoSided = copy != 0 || texels != 2.5f;  // as the depth pass dices them, but for one grid
+            grids.push_back(std::move(g));
+        }
+    // The sample tests: the texel centres of the target inside each micropolygon's bound (none for one
+    // facing away on a one-sided grid).
+    uint64_t centres = 0;
+    for (const Grid& g : grids)
+        for (int j = 0; j < g.nv; ++j)
+            for (int i = 0; i < g.nu; ++i) {
+                const int a = j * (g.nu + 1) + i, corners[4] = {a, a + 1, a + g.nu + 2, a + g.nu + 1};
+                if (!g.twoSided &&
+                    !(g.front[a] | g.front[a + 1] | g.front[a + g.nu + 2] | g.front[a + g.nu + 1]))
+                    continue;
+                int32_t x0 = INT32_MAX, x1 = INT32_MIN, y0 = INT32_MAX, y1 = INT32_MIN;
+                for (int c : corners)
+                    x0 = std::min(x0, g.X[c]), x1 = std::max(x1, g.X[c]), y0 = std::min(y0, g.Y[c]),
+                    y1 = std::max(y1, g.Y[c]);
+                int64_t n = 0;
+                for (int y = target.y0; y < target.y1; ++y)
+                    for (int x = target.x0; x < target.x1; ++x) {
+                        const int32_t cx = x * 256 + 128, cy = y * 256 + 128;
+                        n += cx >= x0 && cx <= x1 && cy >= y0 && cy <= y1;
+                    }
+                centres += uint64_t(n);
+            }
+    const float inf = std::numeric_limits<float>::infinity(), outside = -7.f;
+    for (const bool avx2 : {true, false}) {
+        reyesUseAvx2(avx2);
+        std::vector<float> depth(size_t(width) * height, outside);
+        for (int y = target.y0; y < target.y1; ++y)
+            for (int x = target.x0; x < target.x1; ++x) depth[size_t(y) * width + x] = inf;
+        uint64_t tests = 0;
+        for (const Grid& g : grids) tests += rasterizeGridDepth(g, target, depth.data(), width, nearZ);
+        SampleTile tile;
+        tile.deferPixelFill = true;
+        tile.reset(target, 1, 1, 0, inf, SamplerKind::Jittered);
+        size_t i = 0;
+        for (int y = target.y0; y < target.y1; ++y)
+            for (int x = target.x0; x < target.x1; ++x, ++i)
+                tile.sx[i] = (x << kSubpixelBits) + 128, tile.sy[i] = (y << kSubpixelBits) + 128;
+        uint64_t tileTests = 0;
+        for (const Grid& g : grids) tileTests += rasterizeGrid(g, tile, nearZ);
+        tile.leaveStrataOrder();
+        EXPECT_EQ(tests, centres) << "AVX2 " << avx2;
+        int covered = 0, differ = 0;
+        i = 0;
+        for (int y = 0; y < height; ++y)
+            for (int x = 0; x < width; ++x) {
+                const float d = depth[size_t(y) * width + x];
+                if (x < target.x0 || x >= target.x1 || y < target.y0 || y >= target.y1) {
+                    differ += d != outside;  // nothing written beside the bucket
+                    continue;
+                }
+                const float want = tile.z[size_t(y - target.y0) * target.width() + size_t(x - target.x0)];
+                differ += std::memcmp(&d, &want, sizeof d) != 0;
+                covered += d < inf;
+            }
+        std::printf("AVX2 %d: %d of %d texels covered, %d differ; %llu sample tests (the tile's: %llu)\n",
+                    int(avx2), covered, target.width() * target.height(), differ, (unsigned long long)tests,
+                    (unsigned long long)tileTests);
+        EXPECT_EQ(differ, 0) << "AVX2 " << avx2;
+        EXPECT_GT(covered, target.width() * target.height() / 2);
+    }
+    reyesUseAvx2(true);
 }
 
 TEST(ReyesWatertight, EdgesSharedOnlyUpToRoundingAreWelded) {

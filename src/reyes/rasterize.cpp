@@ -475,7 +475,292 @@ uint64_t rasterizeGridNearestImpl(const Grid& g, SampleTile& tile, float nearZ) 
     return tests;
 }
 
+// One triangle of rasterizeGridDepth, oriented as setupTriangleEdges orients it (vertices 1 and 2 swapped
+// when clockwise), with its corners' fixed-point positions: a micropolygon of about a texel holds one texel
+// centre or none, so its edge functions are evaluated at that centre directly instead of set up as A, B, C
+// for many samples (the same integers: see depthTestSample).
+struct DepthTriangle {
+    int64_t x[3], y[3];
+    int v[3];
+    float invArea;
+    bool valid;
+};
+
+[[gnu::always_inline]] inline DepthTriangle depthTriangle(const Grid& g, int i0, int i1, int i2) {
+    DepthTriangle t;
+    const int64_t x0 = g.X[size_t(i0)], y0 = g.Y[size_t(i0)];
+    int64_t x1 = g.X[size_t(i1)], y1 = g.Y[size_t(i1)], x2 = g.X[size_t(i2)], y2 = g.Y[size_t(i2)];
+    int64_t area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+    t.valid = area != 0;
+    if (area < 0) {
+        std::swap(x1, x2), std::swap(y1, y2), std::swap(i1, i2);
+        area = -area;
+    }
+    t.x[0] = x0, t.x[1] = x1, t.x[2] = x2;
+    t.y[0] = y0, t.y[1] = y1, t.y[2] = y2;
+    t.v[0] = i0, t.v[1] = i1, t.v[2] = i2;
+    t.invArea = t.valid ? 1.f / float(area) : 0.f;
+    return t;
+}
+
+// The edge function of edge a->b at (sx, sy) less the fill-rule bias: setupTriangleEdges' A sx + B sy + C
+// (A = -(by - ay), B = bx - ax, C = -(A ax + B ay) - bias), the same integer.
+[[gnu::always_inline]] inline int64_t edgeAt(int64_t ax, int64_t ay, int64_t bx, int64_t by, int64_t sx,
+                                             int64_t sy) {
+    return (bx - ax) * (sy - ay) - (by - ay) * (sx - ax) - fillBias<int64_t>(ax, ay, bx, by);
+}
+
+// rasterizeGridDepth's test of sample (sx, sy) against triangle t: insideTriangle's test and weights, and
+// the depth as shadeSampleIfInside interpolates it, written where nearer and not nearer than nearZ.
+[[gnu::always_inline]] inline bool depthTestSample(const DepthTriangle& t, const Grid& g, int64_t sx,
+                                                   int64_t sy, float& depth, float nearZ) {
+    if (!t.valid) return false;
+    const int64_t w0 = edgeAt(t.x[1], t.y[1], t.x[2], t.y[2], sx, sy);
+    if (w0 < 0) return false;
+    const int64_t w1 = edgeAt(t.x[2], t.y[2], t.x[0], t.y[0], sx, sy);
+    if (w1 < 0) return false;
+    const int64_t w2 = edgeAt(t.x[0], t.y[0], t.x[1], t.y[1], sx, sy);
+    if (w2 < 0) return false;
+    const float l1 = float(w1) * t.invArea, l2 = float(w2) * t.invArea, l0 = 1.f - l1 - l2;
+    const float z = l0 * g.Z[size_t(t.v[0])] + l1 * g.Z[size_t(t.v[1])] + l2 * g.Z[size_t(t.v[2])];
+    if (z < depth && !(z < nearZ)) depth = z;
+    return true;
+}
+
+constexpr int32_t kHalfTexel = 1 << (kSubpixelBits - 1);  // a texel's centre, fixed point
+
+// The texel centres (p << 8) + 128 of `target` inside [lo, hi]: p from ceil((lo - 128) / 256) to
+// floor((hi - 128) / 256).
+[[gnu::always_inline]] inline int32_t firstCentreAtOrAbove(int32_t lo) {
+    return (lo + kHalfTexel - 1) >> kSubpixelBits;
+}
+[[gnu::always_inline]] inline int32_t lastCentreAtOrBelow(int32_t hi) {
+    return (hi - kHalfTexel) >> kSubpixelBits;
+}
+
+// rasterizeGridDepth for micropolygon a of grid g (corners a, a + 1, a + stride + 1, a + stride): its
+// texel centres inside `target` tested and written; returns their count.
+[[gnu::always_inline]] inline uint64_t depthMicropolygon(const Grid& g, int a, int stride, Rect target,
+                                                         float* depth, int width, float nearZ) {
+    const int b = a + 1, c = a + stride + 1, d = a + stride;
+    if (!g.twoSided && !(g.front[a] | g.front[b] | g.front[c] | g.front[d])) return 0;
+    const int32_t* X = g.X.data();
+    const int32_t* Y = g.Y.data();
+    const int32_t minX = std::min(std::min(X[a], X[b]), std::min(X[c], X[d]));
+    const int32_t maxX = std::max(std::max(X[a], X[b]), std::max(X[c], X[d]));
+    const int32_t minY = std::min(std::min(Y[a], Y[b]), std::min(Y[c], Y[d]));
+    const int32_t maxY = std::max(std::max(Y[a], Y[b]), std::max(Y[c], Y[d]));
+    // The texel centres inside the bound: a micropolygon of about a texel holds one or none.
+    const int32_t cx0 = std::max(target.x0, firstCentreAtOrAbove(minX));
+    const int32_t cx1 = std::min(target.x1 - 1, lastCentreAtOrBelow(maxX));
+    const int32_t cy0 = std::max(target.y0, firstCentreAtOrAbove(minY));
+    const int32_t cy1 = std::min(target.y1 - 1, lastCentreAtOrBelow(maxY));
+    if (cx0 > cx1 || cy0 > cy1) return 0;
+    // The first triangle first (a sample on the diagonal belongs to one of them); the second is set up only
+    // for a centre the first does not hold.
+    const DepthTriangle t0 = depthTriangle(g, a, b, c);
+    DepthTriangle t1;
+    bool haveT1 = false;
+    for (int32_t py = cy0; py <= cy1; ++py) {
+        const int64_t sy = (int64_t(py) << kSubpixelBits) + kHalfTexel;
+        float* row = depth + size_t(py) * size_t(width);
+        for (int32_t px = cx0; px <= cx1; ++px) {
+            const int64_t sx = (int64_t(px) << kSubpixelBits) + kHalfTexel;
+            if (depthTestSample(t0, g, sx, sy, row[px], nearZ)) continue;
+            if (!haveT1) t1 = depthTriangle(g, a, c, d), haveT1 = true;
+            depthTestSample(t1, g, sx, sy, row[px], nearZ);
+        }
+    }
+    return uint64_t(cx1 - cx0 + 1) * uint64_t(cy1 - cy0 + 1);
+}
+
+uint64_t rasterizeGridDepthScalar(const Grid& g, Rect target, float* depth, int width, float nearZ) {
+    uint64_t tests = 0;
+    const int stride = g.nu + 1;
+    for (int j = 0; j < g.nv; ++j)
+        for (int i = 0; i < g.nu; ++i)
+            tests += depthMicropolygon(g, j * stride + i, stride, target, depth, width, nearZ);
+    return tests;
+}
+
+#if TESSERA_REYES_AVX2
+// Triangle (0, 1, 2) of 8 micropolygons in coordinates relative to each lane's sample, for
+// rasterizeGridDepthAvx2: the lanes whose sample it holds (sign bits) and its depth there, as
+// depthTriangle and depthTestSample compute them (oriented counter-clockwise, the same edge integers, the
+// same float operations: the same bits). Every coordinate is under 2^13 + 256 from the sample, so the
+// edge functions (products under 2^27) fit 32 bits and equal the 64-bit ones.
+struct DepthLanes {
+    __m256i inside;
+    __m256 z;
+};
+
+__attribute__((target("avx2"))) inline __m256i loadLanes(const int32_t* p) {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+}
+
+// The fill-rule bias of edge (dx, dy) per lane: 0 where it owns the samples on it (fillBias), else 1.
+__attribute__((target("avx2"))) inline __m256i fillBiasLanes(__m256i dx, __m256i dy) {
+    const __m256i zero = _mm256_setzero_si256();
+    const __m256i owns =
+        _mm256_or_si256(_mm256_cmpgt_epi32(dy, zero),
+                        _mm256_and_si256(_mm256_cmpeq_epi32(dy, zero), _mm256_cmpgt_epi32(zero, dx)));
+    return _mm256_andnot_si256(owns, _mm256_set1_epi32(1));
+}
+
+// edgeAt(a, b, 0, 0): (by - ay) ax - (bx - ax) ay - bias.
+__attribute__((target("avx2"))) inline __m256i edgeAtOrigin(__m256i ax, __m256i ay, __m256i bx, __m256i by) {
+    const __m256i dx = _mm256_sub_epi32(bx, ax), dy = _mm256_sub_epi32(by, ay);
+    return _mm256_sub_epi32(_mm256_sub_epi32(_mm256_mullo_epi32(dy, ax), _mm256_mullo_epi32(dx, ay)),
+                            fillBiasLanes(dx, dy));
+}
+
+__attribute__((target("avx2"))) inline DepthLanes depthLanes(__m256i x0, __m256i y0, __m256i x1, __m256i y1,
+                                                             __m256i x2, __m256i y2, __m256 z0, __m256 z1,
+                                                             __m256 z2) {
+    __m256i area = _mm256_sub_epi32(_mm256_mullo_epi32(_mm256_sub_epi32(x1, x0), _mm256_sub_epi32(y2, y0)),
+                                    _mm256_mullo_epi32(_mm256_sub_epi32(x2, x0), _mm256_sub_epi32(y1, y0)));
+    const __m256i valid =
+        _mm256_xor_si256(_mm256_cmpeq_epi32(area, _mm256_setzero_si256()), _mm256_set1_epi32(-1));
+    // Clockwise lanes: vertices 1 and 2 swapped.
+    const __m256i cw = _mm256_cmpgt_epi32(_mm256_setzero_si256(), area);
+    const __m256 cwf = _mm256_castsi256_ps(cw);
+    const __m256i ox1 = _mm256_blendv_epi8(x1, x2, cw), oy1 = _mm256_blendv_epi8(y1, y2, cw);
+    const __m256i ox2 = _mm256_blendv_epi8(x2, x1, cw), oy2 = _mm256_blendv_epi8(y2, y1, cw);
+    const __m256 oz1 = _mm256_blendv_ps(z1, z2, cwf), oz2 = _mm256_blendv_ps(z2, z1, cwf);
+    area = _mm256_abs_epi32(area);
+    const __m256i w0 = edgeAtOrigin(ox1, oy1, ox2, oy2);
+    const __m256i w1 = edgeAtOrigin(ox2, oy2, x0, y0);
+    const __m256i w2 = edgeAtOrigin(x0, y0, ox1, oy1);
+    DepthLanes out;
+    out.inside = _mm256_andnot_si256(_mm256_or_si256(_mm256_or_si256(w0, w1), w2), valid);
+    const __m256 invArea = _mm256_div_ps(_mm256_set1_ps(1.f), _mm256_cvtepi32_ps(area));
+    const __m256 l1 = _mm256_mul_ps(_mm256_cvtepi32_ps(w1), invArea);
+    const __m256 l2 = _mm256_mul_ps(_mm256_cvtepi32_ps(w2), invArea);
+    const __m256 l0 = _mm256_sub_ps(_mm256_sub_ps(_mm256_set1_ps(1.f), l1), l2);
+    out.z =
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(l0, z0), _mm256_mul_ps(l1, oz1)), _mm256_mul_ps(l2, oz2));
+    return out;
+}
+
+// rasterizeGridDepthScalar with 8 micropolygons of a row at a time: their bounds and texel centres, and,
+// for each that holds exactly one centre and spans under 2^13 units (32 texels), its two triangles' tests
+// and depths (depthLanes). The writes then go lane by lane in the scalar loop's order (the depth test keeps
+// the first of equal depths), each other micropolygon through depthMicropolygon in its turn.
+__attribute__((target("avx2"))) uint64_t rasterizeGridDepthAvx2(const Grid& g, Rect target, float* depth,
+                                                                int width, float nearZ) {
+    if (!g.twoSided) return rasterizeGridDepthScalar(g, target, depth, width, nearZ);
+    uint64_t tests = 0;
+    const int stride = g.nu + 1;
+    const int32_t* X = g.X.data();
+    const int32_t* Y = g.Y.data();
+    const float* Z = g.Z.data();
+    const __m256i tx0 = _mm256_set1_epi32(target.x0), tx1 = _mm256_set1_epi32(target.x1 - 1);
+    const __m256i ty0 = _mm256_set1_epi32(target.y0), ty1 = _mm256_set1_epi32(target.y1 - 1);
+    const __m256i belowHalf = _mm256_set1_epi32(kHalfTexel - 1), half = _mm256_set1_epi32(kHalfTexel);
+    const __m256i span = _mm256_set1_epi32(int32_t(kAvx2Span)), two = _mm256_set1_epi32(2);
+    for (int j = 0; j < g.nv; ++j) {
+        if (g.nu < 8) {
+            for (int i = 0; i < g.nu; ++i)
+                tests += depthMicropolygon(g, j * stride + i, stride, target, depth, width, nearZ);
+            continue;
+        }
+        for (int i = 0; i < g.nu; i += 8) {
+            // The row's last group ends at its end (the loads stay inside the grid), its lanes that the
+            // group before did left out.
+            const int start = std::min(i, g.nu - 8);
+            const unsigned fresh = (0xffu << (i - start)) & 0xffu;
+            const int a = j * stride + start, d = a + stride;  // lane k: corners a+k, a+k+1, d+k+1, d+k
+            const __m256i xa = loadLanes(X + a), xb = loadLanes(X + a + 1), xc = loadLanes(X + d + 1),
+                          xd = loadLanes(X + d);
+            const __m256i ya = loadLanes(Y + a), yb = loadLanes(Y + a + 1), yc = loadLanes(Y + d + 1),
+                          yd = loadLanes(Y + d);
+            const __m256i minX = _mm256_min_epi32(_mm256_min_epi32(xa, xb), _mm256_min_epi32(xc, xd));
+            const __m256i maxX = _mm256_max_epi32(_mm256_max_epi32(xa, xb), _mm256_max_epi32(xc, xd));
+            const __m256i minY = _mm256_min_epi32(_mm256_min_epi32(ya, yb), _mm256_min_epi32(yc, yd));
+            const __m256i maxY = _mm256_max_epi32(_mm256_max_epi32(ya, yb), _mm256_max_epi32(yc, yd));
+            const __m256i cx0 =
+                _mm256_max_epi32(tx0, _mm256_srai_epi32(_mm256_add_epi32(minX, belowHalf), kSubpixelBits));
+            const __m256i cx1 =
+                _mm256_min_epi32(tx1, _mm256_srai_epi32(_mm256_sub_epi32(maxX, half), kSubpixelBits));
+            const __m256i cy0 =
+                _mm256_max_epi32(ty0, _mm256_srai_epi32(_mm256_add_epi32(minY, belowHalf), kSubpixelBits));
+            const __m256i cy1 =
+                _mm256_min_epi32(ty1, _mm256_srai_epi32(_mm256_sub_epi32(maxY, half), kSubpixelBits));
+            const __m256i nx = _mm256_sub_epi32(cx1, cx0), ny = _mm256_sub_epi32(cy1, cy0);  // centres - 1
+            const __m256i none = _mm256_or_si256(nx, ny);  // sign: no centre
+            const unsigned some = ~unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(none))) & fresh;
+            if (!some) continue;
+            // Up to 2 x 2 centres and a span under 2^13 in both directions: the vector tests, one pass per
+            // centre of the 2 x 2 (the lanes that hold it).
+            const __m256i small = _mm256_and_si256(_mm256_cmpgt_epi32(span, _mm256_sub_epi32(maxX, minX)),
+                                                   _mm256_cmpgt_epi32(span, _mm256_sub_epi32(maxY, minY)));
+            const __m256i fewX = _mm256_cmpgt_epi32(two, nx), fewY = _mm256_cmpgt_epi32(two, ny);
+            const unsigned vectored = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(
+                                          _mm256_and_si256(_mm256_and_si256(fewX, fewY), small)))) &
+                                      some;
+            alignas(32) int32_t centreX[8], centreY[8], centres[8];
+            alignas(32) float zs[4][8];
+            unsigned hits[4] = {0, 0, 0, 0};
+            if (vectored) {
+                const __m256 za = _mm256_loadu_ps(Z + a), zb = _mm256_loadu_ps(Z + a + 1);
+                const __m256 zc = _mm256_loadu_ps(Z + d + 1), zd = _mm256_loadu_ps(Z + d);
+                const __m256i sx0 = _mm256_add_epi32(_mm256_slli_epi32(cx0, kSubpixelBits), half);
+                const __m256i sy0 = _mm256_add_epi32(_mm256_slli_epi32(cy0, kSubpixelBits), half);
+                for (int q = 0; q < 4; ++q) {
+                    const int qx = q & 1, qy = q >> 1;
+                    const __m256i holds = _mm256_and_si256(_mm256_cmpgt_epi32(nx, _mm256_set1_epi32(qx - 1)),
+                                                           _mm256_cmpgt_epi32(ny, _mm256_set1_epi32(qy - 1)));
+                    const unsigned lanes =
+                        unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(holds))) & vectored;
+                    if (!lanes) continue;
+                    const __m256i sx = _mm256_add_epi32(sx0, _mm256_set1_epi32(qx << kSubpixelBits));
+                    const __m256i sy = _mm256_add_epi32(sy0, _mm256_set1_epi32(qy << kSubpixelBits));
+                    const __m256i ax = _mm256_sub_epi32(xa, sx), ay = _mm256_sub_epi32(ya, sy);
+                    const __m256i bx = _mm256_sub_epi32(xb, sx), by = _mm256_sub_epi32(yb, sy);
+                    const __m256i cx = _mm256_sub_epi32(xc, sx), cy = _mm256_sub_epi32(yc, sy);
+                    const __m256i dx = _mm256_sub_epi32(xd, sx), dy = _mm256_sub_epi32(yd, sy);
+                    const DepthLanes t0 = depthLanes(ax, ay, bx, by, cx, cy, za, zb, zc);
+                    const DepthLanes t1 = depthLanes(ax, ay, cx, cy, dx, dy, za, zc, zd);
+                    hits[q] = unsigned(_mm256_movemask_ps(
+                                  _mm256_castsi256_ps(_mm256_or_si256(t0.inside, t1.inside)))) &
+                              lanes;
+                    _mm256_store_ps(zs[q], _mm256_blendv_ps(t1.z, t0.z, _mm256_castsi256_ps(t0.inside)));
+                }
+                _mm256_store_si256(reinterpret_cast<__m256i*>(centreX), cx0);
+                _mm256_store_si256(reinterpret_cast<__m256i*>(centreY), cy0);
+                _mm256_store_si256(reinterpret_cast<__m256i*>(centres),
+                                   _mm256_mullo_epi32(_mm256_add_epi32(nx, _mm256_set1_epi32(1)),
+                                                      _mm256_add_epi32(ny, _mm256_set1_epi32(1))));
+            }
+            for (unsigned mask = some; mask; mask &= mask - 1) {
+                const int k = __builtin_ctz(mask);
+                if (!((vectored >> k) & 1u)) {
+                    tests += depthMicropolygon(g, a + k, stride, target, depth, width, nearZ);
+                    continue;
+                }
+                tests += uint64_t(centres[k]);
+                for (int q = 0; q < 4; ++q) {
+                    if (!((hits[q] >> k) & 1u)) continue;
+                    float& texel =
+                        depth[size_t(centreY[k] + (q >> 1)) * size_t(width) + size_t(centreX[k] + (q & 1))];
+                    const float z = zs[q][k];
+                    if (z < texel && !(z < nearZ)) texel = z;
+                }
+            }
+        }
+    }
+    return tests;
+}
+#endif
+
 }  // namespace
+
+uint64_t rasterizeGridDepth(const Grid& g, Rect target, float* depth, int width, float nearZ) {
+#if TESSERA_REYES_AVX2
+    if (reyesAvx2Active()) return rasterizeGridDepthAvx2(g, target, depth, width, nearZ);
+#endif
+    return rasterizeGridDepthScalar(g, target, depth, width, nearZ);
+}
 
 uint64_t rasterizeGridNearest(const Grid& g, SampleTile& tile, float nearZ) {
     return tile.channels ? rasterizeGridNearestImpl<true>(g, tile, nearZ)

@@ -28,4 +28,12 @@ bool reyesAvx2Active();
 // holes stay unless micropolygons shrink to about 1/N pixel. Returns the number of samples tested.
 uint64_t rasterizeGridNearest(const Grid& grid, SampleTile& tile, float nearZ);
 
+// A shadow map's depth pass: one sample at the centre of each texel of `target`, depth only, written
+// straight into the map (`depth`: texel (x, y) at depth[y * width + x]) where nearer and not nearer than
+// nearZ. The same samples covered and the same depths, bit for bit, as rasterizeGrid on a tile of those
+// centres, without its colour, coverage and sample arrays. Returns the number of sample tests: the texel
+// centres inside each micropolygon's bound (rasterizeGrid counts every sample of the strata the bound
+// overlaps).
+uint64_t rasterizeGridDepth(const Grid& grid, Rect target, float* depth, int width, float nearZ);
+
 }  // namespace tessera

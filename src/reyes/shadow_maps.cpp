@@ -95,7 +95,6 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
     DepthBuffer depth(size_t(width) * size_t(height));  // every bucket writes its texels below
 
     struct Worker {
-        SampleTile tile;
         uint64_t grids = 0, micropolygons = 0, sampleTests = 0;
     };
     tbb::enumerable_thread_specific<Worker> workers;
@@ -103,7 +102,7 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
     pass.progress = nullptr;  // the frame's progress counts the frame's buckets only
     const TileLoopResult loop = runTileLoop(layout, pieces.work(), pass, workers, [&](int b, Worker& w) {
         const Rect t = layout.target(b);
-        bool started = false;
+        for (int py = t.y0; py < t.y1; ++py) std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
         auto dice = [&](const Piece& piece, Grid& g) {
             const PatchAttributes& attr = scene.attributes[piece.patch];
             ShadeInputs in{attr.kind,  &scene.materials[attr.material], true, attr.flipNormal, {},
@@ -114,30 +113,10 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
             ++w.grids;
             w.micropolygons += uint64_t(g.nu) * g.nv;
         };
+        // One sample at each texel's centre (where the lookups read the depth), written into the map.
         pieces.forEach(b, dice, [&](const Piece&, const Grid& grid) {
-            if (!started) {
-                w.tile.deferPixelFill = true;  // the depth is read after leaveStrataOrder
-                w.tile.reset(t, 1, 1, 0, kInf, SamplerKind::Jittered);
-                // One sample at each texel's centre: the lookups read the depth there.
-                size_t i = 0;
-                for (int py = t.y0; py < t.y1; ++py)
-                    for (int px = t.x0; px < t.x1; ++px, ++i) {
-                        w.tile.sx[i] = (px << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-                        w.tile.sy[i] = (py << kSubpixelBits) + (1 << (kSubpixelBits - 1));
-                    }
-                started = true;
-            }
-            w.sampleTests += rasterizeGrid(grid, w.tile, view.projector.nearClip);
+            w.sampleTests += rasterizeGridDepth(grid, t, depth.data(), width, view.projector.nearClip);
         });
-        if (!started) {
-            for (int py = t.y0; py < t.y1; ++py)
-                std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
-            return;
-        }
-        w.tile.leaveStrataOrder();  // the rasterizer's stratum-ordered depths back into pixel order
-        size_t i = 0;
-        for (int py = t.y0; py < t.y1; ++py)
-            for (int px = t.x0; px < t.x1; ++px, ++i) depth[size_t(py) * width + px] = w.tile.z[i];
     });
     // A cancelled loop skips buckets: their texels were never written.
     if (loop.cancelled) std::fill(depth.begin(), depth.end(), kInf);
