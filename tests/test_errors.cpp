@@ -163,6 +163,9 @@ TEST(BadInput, WrongTokenTypes) {
                    "array mixes numbers and strings");
     expectRejected("number_as_request.rib", "12 WorldBegin\n", 1,
                    "expected a RIB request, found number '12'");
+    // A number is printed as the shortest digits that read back as its value.
+    expectRejected("fraction_as_request.rib", "-12.50e0 WorldBegin\n", 1,
+                   "expected a RIB request, found number '-12.5'");
     expectRejected("fraction.bpt", "1.5\n", 1, "expected the patch count");
     expectRejected("word.bpt", "one\n", 1, "expected the patch count, found 'one'");
 }

@@ -45,8 +45,12 @@ std::string describe(const Token& t) {
     switch (t.type) {
         case TokenType::Request:
             return "request '" + printable(t.text) + "'";
-        case TokenType::Number:
-            return "number '" + t.text + "'";
+        case TokenType::Number: {
+            // The shortest digits that read back as the same double (`12` for 12, `0.5` for .50).
+            char digits[32];
+            const auto end = std::to_chars(digits, digits + sizeof digits, t.number).ptr;
+            return "number '" + std::string(digits, end) + "'";
+        }
         case TokenType::String:
             return "string \"" + printable(t.text) + "\"";
         case TokenType::ArrayBegin:
@@ -177,7 +181,6 @@ Token RibLexer::lexText() {
         }
         if (digits > 0 && (p >= text_.size() || isDelimiter(text_[p]))) {
             t.type = TokenType::Number;
-            t.text = text_.substr(start, p - start);
             pos_ = p;
             // Clinger's fast path (1990): an integer below 2^53 and a power of ten up to 1e22 are exact
             // doubles, so one IEEE division rounds their quotient correctly, the same double from_chars
@@ -196,7 +199,7 @@ Token RibLexer::lexText() {
             // Everything downstream is single precision: larger magnitudes would become infinities.
             if (ec != std::errc() || end != text_.data() + p || !std::isfinite(t.number) ||
                 std::fabs(t.number) > std::numeric_limits<float>::max())
-                fail(t.line, "invalid number '" + t.text + "': out of range");
+                fail(t.line, "invalid number '" + text_.substr(start, p - start) + "': out of range");
             return t;
         }
     }
