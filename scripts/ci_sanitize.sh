@@ -79,6 +79,13 @@ heavy+='|NewtonLanes\.BitIdenticalToScalarNewton|RtInstancing\.RaysHitInstancesA
 # machines have AVX2); what these add is the fallbacks' equality, a Release-stage property.
 heavy+='|Film\.Avx2ReconstructionAndBlurSamplesEqualTheScalarPaths|MotionBlur\.Avx2FiltersEqualTheFourWideFilters'
 heavy+='|ReyesRasterize\.Avx2SampleTestsEqualTheScalarLoop'
+# Three more that repeat what smaller tests run here (8-14 s each): the moving teapot's ray binning against
+# per-ray traversal and at 1 and 2 threads (as RtRayBinning's and the determinism tests above); Reyes with
+# ray-traced shadows against the ray tracer on two shipped scenes (that path runs here in
+# ReyesShadowMaps.EveryKindOfMapAgreesWithRayTracedShadows and the shadow-count test); the shipped motion
+# scenes at 64 spp in both engines (MotionBlur's and RtMotion's tests run the blur here).
+heavy+='|RtMotion\.BinningStaysExactAndImagesDoNotDependOnThreads|ReyesRayTracedShadows\.AgreeWithTheRayTracerOnShippedScenes'
+heavy+='|MotionBlurCrossEngine\.ShippedMotionScenesAgree'
 heavy+=')( |$)'
 exclude=(-E "$heavy")
 [ "${TESSERA_ASAN_ALL:-0}" = 1 ] && exclude=()
