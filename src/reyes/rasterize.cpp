@@ -475,53 +475,12 @@ uint64_t rasterizeGridNearestImpl(const Grid& g, SampleTile& tile, float nearZ) 
     return tests;
 }
 
-// One triangle of rasterizeGridDepth, oriented as setupTriangleEdges orients it (vertices 1 and 2 swapped
-// when clockwise), with its corners' fixed-point positions: a micropolygon of about a texel holds one texel
-// centre or none, so its edge functions are evaluated at that centre directly instead of set up as A, B, C
-// for many samples (the same integers: see depthTestSample).
-struct DepthTriangle {
-    int64_t x[3], y[3];
-    int v[3];
-    float invArea;
-    bool valid;
-};
-
-[[gnu::always_inline]] inline DepthTriangle depthTriangle(const Grid& g, int i0, int i1, int i2) {
-    DepthTriangle t;
-    const int64_t x0 = g.X[size_t(i0)], y0 = g.Y[size_t(i0)];
-    int64_t x1 = g.X[size_t(i1)], y1 = g.Y[size_t(i1)], x2 = g.X[size_t(i2)], y2 = g.Y[size_t(i2)];
-    int64_t area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
-    t.valid = area != 0;
-    if (area < 0) {
-        std::swap(x1, x2), std::swap(y1, y2), std::swap(i1, i2);
-        area = -area;
-    }
-    t.x[0] = x0, t.x[1] = x1, t.x[2] = x2;
-    t.y[0] = y0, t.y[1] = y1, t.y[2] = y2;
-    t.v[0] = i0, t.v[1] = i1, t.v[2] = i2;
-    t.invArea = t.valid ? 1.f / float(area) : 0.f;
-    return t;
-}
-
-// The edge function of edge a->b at (sx, sy) less the fill-rule bias: setupTriangleEdges' A sx + B sy + C
-// (A = -(by - ay), B = bx - ax, C = -(A ax + B ay) - bias), the same integer.
-[[gnu::always_inline]] inline int64_t edgeAt(int64_t ax, int64_t ay, int64_t bx, int64_t by, int64_t sx,
-                                             int64_t sy) {
-    return (bx - ax) * (sy - ay) - (by - ay) * (sx - ax) - fillBias<int64_t>(ax, ay, bx, by);
-}
-
-// rasterizeGridDepth's test of sample (sx, sy) against triangle t: insideTriangle's test and weights, and
-// the depth as shadeSampleIfInside interpolates it, written where nearer and not nearer than nearZ.
-[[gnu::always_inline]] inline bool depthTestSample(const DepthTriangle& t, const Grid& g, int64_t sx,
+// rasterizeGridDepth's test of sample (sx, sy) against triangle t: insideTriangle, then the depth as
+// shadeSampleIfInside interpolates it, written where nearer and not nearer than nearZ.
+[[gnu::always_inline]] inline bool depthTestSample(const TriangleSetup& t, const Grid& g, int64_t sx,
                                                    int64_t sy, float& depth, float nearZ) {
-    if (!t.valid) return false;
-    const int64_t w0 = edgeAt(t.x[1], t.y[1], t.x[2], t.y[2], sx, sy);
-    if (w0 < 0) return false;
-    const int64_t w1 = edgeAt(t.x[2], t.y[2], t.x[0], t.y[0], sx, sy);
-    if (w1 < 0) return false;
-    const int64_t w2 = edgeAt(t.x[0], t.y[0], t.x[1], t.y[1], sx, sy);
-    if (w2 < 0) return false;
-    const float l1 = float(w1) * t.invArea, l2 = float(w2) * t.invArea, l0 = 1.f - l1 - l2;
+    float l0, l1, l2;
+    if (!t.valid || !insideTriangle(t.e, sx, sy, l0, l1, l2)) return false;
     const float z = l0 * g.Z[size_t(t.v[0])] + l1 * g.Z[size_t(t.v[1])] + l2 * g.Z[size_t(t.v[2])];
     if (z < depth && !(z < nearZ)) depth = z;
     return true;
@@ -558,8 +517,8 @@ constexpr int32_t kHalfTexel = 1 << (kSubpixelBits - 1);  // a texel's centre, f
     if (cx0 > cx1 || cy0 > cy1) return 0;
     // The first triangle first (a sample on the diagonal belongs to one of them); the second is set up only
     // for a centre the first does not hold.
-    const DepthTriangle t0 = depthTriangle(g, a, b, c);
-    DepthTriangle t1;
+    const TriangleSetup t0 = setupTriangle(g, a, b, c);
+    TriangleSetup t1;
     bool haveT1 = false;
     for (int32_t py = cy0; py <= cy1; ++py) {
         const int64_t sy = (int64_t(py) << kSubpixelBits) + kHalfTexel;
@@ -567,7 +526,7 @@ constexpr int32_t kHalfTexel = 1 << (kSubpixelBits - 1);  // a texel's centre, f
         for (int32_t px = cx0; px <= cx1; ++px) {
             const int64_t sx = (int64_t(px) << kSubpixelBits) + kHalfTexel;
             if (depthTestSample(t0, g, sx, sy, row[px], nearZ)) continue;
-            if (!haveT1) t1 = depthTriangle(g, a, c, d), haveT1 = true;
+            if (!haveT1) t1 = setupTriangle(g, a, c, d), haveT1 = true;
             depthTestSample(t1, g, sx, sy, row[px], nearZ);
         }
     }
@@ -586,7 +545,7 @@ uint64_t rasterizeGridDepthScalar(const Grid& g, Rect target, float* depth, int 
 #if TESSERA_REYES_AVX2
 // Triangle (0, 1, 2) of 8 micropolygons in coordinates relative to each lane's sample, for
 // rasterizeGridDepthAvx2: the lanes whose sample it holds (sign bits) and its depth there, as
-// depthTriangle and depthTestSample compute them (oriented counter-clockwise, the same edge integers, the
+// setupTriangle and depthTestSample compute them (oriented counter-clockwise, the same edge integers, the
 // same float operations: the same bits). Every coordinate is under 2^13 + 256 from the sample, so the
 // edge functions (products under 2^27) fit 32 bits and equal the 64-bit ones.
 struct DepthLanes {
@@ -607,7 +566,8 @@ __attribute__((target("avx2"))) inline __m256i fillBiasLanes(__m256i dx, __m256i
     return _mm256_andnot_si256(owns, _mm256_set1_epi32(1));
 }
 
-// edgeAt(a, b, 0, 0): (by - ay) ax - (bx - ax) ay - bias.
+// The edge function of edge a->b at the origin less the fill-rule bias (setupTriangleEdges' C, the value
+// insideTriangle tests): (by - ay) ax - (bx - ax) ay - bias.
 __attribute__((target("avx2"))) inline __m256i edgeAtOrigin(__m256i ax, __m256i ay, __m256i bx, __m256i by) {
     const __m256i dx = _mm256_sub_epi32(bx, ax), dy = _mm256_sub_epi32(by, ay);
     return _mm256_sub_epi32(_mm256_sub_epi32(_mm256_mullo_epi32(dy, ax), _mm256_mullo_epi32(dx, ay)),

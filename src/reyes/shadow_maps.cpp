@@ -102,7 +102,8 @@ DepthBuffer renderDepthMap(const Scene& scene, const Camera& lightCamera, float 
     pass.progress = nullptr;  // the frame's progress counts the frame's buckets only
     const TileLoopResult loop = runTileLoop(layout, pieces.work(), pass, workers, [&](int b, Worker& w) {
         const Rect t = layout.target(b);
-        for (int py = t.y0; py < t.y1; ++py) std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
+        for (int py = t.y0; py < t.y1; ++py)
+            std::fill_n(&depth[size_t(py) * width + t.x0], t.x1 - t.x0, kInf);
         auto dice = [&](const Piece& piece, Grid& g) {
             const PatchAttributes& attr = scene.attributes[piece.patch];
             ShadeInputs in{attr.kind,  &scene.materials[attr.material], true, attr.flipNormal, {},
