@@ -1,7 +1,9 @@
 // Reyes engine against independent truth: analytic coverage, watertightness of closed surfaces,
 // culling, and convergence with the sample count.
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -452,28 +454,40 @@ TEST(Weld, CornersBeyondThirtyTwoBitBlocksAreLeftToThePatchOrderPass) {
 // A 120 x 120 grid of patches whose shared control points differ by up to half the tolerance: the weld
 // (in parallel by blocks of cells, and by edge keys) must give every shared point the value of its copy in
 // the first patch in order, as one greedy pass in patch order does, and move every other copy.
-TEST(Weld, AGridOfJitteredPatchesTakesEachSharedPointFromItsFirstPatch) {
-    const int n = 120;
-    const float tol = 1e-3f;
+// An n x n grid of unit patches whose control points are moved by +-(0.1 .. 0.25) tol (never 0) each, so
+// that shared points match only up to tol. `copies`, when given: every control point by its exact grid
+// position (in thirds), as (patch, cp) copies in patch order.
+std::vector<BezierPatch> jitteredPatchGrid(
+    int n, float tol, std::map<std::pair<int, int>, std::vector<std::pair<size_t, int>>>* copies) {
     std::vector<BezierPatch> ps(size_t(n) * n);
+    // The weld decides the corners of a block of 64 tol that all lie inside it on their own (in parallel),
+    // the others in patch order: the grid lies mid-block in z so that both kinds occur (at z = 0 every corner
+    // would lie on a block side).
+    const float zMid = 32.f * tol;
     uint32_t state = 12345u;
-    auto jitter = [&]() {  // +-(0.1 .. 0.25) tol, never 0
+    auto jitter = [&]() {
         state = state * 1664525u + 1013904223u;
         const float m = 0.1f + 0.15f * float(state >> 8) / float(1u << 24);
         return (state & 1u) ? m * tol : -m * tol;
     };
-    // Every control point by its exact grid position (in thirds): (patch, cp) copies in patch order.
-    std::map<std::pair<int, int>, std::vector<std::pair<size_t, int>>> copies;
     for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i) {
             const size_t pi = size_t(j) * n + size_t(i);
             for (int row = 0; row < 4; ++row)
                 for (int col = 0; col < 4; ++col) {
                     ps[pi].cp[row * 4 + col] = Vec3{float(i) + float(col) / 3.f + jitter(),
-                                                    float(j) + float(row) / 3.f + jitter(), jitter()};
-                    copies[{3 * i + col, 3 * j + row}].push_back({pi, row * 4 + col});
+                                                    float(j) + float(row) / 3.f + jitter(), zMid + jitter()};
+                    if (copies) (*copies)[{3 * i + col, 3 * j + row}].push_back({pi, row * 4 + col});
                 }
         }
+    return ps;
+}
+
+TEST(Weld, AGridOfJitteredPatchesTakesEachSharedPointFromItsFirstPatch) {
+    const int n = 120;
+    const float tol = 1e-3f;
+    std::map<std::pair<int, int>, std::vector<std::pair<size_t, int>>> copies;
+    std::vector<BezierPatch> ps = jitteredPatchGrid(n, tol, &copies);
     const std::vector<BezierPatch> before = ps;
     const WeldResult w = weldSharedEdges(ps, tol);
     size_t moved = 0, shared = 0, wrong = 0;
@@ -490,6 +504,56 @@ TEST(Weld, AGridOfJitteredPatchesTakesEachSharedPointFromItsFirstPatch) {
     EXPECT_EQ(w.cornersMoved, sharedCorners);
     EXPECT_EQ(w.edgesWelded, size_t(2) * n * (n - 1));
     EXPECT_GT(moved, w.cornersMoved);  // the edges' inner points moved too
+}
+
+// The weld's plan (kept for motion blur) replayed on the patches before the weld gives the welded patches
+// bit for bit, and neither the patches nor the plan depend on the thread count. A patch with a NaN corner
+// and one with an infinite corner take part only through their finite corners. The grid is large enough
+// that the corner grouping takes both its levels (runs of buckets, then buckets).
+TEST(Weld, ThePlanReplaysTheWeldAndNothingDependsOnTheThreadCount) {
+    const int n = 150;
+    const float tol = 1e-3f;
+    std::vector<BezierPatch> original = jitteredPatchGrid(n, tol, nullptr);
+    original[7].cp[0].x = std::numeric_limits<float>::quiet_NaN();
+    original[size_t(n) * 40 + 3].cp[15].y = std::numeric_limits<float>::infinity();
+    std::vector<BezierPatch> one = original, four = original;
+    WeldPlan planOne, planFour;
+    WeldResult wOne, wFour;
+    tbb::task_arena(1).execute([&] { wOne = weldSharedEdges(one, tol, &planOne); });
+    tbb::task_arena(4).execute([&] { wFour = weldSharedEdges(four, tol, &planFour); });
+    EXPECT_EQ(wOne.cornersMoved, wFour.cornersMoved);
+    EXPECT_EQ(wOne.edgesWelded, wFour.edgesWelded);
+    // Every inner grid corner has 3 copies to move and each border one 1. Each non-finite corner removes one
+    // move: the NaN one is the second copy of a border corner (not moved now), the infinite one the first
+    // copy of an inner corner (whose 3 other copies keep 2 moves).
+    const size_t sharedCorners = size_t(n - 1) * (n - 1) * 3 + size_t(4 * (n - 1));
+    EXPECT_EQ(wOne.cornersMoved, sharedCorners - 2);
+    ASSERT_EQ(planOne.size(), planFour.size());
+    size_t samePlan = 0;
+    for (size_t i = 0; i < planOne.size(); ++i)
+        samePlan += planOne[i].dstPatch == planFour[i].dstPatch &&
+                    planOne[i].srcPatch == planFour[i].srcPatch && planOne[i].dstCp == planFour[i].dstCp &&
+                    planOne[i].srcCp == planFour[i].srcCp;
+    EXPECT_EQ(samePlan, planOne.size());
+    std::vector<BezierPatch> replayed = original;
+    applyWeldPlan(planOne, replayed);
+    size_t differ = 0, replayDiffers = 0, moved = 0;
+    for (size_t pi = 0; pi < original.size(); ++pi)
+        for (int k = 0; k < 16; ++k) {
+            auto bits = [](Vec3 v) {
+                uint32_t b[3];
+                std::memcpy(b, &v, sizeof b);
+                return std::array<uint32_t, 3>{b[0], b[1], b[2]};
+            };
+            differ += bits(one[pi].cp[k]) != bits(four[pi].cp[k]);
+            replayDiffers += bits(replayed[pi].cp[k]) != bits(one[pi].cp[k]);
+            moved += bits(one[pi].cp[k]) != bits(original[pi].cp[k]);
+        }
+    EXPECT_EQ(differ, 0u);
+    EXPECT_EQ(replayDiffers, 0u);
+    EXPECT_GT(moved, wOne.cornersMoved);
+    EXPECT_TRUE(std::isnan(one[7].cp[0].x));
+    EXPECT_TRUE(std::isinf(one[size_t(n) * 40 + 3].cp[15].y));
 }
 
 // A corner within tol of two representatives snaps onto the one the cell search finds first: the one in
