@@ -6,7 +6,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <limits>
 #include <string>
+#include <vector>
 
 #include "film/image_compare.h"
 #include "io/rib_writer.h"
@@ -14,6 +17,7 @@
 #include "render/render.h"
 #include "reyes/shadow_maps.h"
 #include "rib_test_util.h"
+#include "shading/shadow_map.h"
 #include "test_util.h"
 
 namespace tessera::test::shadows_tests {
@@ -170,8 +174,7 @@ WorldEnd
 
 TEST(ShadowAttribute, TheDefaultLightsOfInputsWithoutARibCastShadows) {
     // What the ray tracer always did for .bpt, OBJ and Micropolis inputs (docs/inputs.md).
-    const Scene s =
-        loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
+    const Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     int casting = 0;
     for (const Light& l : s.lights) {
         EXPECT_EQ(l.castsShadows, l.type != LightType::Ambient);
@@ -480,6 +483,90 @@ Scene sphereOverFloor(const Light& light) {
 }
 
 }  // namespace
+
+// A lookup's percentage-closer filter computes the receiver plane's depth from terms per texel column and
+// row; it must give the bits of the filter that evaluates receiverPlaneDepth at every texel (written out
+// below), on orthographic and perspective faces, for normals facing, grazing and perpendicular to the
+// lines of sight, footprints inside, across and beyond the map's edges, and filter widths up to beyond the
+// column terms' 8 texels.
+TEST(ShadowMaps, TheFilteredLookupEqualsTheFilterEvaluatingEachTexel) {
+    auto reference = [](const ShadowMapFace& f, Vec3 p, Vec3 n, float bias, float filterWidth) {
+        if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;
+        float tx, ty, texelWorld;
+        shadowMapProject(f, p, tx, ty, texelWorld);
+        if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
+        const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
+        float lit = 0.f, total = 0.f;
+        for (int y = int(std::floor(ty - half)); y <= int(std::floor(ty + half)); ++y) {
+            const float wy = std::fmin(float(y + 1), ty + half) - std::fmax(float(y), ty - half);
+            if (!(wy > 0.f)) continue;
+            for (int x = int(std::floor(tx - half)); x <= int(std::floor(tx + half)); ++x) {
+                const float wx = std::fmin(float(x + 1), tx + half) - std::fmax(float(x), tx - half);
+                if (!(wx > 0.f)) continue;
+                total += wx * wy;
+                if (x < 0 || y < 0 || x >= f.width || y >= f.height) {
+                    lit += wx * wy;
+                    continue;
+                }
+                const float stored = f.depth[size_t(y) * size_t(f.width) + size_t(x)];
+                if (receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f) - biasWorld <= stored)
+                    lit += wx * wy;
+            }
+        }
+        return total > 0.f ? lit / total : 1.f;
+    };
+    const int size = 64;
+    std::vector<float> depth(size_t(size) * size);
+    uint32_t state = 99u;
+    auto uniform = [&]() {
+        state = state * 1664525u + 1013904223u;
+        return float(state >> 8) / float(1u << 24);
+    };
+    // A bumpy surface 10 units from the light, some texels empty.
+    for (size_t i = 0; i < depth.size(); ++i)
+        depth[i] = uniform() < 0.05f ? std::numeric_limits<float>::infinity() : 10.f + 0.3f * uniform();
+    size_t compared = 0, differ = 0, partial = 0;
+    for (const bool perspective : {false, true}) {
+        ShadowMapFace f;
+        f.perspective = perspective;
+        f.width = f.height = size;
+        f.depth = depth.data();
+        // Orthographic: light-space x, y in [-4, 4] over the map; perspective: 90 degrees (x/z in [-1, 1]).
+        f.sx = perspective ? 32.f : 8.f, f.sy = perspective ? -32.f : -8.f, f.ox = f.oy = 32.f;
+        for (int k = 0; k < 4000; ++k) {
+            const float span = perspective ? 11.f : 4.5f;  // a little beyond the map's edges
+            const Vec3 p{(2.f * uniform() - 1.f) * span, (2.f * uniform() - 1.f) * span, 9.5f + uniform()};
+            Vec3 n{2.f * uniform() - 1.f, 2.f * uniform() - 1.f, 2.f * uniform() - 1.f};
+            if (k % 7 == 0) n.z = 0.f;                  // parallel to the lines of sight
+            if (k % 11 == 0) n = Vec3{0.f, 0.f, -1.f};  // facing the light
+            const float widths[] = {1.f, 2.f, 3.5f, 7.9f, 12.f};
+            const float width = widths[k % 5], bias = k % 3 == 0 ? 0.f : 1.f;
+            // Every third lookup sees texels holding exactly its receiver depths less the bias (a tie: lit)
+            // or the float below (shadowed), so that a receiver depth one bit off changes the result.
+            const int tie = k % 3 == 1 ? 0 : k % 3 == 2 ? 1 : -1;
+            if (tie >= 0) {
+                float tx, ty, texelWorld;
+                shadowMapProject(f, p, tx, ty, texelWorld);
+                const float half = 0.5f * width;
+                for (int y = int(std::floor(ty - half)); y <= int(std::floor(ty + half)); ++y)
+                    for (int x = int(std::floor(tx - half)); x <= int(std::floor(tx + half)); ++x) {
+                        if (x < 0 || y < 0 || x >= size || y >= size) continue;
+                        float d =
+                            receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f) - bias * texelWorld;
+                        if (tie == 1) d = std::nextafter(d, -std::numeric_limits<float>::infinity());
+                        depth[size_t(y) * size + size_t(x)] = d;
+                    }
+            }
+            const float got = shadowMapFaceVisibility(f, p, n, bias, width);
+            const float want = reference(f, p, n, bias, width);
+            ++compared;
+            differ += std::memcmp(&got, &want, sizeof got) != 0;
+            partial += want > 0.f && want < 1.f;
+        }
+    }
+    EXPECT_EQ(differ, 0u) << "of " << compared << " lookups";
+    EXPECT_GT(partial, compared / 4);  // the filter straddles shadow edges, not only all-lit or all-dark
+}
 
 TEST(ReyesShadowMaps, EveryKindOfMapAgreesWithRayTracedShadows) {
     // The same Reyes render with its shadow maps and with the trace service's shadow rays: an orthographic

@@ -92,14 +92,65 @@ TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n,
     shadowMapProject(f, p, tx, ty, texelWorld);
     if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
     const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
-    const int x0 = int(std::floor(tx - half)), x1 = int(std::floor(tx + half));
-    const int y0 = int(std::floor(ty - half)), y1 = int(std::floor(ty + half));
+    if (!(half < 1e8f)) return 1.f;  // a filter wider than any map (and the range of floorToInt below)
+    // floor(v) as an int for |v| < 2^31 (here under 2e8), without a call to floorf: truncation, then one
+    // down for negative non-integers.
+    auto floorToInt = [](float v) {
+        const int i = int(v);
+        return float(i) > v ? i - 1 : i;
+    };
+    const int x0 = floorToInt(tx - half), x1 = floorToInt(tx + half);
+    const int y0 = floorToInt(ty - half), y1 = floorToInt(ty + half);
+    // A texel's weight: its overlap with the box along one axis (0 or less: outside the box). Plain
+    // comparisons, not fminf / fmaxf (calls here): they differ only between -0 and +0, where the overlap is
+    // 0 and the texel is skipped either way; tx and ty are finite.
+    auto overlap = [](int k, float lo, float hi) {
+        const float a = float(k + 1) < hi ? float(k + 1) : hi, b = float(k) > lo ? float(k) : lo;
+        return a - b;
+    };
     float lit = 0.f, total = 0.f;
+    constexpr int kColumns = 8;
+    if (x1 - x0 < kColumns && x0 >= 0 && y0 >= 0 && x1 < f.width && y1 < f.height) {
+        // The common footprint, inside the map and at most kColumns texels wide: receiverPlaneDepth at the
+        // texel centres from its terms in x, computed once per column, and in y, once per row (the same
+        // operations, so the same bits; per texel, its three divisions were most of a lookup).
+        float columnTerm[kColumns], columnWeight[kColumns];
+        const int columns = x1 - x0 + 1;
+        for (int i = 0; i < columns; ++i) {
+            const float lx = (float(x0 + i) + 0.5f - f.ox) / f.sx;
+            columnTerm[i] = f.perspective ? n.x * lx : n.x * (lx - p.x);
+            columnWeight[i] = overlap(x0 + i, tx - half, tx + half);
+        }
+        const float np = n.x * p.x + n.y * p.y + n.z * p.z;
+        const float ndLimit = 1e-4f * (std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z));
+        const bool flat = !f.perspective && !(std::fabs(n.z) > 1e-4f * (std::fabs(n.x) + std::fabs(n.y)));
+        for (int y = y0; y <= y1; ++y) {
+            const float wy = overlap(y, ty - half, ty + half);
+            if (!(wy > 0.f)) continue;
+            const float ly = (float(y) + 0.5f - f.oy) / f.sy;
+            const float rowTerm = f.perspective ? n.y * ly : n.y * (ly - p.y);
+            const float* row = f.depth + size_t(y) * size_t(f.width) + size_t(x0);
+            for (int i = 0; i < columns; ++i) {
+                if (!(columnWeight[i] > 0.f)) continue;
+                const float w = columnWeight[i] * wy;
+                total += w;
+                float receiver;
+                if (!f.perspective) {
+                    receiver = flat ? p.z : p.z - (columnTerm[i] + rowTerm) / n.z;
+                } else {
+                    const float nd = columnTerm[i] + rowTerm + n.z, t = np / nd;
+                    receiver = !(std::fabs(nd) > ndLimit) || !(t > 0.f) ? p.z : t;
+                }
+                if (receiver - biasWorld <= row[i]) lit += w;
+            }
+        }
+        return total > 0.f ? lit / total : 1.f;
+    }
     for (int y = y0; y <= y1; ++y) {
-        const float wy = std::fmin(float(y + 1), ty + half) - std::fmax(float(y), ty - half);
+        const float wy = overlap(y, ty - half, ty + half);
         if (!(wy > 0.f)) continue;
         for (int x = x0; x <= x1; ++x) {
-            const float wx = std::fmin(float(x + 1), tx + half) - std::fmax(float(x), tx - half);
+            const float wx = overlap(x, tx - half, tx + half);
             if (!(wx > 0.f)) continue;
             const float w = wx * wy;
             total += w;
