@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <string>
 #include <vector>
@@ -83,6 +84,53 @@ std::string orthoRib(int res, const std::string& body, float window = 1.f) {
 }
 
 }  // namespace
+
+// A shadow map's depth pass dices with its own loop (positions only, interior vertices from per-column
+// terms): every piece's raster positions and depths must be those of the frame's dicer, bit for bit, on
+// bicubic patches (with and without displacement, whose shared edges take canonical positions) and on
+// quadrics.
+TEST(Displacement, TheDepthPassDicesTheFramesPositions) {
+    for (const char* name : {"displaced_teapot", "teapot", "quadrics"}) {
+        const Scene scene = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib", nullptr);
+        RenderSettings rs;
+        const FrameSetup frame(scene, rs);
+        PatchArray patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
+        weldSharedEdges(patches, defaultWeldTolerance(patches));
+        const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, frame.camera.cameraFromWorld);
+        ReyesView view(frame.camera);
+        view.patches = patches.data();
+        view.quadrics = quadrics.data();
+        view.projector = frame.projector;
+        const DisplacementFrame disp = makeDisplacementFrame(scene, frame.textures.get(), patches, 1.f);
+        if (disp.any()) view.displacement = &disp;
+        view.maxGridEdge = 16;
+        view.cullX0 = view.cullY0 = -1e9f, view.cullX1 = view.cullY1 = 1e9f;
+        SplitStats stats;
+        const PieceList pieces = splitPatches(view, scene, 0.f, nullptr, stats);
+        size_t vertices = 0, differ = 0, pieceCount = 0;
+        Grid full, depth;
+        for (const Piece& piece : pieces) {
+            if (++pieceCount % 3 != 0) continue;  // a third of the pieces keeps the test short
+            const PatchAttributes& a = scene.attributes[piece.patch];
+            ShadeInputs in{a.kind,  &scene.materials[a.material], a.twoSided, a.flipNormal, frame.lights,
+                           a.object};
+            in.textures = frame.textures.get();
+            in.quadric = quadricOf(view, a);
+            diceAndShade(view, piece, in, full);
+            in.depthOnly = true;
+            diceAndShade(view, piece, in, depth);
+            ASSERT_EQ(depth.vertexCount(), full.vertexCount());
+            EXPECT_TRUE(depth.twoSided);
+            for (int v = 0; v < full.vertexCount(); ++v) {
+                ++vertices;
+                differ += full.X[v] != depth.X[v] || full.Y[v] != depth.Y[v] ||
+                          std::memcmp(&full.Z[v], &depth.Z[v], sizeof(float)) != 0;
+            }
+        }
+        EXPECT_GT(vertices, 10000u) << name;
+        EXPECT_EQ(differ, 0u) << name << ": of " << vertices << " vertices";
+    }
+}
 
 // A constant displacement d ("offset") of a plane: every diced point is at distance d from the plane, on the
 // side of the patch's normal, and its shading normal is the plane's.

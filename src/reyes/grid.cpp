@@ -60,8 +60,90 @@ struct EdgeCurves {
     }
 };
 
+// A shadow map's depth pass (shade.depthOnly): each vertex's raster position and depth only, both sides, no
+// colour (a depth grid holds nu, nv, X, Y, Z, twoSided and objectId: rasterizeGridDepth reads no more).
+// The positions are diceAndShadeSurface's: the edges' vertices by their owner edge (pieceVertexUV), the
+// interior ones by the bilinear map of the piece's (u,v) quad, its terms in s kept per column (the same
+// operations as pieceVertexUV's, so the same bits), evaluated through the column's rows of the net.
+void diceDepthOnly(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
+    const BezierPatch& patch = view.patches[piece.patch];
+    const PieceEdge* e = piece.edge;
+    const int nu = pieceGridU(piece), nv = pieceGridV(piece);
+    grid.nu = nu;
+    grid.nv = nv;
+    grid.twoSided = true;  // depth maps see both sides, as shadow rays do
+    grid.objectId = shade.objectId;
+    const int count = (nu + 1) * (nv + 1);
+    grid.X.resize(count);
+    grid.Y.resize(count);
+    grid.Z.resize(count);
+    const PlacedQuadric* quadric = shade.quadric;
+    const bool displaced = view.displacement && view.displacement->displaced(piece.patch);
+    const EdgeCurves edgeCurves(patch, e, /*bezier=*/!quadric);
+    thread_local std::vector<PatchRowsAtU> columnRows;
+    thread_local std::vector<Vec2> columnAB, columnDC;  // per column: (1 - s) a + s b and (1 - s) d + s c
+    columnRows.resize(size_t(nu) + 1);
+    columnAB.resize(size_t(nu) + 1);
+    columnDC.resize(size_t(nu) + 1);
+    const Vec2 a = piece.uv[0], b = piece.uv[1], c = piece.uv[2], d = piece.uv[3];
+    for (int i = 0; i <= nu; ++i) {
+        const float s = float(i) / nu;
+        columnAB[size_t(i)] = Vec2{(1 - s) * a.x + s * b.x, (1 - s) * a.y + s * b.y};
+        columnDC[size_t(i)] = Vec2{(1 - s) * d.x + s * c.x, (1 - s) * d.y + s * c.y};
+    }
+    // Interior vertices of a column share their u bit for bit (as in diceAndShadeSurface) when the piece's
+    // quad has straight u columns; the rows at that u are derived once per column and u.
+    thread_local std::vector<uint32_t> columnU;
+    columnU.assign(size_t(nu) + 1, 0xffffffffu);  // a NaN: no u has these bits
+    auto rowsAt = [&](int i, float u) -> const PatchRowsAtU& {
+        uint32_t bits;
+        std::memcpy(&bits, &u, sizeof bits);
+        if (columnU[size_t(i)] != bits)
+            patchRowsAtU(patch, u, columnRows[size_t(i)]), columnU[size_t(i)] = bits;
+        return columnRows[size_t(i)];
+    };
+    auto place = [&](int v, int i, Vec2 uv, const PieceEdge* owner, int k) {
+        Vec3 P = quadric                         ? quadricPoint(*quadric, uv)
+                 : owner && owner->boundary >= 0 ? edgeCurves.position(e, *owner, k, Vec3{})
+                                                 : evalPatchAt(rowsAt(i, uv.x), uv.y);
+        if (displaced)
+            P = displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P, shade.flipNormal,
+                               /*normal=*/false)
+                    .P;
+        const Vec3 r = view.projector.toRaster(P);
+        grid.X[v] = rasterToFixed(r.x);
+        grid.Y[v] = rasterToFixed(r.y);
+        grid.Z[v] = P.z;
+    };
+    for (int j = 0; j <= nv; ++j) {
+        const int row = j * (nu + 1);
+        if (j == 0 || j == nv) {
+            for (int i = 0; i <= nu; ++i) {
+                const PieceEdge* owner = nullptr;
+                int k = 0;
+                const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);  // sets owner and k
+                place(row + i, i, uv, owner, k);
+            }
+            continue;
+        }
+        const float t = float(j) / nv;
+        for (int i = 0; i <= nu; ++i) {
+            if (i == 0 || i == nu) {
+                const PieceEdge* owner = nullptr;
+                int k = 0;
+                const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);  // sets owner and k
+                place(row + i, i, uv, owner, k);
+                continue;
+            }
+            const Vec2 ab = columnAB[size_t(i)], dc = columnDC[size_t(i)];
+            place(row + i, i, Vec2{(1 - t) * ab.x + t * dc.x, (1 - t) * ab.y + t * dc.y}, nullptr, 0);
+        }
+    }
+}
+
 // Dice and shade a piece of a bicubic Bezier patch or, with shade.quadric, of a quadric.
 void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeInputs& shade, Grid& grid) {
+    if (shade.depthOnly) return diceDepthOnly(view, piece, shade, grid);
     const BezierPatch& patch = view.patches[piece.patch];
     const PieceEdge* e = piece.edge;
     const int nu = pieceGridU(piece), nv = pieceGridV(piece);
@@ -81,10 +163,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
     thread_local std::vector<Color> Ci, Ct, Cv;
     thread_local std::vector<Vec3> shadowP;  // user normals: where shadow lookups start (terminatorSafePoint)
     // Textures on bicubic patches only (quadrics have no s, t yet).
-    const bool textured =
-        shade.textures && shade.material->texture >= 0 && !shade.depthOnly && !shade.quadric;
+    const bool textured = shade.textures && shade.material->texture >= 0 && !shade.quadric;
     // Per-vertex values (polygons' "N" and "Cs"): bicubic patches only, as the reader gives them.
-    const PatchVertexValues* vv = shade.depthOnly || shade.quadric ? nullptr : shade.vertexValues;
+    const PatchVertexValues* vv = shade.quadric ? nullptr : shade.vertexValues;
     const bool vertexColoured = vv && vv->hasCs;
     if (textured) Ct.resize(count);
     if (vertexColoured) Cv.resize(count);
@@ -133,21 +214,6 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             int k = 0;
             const Vec2 uv = pieceVertexUV(piece, i, j, nu, nv, owner, k);
             const int v = j * (nu + 1) + i;
-            if (shade.depthOnly) {  // a shadow map's pass: positions only
-                Vec3 P = quadric                         ? quadricPoint(*quadric, uv)
-                         : owner && owner->boundary >= 0 ? edgeCurves.position(e, *owner, k, Vec3{})
-                                                         : evalPatchAt(rowsAt(i, uv.x), uv.y);
-                if (displaced)
-                    P = displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P,
-                                       shade.flipNormal,
-                                       /*normal=*/false)
-                            .P;
-                const Vec3 r = view.projector.toRaster(P);
-                grid.X[v] = rasterToFixed(r.x);
-                grid.Y[v] = rasterToFixed(r.y);
-                grid.Z[v] = P.z;
-                continue;
-            }
             Vec3 P, N;
             SurfacePoint sp{};
             if (quadric) {
@@ -197,7 +263,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
             grid.front[v] = dot(N, P) < 0.f;
         }
     }
-    if (displaced && !shade.depthOnly && !view.exactDisplacementNormals) {
+    if (displaced && !view.exactDisplacementNormals) {
         // The approximate mode's shading normals: central differences of the displaced grid (one-sided at
         // its borders), kept on the side of the undisplaced normal.
         const int stride = nu + 1;
@@ -212,15 +278,6 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 Ns[v] = dot(n, Ns[v]) < 0.f ? -n : n;
                 grid.front[v] = dot(Ns[v], Ps[v]) < 0.f;
             }
-    }
-    if (shade.depthOnly) {
-        // Depth maps see both sides (as shadow rays do); no colour.
-        grid.twoSided = true;
-        std::fill(grid.R.begin(), grid.R.end(), 0.f);
-        std::fill(grid.G.begin(), grid.G.end(), 0.f);
-        std::fill(grid.B.begin(), grid.B.end(), 0.f);
-        grid.objectId = shade.objectId;
-        return;
     }
     grid.blurred = moves || view.lens;
     grid.knots = 1;
@@ -328,7 +385,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
         }
     }
     grid.albedo.clear(), grid.P.clear(), grid.Cs.clear();
-    if (shade.wantSurfaceAovs && !shade.depthOnly) {
+    if (shade.wantSurfaceAovs) {
         grid.albedo.resize(count), grid.P.resize(count), grid.Cs.resize(count);
         for (int v = 0; v < count; ++v) {
             const Material m = points.materialAt(material, size_t(v));
