@@ -485,36 +485,11 @@ Scene sphereOverFloor(const Light& light) {
 }  // namespace
 
 // A lookup's percentage-closer filter computes the receiver plane's depth from terms per texel column and
-// row; it must give the bits of the filter that evaluates receiverPlaneDepth at every texel (written out
-// below), on orthographic and perspective faces, for normals facing, grazing and perpendicular to the
-// lines of sight, footprints inside, across and beyond the map's edges, and filter widths up to beyond the
-// column terms' 8 texels.
+// row; it must give the bits of the filter that evaluates receiverPlaneDepth at every texel
+// (shadowMapFaceVisibilityEachTexel), on orthographic and perspective faces, for normals facing, grazing and
+// perpendicular to the lines of sight, footprints inside, across and beyond the map's edges, and filter
+// widths up to beyond the column terms' 8 texels.
 TEST(ShadowMaps, TheFilteredLookupEqualsTheFilterEvaluatingEachTexel) {
-    auto reference = [](const ShadowMapFace& f, Vec3 p, Vec3 n, float bias, float filterWidth) {
-        if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;
-        float tx, ty, texelWorld;
-        shadowMapProject(f, p, tx, ty, texelWorld);
-        if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
-        const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
-        float lit = 0.f, total = 0.f;
-        for (int y = int(std::floor(ty - half)); y <= int(std::floor(ty + half)); ++y) {
-            const float wy = std::fmin(float(y + 1), ty + half) - std::fmax(float(y), ty - half);
-            if (!(wy > 0.f)) continue;
-            for (int x = int(std::floor(tx - half)); x <= int(std::floor(tx + half)); ++x) {
-                const float wx = std::fmin(float(x + 1), tx + half) - std::fmax(float(x), tx - half);
-                if (!(wx > 0.f)) continue;
-                total += wx * wy;
-                if (x < 0 || y < 0 || x >= f.width || y >= f.height) {
-                    lit += wx * wy;
-                    continue;
-                }
-                const float stored = f.depth[size_t(y) * size_t(f.width) + size_t(x)];
-                if (receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f) - biasWorld <= stored)
-                    lit += wx * wy;
-            }
-        }
-        return total > 0.f ? lit / total : 1.f;
-    };
     const int size = 64;
     std::vector<float> depth(size_t(size) * size);
     uint32_t state = 99u;
@@ -558,7 +533,7 @@ TEST(ShadowMaps, TheFilteredLookupEqualsTheFilterEvaluatingEachTexel) {
                     }
             }
             const float got = shadowMapFaceVisibility(f, p, n, bias, width);
-            const float want = reference(f, p, n, bias, width);
+            const float want = shadowMapFaceVisibilityEachTexel(f, p, n, bias, width);
             ++compared;
             differ += std::memcmp(&got, &want, sizeof got) != 0;
             partial += want > 0.f && want < 1.f;

@@ -83,8 +83,44 @@ TESSERA_HD float receiverPlaneDepth(const ShadowMapFace& f, Vec3 p, Vec3 n, floa
     return t;
 }
 
-// Percentage-closer filtered visibility in [0, 1] of one face at light-space point p with normal n.
-// Texels outside the face and empty texels count as lit.
+// Percentage-closer filtered visibility in [0, 1] of one face at light-space point p with normal n, texel
+// by texel as the filter is defined: the receiver plane's depth (receiverPlaneDepth) against each texel
+// under the box, weighted by the texel's overlap with it. Texels outside the face and empty texels count as
+// lit. shadowMapFaceVisibility gives the same bits faster; this form serves footprints it does not take,
+// and is the reference its test and benchmark compare with.
+TESSERA_HD float shadowMapFaceVisibilityEachTexel(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
+                                                  float filterWidth) {
+    if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;  // no map, or behind the light
+    float tx, ty, texelWorld;
+    shadowMapProject(f, p, tx, ty, texelWorld);
+    if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
+    const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
+    if (!(half < 1e8f)) return 1.f;  // a filter wider than any map (and int's range)
+    const int x0 = int(std::floor(tx - half)), x1 = int(std::floor(tx + half));
+    const int y0 = int(std::floor(ty - half)), y1 = int(std::floor(ty + half));
+    float lit = 0.f, total = 0.f;
+    for (int y = y0; y <= y1; ++y) {
+        const float wy = std::fmin(float(y + 1), ty + half) - std::fmax(float(y), ty - half);
+        if (!(wy > 0.f)) continue;
+        for (int x = x0; x <= x1; ++x) {
+            const float wx = std::fmin(float(x + 1), tx + half) - std::fmax(float(x), tx - half);
+            if (!(wx > 0.f)) continue;
+            const float w = wx * wy;
+            total += w;
+            if (x < 0 || y < 0 || x >= f.width || y >= f.height) {
+                lit += w;
+                continue;
+            }
+            const float stored = f.depth[size_t(y) * size_t(f.width) + size_t(x)];
+            const float receiver = receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f);
+            if (receiver - biasWorld <= stored) lit += w;
+        }
+    }
+    return total > 0.f ? lit / total : 1.f;
+}
+
+// shadowMapFaceVisibilityEachTexel's result, bit for bit, in about half its time where the footprint lies
+// inside the map and is at most 8 texels wide (the rest is left to it).
 TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
                                          float filterWidth) {
     if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;  // no map, or behind the light
@@ -146,24 +182,7 @@ TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n,
         }
         return total > 0.f ? lit / total : 1.f;
     }
-    for (int y = y0; y <= y1; ++y) {
-        const float wy = overlap(y, ty - half, ty + half);
-        if (!(wy > 0.f)) continue;
-        for (int x = x0; x <= x1; ++x) {
-            const float wx = overlap(x, tx - half, tx + half);
-            if (!(wx > 0.f)) continue;
-            const float w = wx * wy;
-            total += w;
-            if (x < 0 || y < 0 || x >= f.width || y >= f.height) {
-                lit += w;
-                continue;
-            }
-            const float stored = f.depth[size_t(y) * size_t(f.width) + size_t(x)];
-            const float receiver = receiverPlaneDepth(f, p, n, float(x) + 0.5f, float(y) + 0.5f);
-            if (receiver - biasWorld <= stored) lit += w;
-        }
-    }
-    return total > 0.f ? lit / total : 1.f;
+    return shadowMapFaceVisibilityEachTexel(f, p, n, bias, filterWidth);
 }
 
 // The face of a cube map that a light-centred direction d falls in: the major axis, + before -.
