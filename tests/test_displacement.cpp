@@ -110,7 +110,7 @@ TEST(Displacement, TheDepthPassDicesTheFramesPositions) {
         size_t vertices = 0, differ = 0, pieceCount = 0;
         Grid full, depth;
         for (const Piece& piece : pieces) {
-            if (++pieceCount % 3 != 0) continue;  // a third of the pieces keeps the test short
+            if (++pieceCount % 8 != 0) continue;  // an eighth of the pieces keeps the test short
             const PatchAttributes& a = scene.attributes[piece.patch];
             ShadeInputs in{a.kind,  &scene.materials[a.material], a.twoSided, a.flipNormal, frame.lights,
                            a.object};
@@ -127,7 +127,7 @@ TEST(Displacement, TheDepthPassDicesTheFramesPositions) {
                           std::memcmp(&full.Z[v], &depth.Z[v], sizeof(float)) != 0;
             }
         }
-        EXPECT_GT(vertices, 10000u) << name;
+        EXPECT_GT(vertices, 5000u) << name;
         EXPECT_EQ(differ, 0u) << name << ": of " << vertices << " vertices";
     }
 }
