@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "core/random.h"
 #include "shading/shadow_map.h"
 
 using namespace tessera;
@@ -37,11 +38,8 @@ int main(int argc, char** argv) {
     }
     const int size = 2048;
     std::vector<float> depth(size_t(size) * size);
-    uint32_t state = 7u;
-    auto uniform = [&]() {
-        state = state * 1664525u + 1013904223u;
-        return float(state >> 8) / float(1u << 24);
-    };
+    uint32_t draw = 7u;
+    auto uniform = [&]() { return hashToUnit(hash32(draw++)); };
     for (float& d : depth) d = 10.f + 0.3f * uniform();
     nlohmann::json result = {{"map", size}, {"filter_width", filterWidth}, {"runs", runs}};
     for (const bool perspective : {false, true}) {

@@ -43,20 +43,42 @@ struct DicedVertex {
     uint32_t patch;
     bool insideBound;
 };
+// A scene's patches and quadrics in its camera's space, welded, the Reyes view over them (culling
+// nothing, grids of at most maxGrid micropolygons a side) and every piece, split up front.
+struct SplitScene {
+    RenderSettings settings;
+    FrameSetup frame;
+    PatchArray patches;
+    std::vector<PlacedQuadric> quadrics;
+    DisplacementFrame disp;
+    ReyesView view;
+    PieceList pieces;
+    SplitScene(const Scene& scene, int maxGrid)
+        : frame(scene, settings),
+          patches(welded(patchesInCameraSpace(scene, frame.camera.cameraFromWorld))),
+          quadrics(quadricsInSpace(scene, frame.camera.cameraFromWorld)),
+          disp(makeDisplacementFrame(scene, frame.textures.get(), patches, 1.f)),
+          view(frame.camera) {
+        view.patches = patches.data();
+        view.quadrics = quadrics.data();
+        view.projector = frame.projector;
+        if (disp.any()) view.displacement = &disp;
+        view.maxGridEdge = maxGrid;
+        view.cullX0 = view.cullY0 = -1e9f, view.cullX1 = view.cullY1 = 1e9f;
+        SplitStats stats;
+        pieces = splitPatches(view, scene, 0.f, nullptr, stats);
+    }
+    static PatchArray welded(PatchArray p) {
+        weldSharedEdges(p, defaultWeldTolerance(p));
+        return p;
+    }
+};
+
 std::vector<DicedVertex> diceAll(const Scene& scene, int maxGrid = 16) {
-    RenderSettings rs;
-    const FrameSetup frame(scene, rs);
-    PatchArray patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
-    weldSharedEdges(patches, defaultWeldTolerance(patches));
-    ReyesView view(frame.camera);
-    view.patches = patches.data();
-    view.projector = frame.projector;
-    const DisplacementFrame disp = makeDisplacementFrame(scene, frame.textures.get(), patches, 1.f);
-    if (disp.any()) view.displacement = &disp;
-    view.maxGridEdge = maxGrid;
-    view.cullX0 = view.cullY0 = -1e9f, view.cullX1 = view.cullY1 = 1e9f;
-    SplitStats stats;
-    const PieceList pieces = splitPatches(view, scene, 0.f, nullptr, stats);
+    const SplitScene split(scene, maxGrid);
+    const FrameSetup& frame = split.frame;
+    const ReyesView& view = split.view;
+    const PieceList& pieces = split.pieces;
     std::vector<DicedVertex> out;
     const Projector& pr = view.projector;
     for (const Piece& piece : pieces) {
@@ -92,24 +114,12 @@ std::string orthoRib(int res, const std::string& body, float window = 1.f) {
 TEST(Displacement, TheDepthPassDicesTheFramesPositions) {
     for (const char* name : {"displaced_teapot", "teapot", "quadrics"}) {
         const Scene scene = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib", nullptr);
-        RenderSettings rs;
-        const FrameSetup frame(scene, rs);
-        PatchArray patches = patchesInCameraSpace(scene, frame.camera.cameraFromWorld);
-        weldSharedEdges(patches, defaultWeldTolerance(patches));
-        const std::vector<PlacedQuadric> quadrics = quadricsInSpace(scene, frame.camera.cameraFromWorld);
-        ReyesView view(frame.camera);
-        view.patches = patches.data();
-        view.quadrics = quadrics.data();
-        view.projector = frame.projector;
-        const DisplacementFrame disp = makeDisplacementFrame(scene, frame.textures.get(), patches, 1.f);
-        if (disp.any()) view.displacement = &disp;
-        view.maxGridEdge = 16;
-        view.cullX0 = view.cullY0 = -1e9f, view.cullX1 = view.cullY1 = 1e9f;
-        SplitStats stats;
-        const PieceList pieces = splitPatches(view, scene, 0.f, nullptr, stats);
+        const SplitScene split(scene, 16);
+        const FrameSetup& frame = split.frame;
+        const ReyesView& view = split.view;
         size_t vertices = 0, differ = 0, pieceCount = 0;
         Grid full, depth;
-        for (const Piece& piece : pieces) {
+        for (const Piece& piece : split.pieces) {
             if (++pieceCount % 8 != 0) continue;  // an eighth of the pieces keeps the test short
             const PatchAttributes& a = scene.attributes[piece.patch];
             ShadeInputs in{a.kind,  &scene.materials[a.material], a.twoSided, a.flipNormal, frame.lights,

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/random.h"
 #include "film/image_compare.h"
 #include "io/rib_writer.h"
 #include "io/scene_loader.h"
@@ -492,11 +493,8 @@ Scene sphereOverFloor(const Light& light) {
 TEST(ShadowMaps, TheFilteredLookupEqualsTheFilterEvaluatingEachTexel) {
     const int size = 64;
     std::vector<float> depth(size_t(size) * size);
-    uint32_t state = 99u;
-    auto uniform = [&]() {
-        state = state * 1664525u + 1013904223u;
-        return float(state >> 8) / float(1u << 24);
-    };
+    uint32_t draw = 99u;
+    auto uniform = [&]() { return hashToUnit(hash32(draw++)); };
     // A bumpy surface 10 units from the light, some texels empty.
     for (size_t i = 0; i < depth.size(); ++i)
         depth[i] = uniform() < 0.05f ? std::numeric_limits<float>::infinity() : 10.f + 0.3f * uniform();

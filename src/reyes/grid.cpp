@@ -15,6 +15,11 @@ int snapIndex(int i, int n, int segments) {
     return (2 * i * segments + n) / (2 * n);
 }
 
+// (1 - s) p + s q, per component (the bilinear map of a piece's (u,v) quad is two of these and one more).
+Vec2 lerpUV(Vec2 p, Vec2 q, float s) {
+    return {(1 - s) * p.x + s * q.x, (1 - s) * p.y + s * q.y};
+}
+
 // Grid vertex (i,j) of a piece diced nu x nv: its (u,v) on the patch and the edge that owns it (nullptr:
 // interior) with its lattice index k. Boundary-curve edges win at corners, so a corner on a patch boundary
 // is evaluated exactly as the neighbouring patch evaluates it.
@@ -34,11 +39,7 @@ Vec2 pieceVertexUV(const Piece& piece, int i, int j, int nu, int nv, const Piece
     if (owner) return latticeUV(*owner, k);
     // Interior: bilinear map of the piece's (u,v) quad.
     const float s = float(i) / nu, t = float(j) / nv;
-    const Vec2 a = piece.uv[0], b = piece.uv[1], c = piece.uv[2], d = piece.uv[3];
-    Vec2 uv;
-    uv.x = (1 - t) * ((1 - s) * a.x + s * b.x) + t * ((1 - s) * d.x + s * c.x);
-    uv.y = (1 - t) * ((1 - s) * a.y + s * b.y) + t * ((1 - s) * d.y + s * c.y);
-    return uv;
+    return lerpUV(lerpUV(piece.uv[0], piece.uv[1], s), lerpUV(piece.uv[3], piece.uv[2], s), t);
 }
 
 // The canonical control points of a piece's patch-boundary edges, derived once per grid (latticePosition
@@ -57,6 +58,24 @@ struct EdgeCurves {
     // = latticePosition(patch, owner, k) for the owner edges of a vertex at (u, v) = latticeUV(owner, k).
     Vec3 position(const PieceEdge* edges, const PieceEdge& owner, int k, const Vec3& atUV) const {
         return owner.boundary >= 0 ? evalCurve(cp[&owner - edges], owner.param(k)) : atUV;
+    }
+};
+
+// The grid's vertices in a column mostly share their u (bit for bit): the rows of the control net summed at
+// that u are kept per column and reused down it (evalPatchAt / evalPatchDerivAt: the same bits as evalPatch
+// / evalPatchDeriv, in about a third of their work).
+struct ColumnRows {
+    std::vector<PatchRowsAtU> rows;
+    std::vector<uint32_t> uBits;  // the u bits rows[i] holds
+    void reset(int nu) {
+        rows.resize(size_t(nu) + 1);
+        uBits.assign(size_t(nu) + 1, 0xffffffffu);  // a NaN: no u has these bits
+    }
+    const PatchRowsAtU& at(const BezierPatch& patch, int i, float u) {
+        uint32_t bits;
+        std::memcpy(&bits, &u, sizeof bits);
+        if (uBits[size_t(i)] != bits) patchRowsAtU(patch, u, rows[size_t(i)]), uBits[size_t(i)] = bits;
+        return rows[size_t(i)];
     }
 };
 
@@ -80,32 +99,20 @@ void diceDepthOnly(const ReyesView& view, const Piece& piece, const ShadeInputs&
     const PlacedQuadric* quadric = shade.quadric;
     const bool displaced = view.displacement && view.displacement->displaced(piece.patch);
     const EdgeCurves edgeCurves(patch, e, /*bezier=*/!quadric);
-    thread_local std::vector<PatchRowsAtU> columnRows;
+    thread_local ColumnRows columns;
+    columns.reset(nu);
     thread_local std::vector<Vec2> columnAB, columnDC;  // per column: (1 - s) a + s b and (1 - s) d + s c
-    columnRows.resize(size_t(nu) + 1);
     columnAB.resize(size_t(nu) + 1);
     columnDC.resize(size_t(nu) + 1);
-    const Vec2 a = piece.uv[0], b = piece.uv[1], c = piece.uv[2], d = piece.uv[3];
     for (int i = 0; i <= nu; ++i) {
         const float s = float(i) / nu;
-        columnAB[size_t(i)] = Vec2{(1 - s) * a.x + s * b.x, (1 - s) * a.y + s * b.y};
-        columnDC[size_t(i)] = Vec2{(1 - s) * d.x + s * c.x, (1 - s) * d.y + s * c.y};
+        columnAB[size_t(i)] = lerpUV(piece.uv[0], piece.uv[1], s);
+        columnDC[size_t(i)] = lerpUV(piece.uv[3], piece.uv[2], s);
     }
-    // Interior vertices of a column share their u bit for bit (as in diceAndShadeSurface) when the piece's
-    // quad has straight u columns; the rows at that u are derived once per column and u.
-    thread_local std::vector<uint32_t> columnU;
-    columnU.assign(size_t(nu) + 1, 0xffffffffu);  // a NaN: no u has these bits
-    auto rowsAt = [&](int i, float u) -> const PatchRowsAtU& {
-        uint32_t bits;
-        std::memcpy(&bits, &u, sizeof bits);
-        if (columnU[size_t(i)] != bits)
-            patchRowsAtU(patch, u, columnRows[size_t(i)]), columnU[size_t(i)] = bits;
-        return columnRows[size_t(i)];
-    };
     auto place = [&](int v, int i, Vec2 uv, const PieceEdge* owner, int k) {
         Vec3 P = quadric                         ? quadricPoint(*quadric, uv)
                  : owner && owner->boundary >= 0 ? edgeCurves.position(e, *owner, k, Vec3{})
-                                                 : evalPatchAt(rowsAt(i, uv.x), uv.y);
+                                                 : evalPatchAt(columns.at(patch, i, uv.x), uv.y);
         if (displaced)
             P = displaceVertex(view, *view.displacement, piece.patch, owner, k, uv, P, shade.flipNormal,
                                /*normal=*/false)
@@ -135,8 +142,7 @@ void diceDepthOnly(const ReyesView& view, const Piece& piece, const ShadeInputs&
                 place(row + i, i, uv, owner, k);
                 continue;
             }
-            const Vec2 ab = columnAB[size_t(i)], dc = columnDC[size_t(i)];
-            place(row + i, i, Vec2{(1 - t) * ab.x + t * dc.x, (1 - t) * ab.y + t * dc.y}, nullptr, 0);
+            place(row + i, i, lerpUV(columnAB[size_t(i)], columnDC[size_t(i)], t), nullptr, 0);
         }
     }
 }
@@ -193,21 +199,9 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
         lattice.resize(count);
     }
 
-    // The grid's vertices in a column mostly share their u (bit for bit): the rows of the control net
-    // summed at that u are kept per column and reused down it (evalPatchDerivAt: the same bits as
-    // evalPatchDeriv, in about a third of its work).
-    thread_local std::vector<PatchRowsAtU> columnRows;
-    thread_local std::vector<uint32_t> columnU;  // the u bits columnRows[i] holds
-    columnRows.resize(size_t(nu) + 1);
-    columnU.assign(size_t(nu) + 1, 0xffffffffu);  // a NaN: no u has these bits
+    thread_local ColumnRows columns;  // the rows of the net at each column's u
+    columns.reset(nu);
     const EdgeCurves edgeCurves(patch, e, /*bezier=*/!shade.quadric);
-    auto rowsAt = [&](int i, float u) -> const PatchRowsAtU& {
-        uint32_t bits;
-        std::memcpy(&bits, &u, sizeof bits);
-        if (columnU[size_t(i)] != bits)
-            patchRowsAtU(patch, u, columnRows[size_t(i)]), columnU[size_t(i)] = bits;
-        return columnRows[size_t(i)];
-    };
     for (int j = 0; j <= nv; ++j) {
         for (int i = 0; i <= nu; ++i) {
             const PieceEdge* owner = nullptr;
@@ -221,7 +215,7 @@ void diceAndShadeSurface(const ReyesView& view, const Piece& piece, const ShadeI
                 P = quadricPoint(*quadric, uv);
                 evalPlacedQuadric(*quadric, uv.x, uv.y, &N);
             } else {
-                sp = evalPatchDerivAt(rowsAt(i, uv.x), uv.y);
+                sp = evalPatchDerivAt(columns.at(patch, i, uv.x), uv.y);
                 P = owner ? edgeCurves.position(e, *owner, k, sp.p) : sp.p;
                 N = cross(sp.dpdu, sp.dpdv);
                 float scale = dot(sp.dpdu, sp.dpdu) + dot(sp.dpdv, sp.dpdv);

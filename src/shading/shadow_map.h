@@ -83,26 +83,42 @@ TESSERA_HD float receiverPlaneDepth(const ShadowMapFace& f, Vec3 p, Vec3 n, floa
     return t;
 }
 
-// Percentage-closer filtered visibility in [0, 1] of one face at light-space point p with normal n, texel
-// by texel as the filter is defined: the receiver plane's depth (receiverPlaneDepth) against each texel
-// under the box, weighted by the texel's overlap with it. Texels outside the face and empty texels count as
-// lit. shadowMapFaceVisibility gives the same bits faster; this form serves footprints it does not take,
-// and is the reference its test and benchmark compare with.
-TESSERA_HD float shadowMapFaceVisibilityEachTexel(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
-                                                  float filterWidth) {
-    if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;  // no map, or behind the light
-    float tx, ty, texelWorld;
-    shadowMapProject(f, p, tx, ty, texelWorld);
-    if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
-    const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
-    if (!(half < 1e8f)) return 1.f;  // a filter wider than any map (and int's range)
-    const int x0 = int(std::floor(tx - half)), x1 = int(std::floor(tx + half));
-    const int y0 = int(std::floor(ty - half)), y1 = int(std::floor(ty + half));
+// Where a lookup at light-space point p reads a face: its texel position (tx, ty), the filter box's half
+// width, the bias in world units and the texel rows and columns under the box. False when p is not in
+// front of the face's map (no map, behind the light, projecting off any map, or a box wider than any map):
+// the point is lit.
+struct ShadowFootprint {
+    float tx, ty, half, biasWorld;
+    int x0, x1, y0, y1;
+};
+TESSERA_HD bool shadowFootprint(const ShadowMapFace& f, Vec3 p, float bias, float filterWidth,
+                                ShadowFootprint& fp) {
+    if (!f.depth || (f.perspective && !(p.z > 0.f))) return false;  // no map, or behind the light
+    float texelWorld;
+    shadowMapProject(f, p, fp.tx, fp.ty, texelWorld);
+    if (!(std::fabs(fp.tx) < 1e8f && std::fabs(fp.ty) < 1e8f)) return false;
+    fp.half = 0.5f * filterWidth, fp.biasWorld = bias * texelWorld;
+    if (!(fp.half < 1e8f)) return false;  // a filter wider than any map (and the range of floorToInt)
+    // floor(v) as an int for |v| < 2^31 (here under 2e8), without a call to floorf: truncation, then one
+    // down for negative non-integers.
+    auto floorToInt = [](float v) {
+        const int i = int(v);
+        return float(i) > v ? i - 1 : i;
+    };
+    fp.x0 = floorToInt(fp.tx - fp.half), fp.x1 = floorToInt(fp.tx + fp.half);
+    fp.y0 = floorToInt(fp.ty - fp.half), fp.y1 = floorToInt(fp.ty + fp.half);
+    return true;
+}
+
+// The percentage-closer filter texel by texel over footprint fp of point p
+// (shadowMapFaceVisibilityEachTexel).
+TESSERA_HD float shadowFilterEachTexel(const ShadowMapFace& f, Vec3 p, Vec3 n, const ShadowFootprint& fp) {
+    const float tx = fp.tx, ty = fp.ty, half = fp.half, biasWorld = fp.biasWorld;
     float lit = 0.f, total = 0.f;
-    for (int y = y0; y <= y1; ++y) {
+    for (int y = fp.y0; y <= fp.y1; ++y) {
         const float wy = std::fmin(float(y + 1), ty + half) - std::fmax(float(y), ty - half);
         if (!(wy > 0.f)) continue;
-        for (int x = x0; x <= x1; ++x) {
+        for (int x = fp.x0; x <= fp.x1; ++x) {
             const float wx = std::fmin(float(x + 1), tx + half) - std::fmax(float(x), tx - half);
             if (!(wx > 0.f)) continue;
             const float w = wx * wy;
@@ -119,24 +135,25 @@ TESSERA_HD float shadowMapFaceVisibilityEachTexel(const ShadowMapFace& f, Vec3 p
     return total > 0.f ? lit / total : 1.f;
 }
 
+// Percentage-closer filtered visibility in [0, 1] of one face at light-space point p with normal n, texel
+// by texel as the filter is defined: the receiver plane's depth (receiverPlaneDepth) against each texel
+// under the box, weighted by the texel's overlap with it. Texels outside the face and empty texels count as
+// lit. shadowMapFaceVisibility gives the same bits faster; this form serves footprints it does not take,
+// and is the reference its test and benchmark compare with.
+TESSERA_HD float shadowMapFaceVisibilityEachTexel(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
+                                                  float filterWidth) {
+    ShadowFootprint fp;
+    return shadowFootprint(f, p, bias, filterWidth, fp) ? shadowFilterEachTexel(f, p, n, fp) : 1.f;
+}
+
 // shadowMapFaceVisibilityEachTexel's result, bit for bit, in about half its time where the footprint lies
 // inside the map and is at most 8 texels wide (the rest is left to it).
 TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n, float bias,
                                          float filterWidth) {
-    if (!f.depth || (f.perspective && !(p.z > 0.f))) return 1.f;  // no map, or behind the light
-    float tx, ty, texelWorld;
-    shadowMapProject(f, p, tx, ty, texelWorld);
-    if (!(std::fabs(tx) < 1e8f && std::fabs(ty) < 1e8f)) return 1.f;
-    const float half = 0.5f * filterWidth, biasWorld = bias * texelWorld;
-    if (!(half < 1e8f)) return 1.f;  // a filter wider than any map (and the range of floorToInt below)
-    // floor(v) as an int for |v| < 2^31 (here under 2e8), without a call to floorf: truncation, then one
-    // down for negative non-integers.
-    auto floorToInt = [](float v) {
-        const int i = int(v);
-        return float(i) > v ? i - 1 : i;
-    };
-    const int x0 = floorToInt(tx - half), x1 = floorToInt(tx + half);
-    const int y0 = floorToInt(ty - half), y1 = floorToInt(ty + half);
+    ShadowFootprint fp;
+    if (!shadowFootprint(f, p, bias, filterWidth, fp)) return 1.f;
+    const float tx = fp.tx, ty = fp.ty, half = fp.half, biasWorld = fp.biasWorld;
+    const int x0 = fp.x0, x1 = fp.x1, y0 = fp.y0, y1 = fp.y1;
     // A texel's weight: its overlap with the box along one axis (0 or less: outside the box). Plain
     // comparisons, not fminf / fmaxf (calls here): they differ only between -0 and +0, where the overlap is
     // 0 and the texel is skipped either way; tx and ty are finite.
@@ -144,7 +161,6 @@ TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n,
         const float a = float(k + 1) < hi ? float(k + 1) : hi, b = float(k) > lo ? float(k) : lo;
         return a - b;
     };
-    float lit = 0.f, total = 0.f;
     constexpr int kColumns = 8;
     if (x1 - x0 < kColumns && x0 >= 0 && y0 >= 0 && x1 < f.width && y1 < f.height) {
         // The common footprint, inside the map and at most kColumns texels wide: receiverPlaneDepth at the
@@ -160,6 +176,7 @@ TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n,
         const float np = n.x * p.x + n.y * p.y + n.z * p.z;
         const float ndLimit = 1e-4f * (std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z));
         const bool flat = !f.perspective && !(std::fabs(n.z) > 1e-4f * (std::fabs(n.x) + std::fabs(n.y)));
+        float lit = 0.f, total = 0.f;
         for (int y = y0; y <= y1; ++y) {
             const float wy = overlap(y, ty - half, ty + half);
             if (!(wy > 0.f)) continue;
@@ -182,7 +199,7 @@ TESSERA_HD float shadowMapFaceVisibility(const ShadowMapFace& f, Vec3 p, Vec3 n,
         }
         return total > 0.f ? lit / total : 1.f;
     }
-    return shadowMapFaceVisibilityEachTexel(f, p, n, bias, filterWidth);
+    return shadowFilterEachTexel(f, p, n, fp);
 }
 
 // The face of a cube map that a light-centred direction d falls in: the major axis, + before -.
