@@ -217,6 +217,8 @@ Request parseOptions(const py::kwargs& kw) {
             o.noRayBinning = !cast<bool>(k, v);
         else if (key == "instancing")
             o.noInstancing = !cast<bool>(k, v);
+        else if (key == "leaf_slabs")
+            o.noLeafSlabs = !cast<bool>(k, v);
         else if (key == "micropolygon_sampling")
             o.micropolygonSampling = cast<std::string>(k, v);
         else if (key == "displacement_split")
@@ -449,7 +451,7 @@ Options (None or absent: the scene's own value), the CLI's long names with '_' f
   sampler='sobol'|'jittered'|'centred', shadows='on'|'off'|'scene', reyes_shadows='map'|'raytrace',
   bucket_size, subpatch_depth (0 .. 12 or 'auto'), displacement_cache_mb, max_grid,
   micropolygon_sampling='bbox'|'nearest', displacement_split, displacement_normals='exact'|'grid',
-  max_depth, light_samples, cull_backfaces, ray_binning, instancing,
+  max_depth, light_samples, cull_backfaces, ray_binning, instancing, leaf_slabs,
   blur (False: --no-blur), blur_sampling='simple'|'interleaved'|'bbox', blur_tile, blur_permutations,
   shutter=(open, close), dof=(fstop, focallength, focaldistance),
   integrator='direct'|'path'|'ao', ao_samples, ao_distance, ao_weighting='cosine'|'paper',

@@ -1138,6 +1138,9 @@ int main(int argc, char** argv) {
                      "rt: cull back-facing subpatches for primary rays");
     render->add_flag("--no-ray-binning", ra.noRayBinning,
                      "rt: per-ray traversal for camera and shadow rays (no binning; same image)");
+    render->add_flag("--no-leaf-slabs", ra.noLeafSlabs,
+                     "rt: no leaf slab test (every leaf box a ray hits is a Newton candidate; same image to "
+                     "rounding)");
     render->add_flag("--no-instancing", ra.noInstancing,
                      "rt: every ObjectInstance builds its own subpatch trees (no sharing; same image to "
                      "rounding)");

@@ -151,6 +151,9 @@ struct RenderSettings {
     // rt: the surfaces of RIB ObjectInstances of one object share the first instance's subpatch trees (rays
     // are moved into its frame); off: every instance builds its own (tests, benchmarks).
     bool instancing = true;
+    // rt: the candidate stages drop the (ray, leaf) pairs whose ray misses the leaf's slab inside its box
+    // (rt/subpatch_tree.h LeafSlab4); off: every leaf box hit is a Newton candidate (tests, benchmarks).
+    bool leafSlabs = true;
     ShadowOverride shadows = ShadowOverride::Scene;
     ReyesShadows reyesShadows = ReyesShadows::Map;
     // Reyes shadow maps shared by the processes of a farm (--shadow-map-cache, reyes/shadow_maps.h): a

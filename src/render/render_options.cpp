@@ -130,6 +130,7 @@ void applyRenderOptions(const Scene& scene, const RenderOptions& o, RenderSettin
     s.cullBackfaces = o.cullBackfaces;
     s.rayBinning = !o.noRayBinning;
     s.instancing = !o.noInstancing;
+    s.leafSlabs = !o.noLeafSlabs;
     s.maxGridEdge = o.maxGridEdge;
     const std::string mpSampling =
         !o.micropolygonSampling.empty() ? o.micropolygonSampling : scene.image.micropolygonSampling;

@@ -36,7 +36,7 @@ struct RenderOptions {
     int displacementCacheMb = 512;              // rt: memory for displaced micro-grids (RenderSettings)
     int maxDepth = -1;                          // -1: 4 for the direct integrator, 16 for the path tracer
     int lightSamples = 0;                       // 0: each area light's own "samples"
-    bool cullBackfaces = false, noRayBinning = false, noInstancing = false;
+    bool cullBackfaces = false, noRayBinning = false, noInstancing = false, noLeafSlabs = false;
     // Motion blur and depth of field (docs/motion.md): "" / 0 = the scene's Hider parameters.
     bool noBlur = false;
     std::string blurSampling;

@@ -189,7 +189,7 @@ int autoSubpatchDepth(const Scene& scene, const Camera& cam, double samplesPerPi
 
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion, int maxTimeSlabs,
-                  const RtDisplacementOptions* displacement, bool instancing) {
+                  const RtDisplacementOptions* displacement, bool instancing, bool leafSlabs) {
     if (subpatchDepth < 0)  // kAutoSubpatchDepth is the caller's to resolve (autoSubpatchDepth)
         throw std::invalid_argument("buildRtAccel: subpatch depth " + std::to_string(subpatchDepth));
     const size_t n = scene.patches.size();
@@ -268,11 +268,11 @@ void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bo
             if (!quadricPtr.empty()) treeQuadric.push_back(quadricPtr[i]);
         }
         buildSubpatchForest(treePatches, subpatchDepth, acc.forest, false, treeFlip, nullptr, maxTimeSlabs,
-                            kTimeSlabBudgetBytes, treeQuadric);
+                            kTimeSlabBudgetBytes, treeQuadric, leafSlabs);
     } else {
         buildSubpatchForest(acc.patches, subpatchDepth, acc.forest, cullFromOrigin, acc.flip,
                             acc.movingPatches ? &acc.motion : nullptr, maxTimeSlabs, kTimeSlabBudgetBytes,
-                            quadricPtr);
+                            quadricPtr, leafSlabs);
     }
     acc.subpatchMs = msSince(t0);
     // Displaced patches: their micro-grids (now or lazily) and their subpatch boxes.

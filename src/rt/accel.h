@@ -141,10 +141,12 @@ struct RtDisplacementOptions {
 // `subpatchDepth` >= 0 (resolve kAutoSubpatchDepth with autoSubpatchDepth first).
 // `instancing`: the patches of Scene::instances that are affine copies of their object's first instance
 // share its subpatch trees (RtAccel::treeOf); not with `cullFromOrigin` (the back-facing marks depend on
-// where the eye is in the prototype's frame) nor in a frame where anything moves.
+// where the eye is in the prototype's frame) nor in a frame where anything moves. `leafSlabs`: build the
+// leaves' slabs (SubpatchForest::leafSlabs), which the candidate stages test.
 void buildRtAccel(const Scene& scene, const Mat4& toSpace, int subpatchDepth, bool cullFromOrigin,
                   RtAccel& acc, const FrameMotion* motion = nullptr, int maxTimeSlabs = kDefaultTimeSlabs,
-                  const RtDisplacementOptions* displacement = nullptr, bool instancing = false);
+                  const RtDisplacementOptions* displacement = nullptr, bool instancing = false,
+                  bool leafSlabs = true);
 
 // --subpatch-depth auto: a depth for the scene's subpatch trees from how many camera samples its patches
 // cover: the patches whose box projects into the image each cover its clipped raster rectangle times

@@ -21,7 +21,7 @@ constexpr size_t kRootRaysPerLeaf = 8;
 // expects (the traversal's output format). `start`, `next`: scratch.
 void groupCandidates(const CandidateVector& found, size_t n, std::vector<uint32_t>& start,
                      std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests,
-                     size_t rootPairs, bool sortByEntry = true) {
+                     size_t rootPairs, uint64_t slabCulled, bool sortByEntry = true) {
     const size_t nChunks = (n + kChunk - 1) / kChunk;
     if (chunks.size() < nChunks) chunks.resize(nChunks);
     // start[r]: first candidate of ray r; start[n]: total
@@ -38,7 +38,9 @@ void groupCandidates(const CandidateVector& found, size_t n, std::vector<uint32_
         ch.c = StageCounters();
         ch.c.candidates = ch.cand.size();
     }
-    if (nChunks > 0) chunks[0].c.boxTests = boxTests, chunks[0].c.rootPairs = rootPairs;
+    if (nChunks > 0)
+        chunks[0].c.boxTests = boxTests, chunks[0].c.rootPairs = rootPairs,
+        chunks[0].c.slabCulled = slabCulled;
     for (const Candidate& c : found) {
         const size_t ci = c.ray / kChunk;
         chunks[ci].cand[next[c.ray]++ - start[ci * kChunk]] = c;
@@ -131,7 +133,7 @@ inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float
 // in the grid cells its rectangle covers. Candidates are the traversal's; appended to `found` unordered.
 
 bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t r1, ParallelBinning& pb,
-                     CandidateVector& found, CandidateVector& roots, uint64_t& boxTests,
+                     CandidateVector& found, CandidateVector& roots, uint64_t& boxTests, uint64_t& slabCulled,
                      const Vec3* light = nullptr) {
     const size_t n = r1 - r0;
     if (n == 0) return true;
@@ -196,7 +198,8 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
     for (size_t c = 0; c < size_t(g) * g; ++c) pb.cellStart[c + 1] += pb.cellStart[c];
     // Slots 0 .. n - 1 are all written below (the cells' slot ranges partition them); only the padding
     // is set here (the arrays are per-thread scratch: a fill of all of them was a quarter of their cost).
-    for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.ix, &pb.iy, &pb.iz, &pb.tmin, &pb.tmax}) {
+    for (auto* v : {&pb.px, &pb.py, &pb.ox, &pb.oy, &pb.oz, &pb.ix, &pb.iy, &pb.iz, &pb.dx, &pb.dy, &pb.dz,
+                    &pb.tmin, &pb.tmax}) {
         v->resize(n + 4);
         std::fill(v->begin() + ptrdiff_t(n), v->end(), 0.f);
     }
@@ -209,12 +212,13 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         std::vector<uint32_t> slot(pb.cellStart.begin(), pb.cellStart.end() - 1);
         for (size_t r = r0; r < r1; ++r) {
             const uint32_t s = slot[next[r - r0]]++;
-            const Vec3 o = rays.o[r];
-            const Vec3 inv = safeInverse(rays.d[r]);
+            const Vec3 o = rays.o[r], d = rays.d[r];
+            const Vec3 inv = safeInverse(d);
             pb.ray[s] = uint32_t(r), pb.ignore[s] = rays.ignore[r];
             project(o, pb.px[s], pb.py[s]);
             pb.ox[s] = o.x, pb.oy[s] = o.y, pb.oz[s] = o.z;
             pb.ix[s] = inv.x, pb.iy[s] = inv.y, pb.iz[s] = inv.z;
+            pb.dx[s] = d.x, pb.dy[s] = d.y, pb.dz[s] = d.z;
             pb.tmin[s] = rays.tmin[r], pb.tmax[s] = rays.tmax[r];
         }
     }
@@ -369,9 +373,10 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         return (d.x > 0 ? b.lo.x : b.hi.x) * d.x + (d.y > 0 ? b.lo.y : b.hi.y) * d.y +
                (d.z > 0 ? b.lo.z : b.hi.z) * d.z;
     };
-    // The rays in the cells of `rect` against one box, into `out` as candidates of leaf `leaf`.
+    // The rays in the cells of `rect` against one box, into `out` as candidates of leaf `leaf`; with
+    // `slab` (the leaf's slab group), the rays that do not cross the leaf's slab inside its box dropped.
     auto testBox = [&](CandidateVector& out, uint32_t patch, uint32_t leaf, const Bounds3& box,
-                       const Rect2& rect) {
+                       const Rect2& rect, const LeafSlab4* slab = nullptr) {
         const int cx0 = cellX(rect.x0), cx1 = cellX(rect.x1), cy0 = cellY(rect.y0), cy1 = cellY(rect.y1);
 #if defined(__SSE2__)
         const LeafBox4 b4(box, rect);
@@ -398,6 +403,14 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
                 const __m128 selfCut = _mm_and_ps(own, _mm_cmplt_ps(tx, vself));
                 int mask = _mm_movemask_ps(_mm_andnot_ps(selfCut, hit));
                 if (e - i < 4) mask &= (1 << (e - i)) - 1;
+                if (mask && slab) {
+                    const int kept = mask & slabKeepRays4(*slab, int(leaf & 3), _mm_loadu_ps(&pb.ox[i]),
+                                                          _mm_loadu_ps(&pb.oy[i]), _mm_loadu_ps(&pb.oz[i]),
+                                                          _mm_loadu_ps(&pb.dx[i]), _mm_loadu_ps(&pb.dy[i]),
+                                                          _mm_loadu_ps(&pb.dz[i]), te, tx);
+                    slabCulled += kPop4[mask] - kPop4[kept];
+                    mask = kept;
+                }
                 if (mask) k += emitLanes(out.data() + k, mask, te, &pb.ray[i], patch, leaf);
             }
 #else
@@ -410,6 +423,12 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
                                     pb.tmin[i], pb.tmax[i], te, tx))
                     continue;
                 if (pb.ignore[i] == patch && tx < ignoreT) continue;
+                const Vec3 o{pb.ox[i], pb.oy[i], pb.oz[i]};
+                if (slab && !slabKeep1(*slab, int(leaf & 3), o, {pb.dx[i], pb.dy[i], pb.dz[i]},
+                                       slabRayMargin(o), te, tx)) {
+                    ++slabCulled;
+                    continue;
+                }
                 out[k++] = {pb.ray[i], patch, leaf, te};
             }
 #endif
@@ -432,7 +451,9 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
     descendCulled(
         acc, nearDepth, overlaps, [](uint32_t, uint32_t) { return false; }, root,
         [&](uint32_t patch, uint32_t node, const Bounds3& box, const Rect2& rect) {
-            testBox(found, patch, node - firstLeaf, box, rect);
+            const uint32_t leaf = node - firstLeaf;
+            const LeafSlab4* slabs = forest.slabGroups(patch);  // (binning runs without instancing)
+            testBox(found, patch, leaf, box, rect, slabs ? slabs + (leaf >> 2) : nullptr);
         });
     return true;
 }
@@ -458,7 +479,7 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
     CandidateVector& found = bin.found;
     found.clear();
     bin.roots.clear();
-    uint64_t boxTests = 0;
+    uint64_t boxTests = 0, slabCulled = 0;
 
     // Whether the rectangle of box b can hold a sample of the tile, and the rectangle clipped to the
     // region (the whole region when the box reaches behind the eye).
@@ -486,7 +507,7 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
     // (per-sample structure of arrays; camera rays start at z = 0).
     const float tmin = proj.nearClip, tmax = proj.farClip;
     auto testBox = [&](CandidateVector& out, uint32_t patch, uint32_t leaf, const Bounds3& box,
-                       const Rect2& rect) {
+                       const Rect2& rect, const LeafSlab4* slab = nullptr) {
         const int px0 = std::max(reg.x0, int(std::floor(rect.x0))),
                   px1 = std::min(reg.x1 - 1, int(std::floor(rect.x1)));
         const int py0 = std::max(reg.y0, int(std::floor(rect.y0))),
@@ -513,6 +534,14 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
                                  _mm_loadu_ps(&cs.invZ[i]), t0, t1, te, tx);
                 int mask = _mm_movemask_ps(hit);
                 if (rowEnd - i < 4) mask &= (1 << (rowEnd - i)) - 1;
+                if (mask && slab) {
+                    const int kept =
+                        mask & slabKeepRays4(*slab, int(leaf & 3), _mm_loadu_ps(&cs.originX[i]),
+                                             _mm_loadu_ps(&cs.originY[i]), zero, _mm_loadu_ps(&cs.dirX[i]),
+                                             _mm_loadu_ps(&cs.dirY[i]), _mm_loadu_ps(&cs.dirZ[i]), te, tx);
+                    slabCulled += kPop4[mask] - kPop4[kept];
+                    mask = kept;
+                }
                 if (mask) k += emitLanes(out.data() + k, mask, te, &cs.rayOfSample[i], patch, leaf);
             }
 #else
@@ -521,8 +550,13 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
                 const float x = cs.sampleX[i], y = cs.sampleY[i];
                 if (ray == kNone || !(x >= rect.x0 && x <= rect.x1 && y >= rect.y0 && y <= rect.y1)) continue;
                 float te, tx;
-                if (rayBoxInterval(box, rays.o[ray], safeInverse(rays.d[ray]), tmin, tmax, te, tx))
-                    out[k++] = {ray, patch, leaf, te};
+                if (!rayBoxInterval(box, rays.o[ray], safeInverse(rays.d[ray]), tmin, tmax, te, tx)) continue;
+                if (slab && !slabKeep1(*slab, int(leaf & 3), rays.o[ray], rays.d[ray],
+                                       slabRayMargin(rays.o[ray]), te, tx)) {
+                    ++slabCulled;
+                    continue;
+                }
+                out[k++] = {ray, patch, leaf, te};
             }
 #endif
         }
@@ -549,27 +583,30 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
         },
         root,
         [&](uint32_t patch, uint32_t node, const Bounds3& box, const Rect2& rect) {
-            testBox(found, patch, node - firstLeaf, box, rect);
+            const uint32_t leaf = node - firstLeaf;
+            const LeafSlab4* slabs = forest.slabGroups(patch);  // (binning runs without instancing)
+            testBox(found, patch, leaf, box, rect, slabs ? slabs + (leaf >> 2) : nullptr);
         });
-    if (!bin.roots.empty()) descendRootPairs(acc, rays, bin.roots, cull, found, boxTests);
+    if (!bin.roots.empty()) descendRootPairs(acc, rays, bin.roots, cull, found, boxTests, slabCulled);
 
-    groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests, bin.roots.size());
+    groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests, bin.roots.size(), slabCulled);
 }
 
 bool binShadowRays(const RtAccel& acc, const RayList& rays, std::span<const ShadowRun> runs,
                    BinningScratch& bin, std::vector<Chunk>& chunks) {
     bin.found.clear();
     bin.roots.clear();
-    uint64_t boxTests = 0;
+    uint64_t boxTests = 0, slabCulled = 0;
     bool binned = true;
     for (const ShadowRun& run : runs)
         binned = binned && binParallelRays(acc, rays, run.begin, run.end, bin.parallel, bin.found, bin.roots,
-                                           boxTests, run.point ? &run.position : nullptr);
-    if (binned && !bin.roots.empty()) descendRootPairs(acc, rays, bin.roots, false, bin.found, boxTests);
+                                           boxTests, slabCulled, run.point ? &run.position : nullptr);
+    if (binned && !bin.roots.empty())
+        descendRootPairs(acc, rays, bin.roots, false, bin.found, boxTests, slabCulled);
     // Shadow rays stop at any accepted hit: their candidates need no order.
     if (binned)
         groupCandidates(bin.found, rays.size(), bin.start, bin.next, chunks, boxTests, bin.roots.size(),
-                        /*sortByEntry=*/false);
+                        slabCulled, /*sortByEntry=*/false);
     return binned;
 }
 

@@ -29,7 +29,7 @@ struct CameraSamples {
     PixelRect region;
     int spp = 1;
     std::vector<uint32_t> rayOfSample;
-    std::vector<float> sampleX, sampleY, originX, originY, invX, invY, invZ;
+    std::vector<float> sampleX, sampleY, originX, originY, invX, invY, invZ, dirX, dirY, dirZ;
 };
 
 // The shadow rays towards one light: a contiguous run of the shadow list.
@@ -45,7 +45,8 @@ struct ParallelBinning {
     std::vector<std::vector<float>> minStart;  // per level of a min pyramid over the cells: earliest start
     // Per sorted ray (padded by 4): its index and its point, origin, interval, originating patch.
     std::vector<uint32_t> ray, ignore;
-    std::vector<float> px, py, ox, oy, oz, ix, iy, iz, tmin, tmax;  // point, origin, 1/direction, interval
+    std::vector<float> px, py, ox, oy, oz, ix, iy, iz, dx, dy, dz, tmin,
+        tmax;  // point, origin, 1/d, d, interval
 };
 
 // Scratch of the binning stages, reused from list to list.

@@ -107,6 +107,7 @@ struct StageCounters {
     uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
     uint64_t timeCulled = 0;  // candidates of moving patches whose leaf box at the ray's time is missed
     uint64_t rootPairs = 0;   // binning: (ray, patch) pairs sent down their subpatch trees per ray
+    uint64_t slabCulled = 0;  // (ray, leaf) box hits dropped by the leaf's slab (LeafSlab4)
     std::array<uint64_t, kHistBins> hist{};
 };
 

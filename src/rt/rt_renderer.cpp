@@ -676,7 +676,8 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws,
     cs.proj = &proj;
     cs.region = {ws.tile.region.x0, ws.tile.region.y0, ws.tile.region.x1, ws.tile.region.y1};
     cs.spp = ws.tile.spp;
-    for (auto* v : {&cs.sampleX, &cs.sampleY, &cs.originX, &cs.originY, &cs.invX, &cs.invY, &cs.invZ})
+    for (auto* v : {&cs.sampleX, &cs.sampleY, &cs.originX, &cs.originY, &cs.invX, &cs.invY, &cs.invZ,
+                    &cs.dirX, &cs.dirY, &cs.dirZ})
         v->resize(ns + 4);
     cs.rayOfSample.resize(ns + 4);
     size_t m = 0;
@@ -689,6 +690,7 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws,
             cs.rayOfSample[i] = kNone;
             cs.sampleX[i] = cs.sampleY[i] = NAN;  // never inside a rectangle
             cs.originX[i] = cs.originY[i] = cs.invX[i] = cs.invY[i] = cs.invZ[i] = 0.f;
+            cs.dirX[i] = cs.dirY[i] = cs.dirZ[i] = 0.f;
             continue;
         }
         Vec3 o, d;
@@ -709,6 +711,7 @@ void makeCameraRays(const Projector& proj, const SceneRect& sr, Workspace& ws,
         cs.sampleX[i] = x, cs.sampleY[i] = y;
         cs.originX[i] = o.x, cs.originY[i] = o.y;
         cs.invX[i] = inv.x, cs.invY[i] = inv.y, cs.invZ[i] = inv.z;
+        cs.dirX[i] = d.x, cs.dirY[i] = d.y, cs.dirZ[i] = d.z;
         rl.owner[m++] = uint32_t(i);
     }
     rl.resize(m);
@@ -975,7 +978,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     const int subpatchDepth =
         resolveSubpatchDepth(settings.subpatchDepth, scene, cam, double(nx * ny), &samplesPerPatch);
     buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, settings.cullBackfaces, acc, &frame.motion,
-                 kDefaultTimeSlabs, &displacement, settings.instancing);
+                 kDefaultTimeSlabs, &displacement, settings.instancing, settings.leafSlabs);
     const double buildMs = msSince(tBuild);
     if (displacedDicer)
         for (size_t i = 0; i < scene.patches.size(); ++i)
@@ -1114,6 +1117,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     s["binning_root_pairs"] = total.rootPairs;  // binned rays that went down a patch's tree per ray
     s["newton_runs"] = total.newtonRuns;
     s["hull_culled"] = total.hullCulled;
+    s["slab_culled"] = total.slabCulled;
     s["time_culled"] = total.timeCulled;
     s["shadow_lists"] = {{"binned", total.shadowListsBinned}, {"traversed", total.shadowListsTraversed}};
     s["newton_iterations"] = {
@@ -1158,6 +1162,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     writeTileLoopStats(layout, loop, s);
     s["cull_backfaces"] = settings.cullBackfaces;
     s["ray_binning"] = binning;
+    s["leaf_slabs"] = !acc.forest.leafSlabs.empty();
     s["leaves_per_sample"] = leavesPerSample;
     s["max_depth"] = fr.maxDepth;
     s["integrator"] = integratorName(settings.integrator);

@@ -3,7 +3,9 @@
 // candidate writes. Inline in a header so that the hot loops of rt/traversal.cpp and rt/binning.cpp keep
 // them inlined.
 #pragma once
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -29,12 +31,19 @@ namespace tessera::rt {
 // Stack for the 4-wide BVH: each level pushes at most 3 more nodes than it pops.
 inline constexpr int kBvh4Stack = 3 * 64 + 1;
 
-// A ray for the 4-wide BVH test (origin, reciprocal direction and interval in all four lanes).
+// The part of a leaf slab's margin that depends on the ray (LeafSlab4): four times the origin's share of
+// newtonTolerance (2e-6 of its largest coordinate).
+inline float slabRayMargin(Vec3 o) {
+    return 8e-6f * std::max(std::max(std::fabs(o.x), std::fabs(o.y)), std::fabs(o.z));
+}
+
+// A ray for the 4-wide box tests (origin, reciprocal direction and interval in all four lanes), with its
+// direction and slab margin for the leaf slab test (slabKeep4).
 struct Ray4 {
 #if defined(__SSE2__)
-    __m128 ox, oy, oz, ix, iy, iz, t0, t1;
+    __m128 ox, oy, oz, ix, iy, iz, t0, t1, dx, dy, dz, m;
     Ray4() = default;
-    Ray4(Vec3 o, Vec3 inv, float tmin, float tmax)
+    Ray4(Vec3 o, Vec3 inv, float tmin, float tmax, Vec3 d = {0.f, 0.f, 0.f})
         : ox(_mm_set1_ps(o.x)),
           oy(_mm_set1_ps(o.y)),
           oz(_mm_set1_ps(o.z)),
@@ -42,14 +51,71 @@ struct Ray4 {
           iy(_mm_set1_ps(inv.y)),
           iz(_mm_set1_ps(inv.z)),
           t0(_mm_set1_ps(tmin)),
-          t1(_mm_set1_ps(tmax)) {}
+          t1(_mm_set1_ps(tmax)),
+          dx(_mm_set1_ps(d.x)),
+          dy(_mm_set1_ps(d.y)),
+          dz(_mm_set1_ps(d.z)),
+          m(_mm_set1_ps(slabRayMargin(o))) {}
 #else
     Vec3 o, inv;
     float tmin, tmax;
+    Vec3 d;
+    float m;
     Ray4() = default;
-    Ray4(Vec3 o_, Vec3 inv_, float tmin_, float tmax_) : o(o_), inv(inv_), tmin(tmin_), tmax(tmax_) {}
+    Ray4(Vec3 o_, Vec3 inv_, float tmin_, float tmax_, Vec3 d_ = {0.f, 0.f, 0.f})
+        : o(o_), inv(inv_), tmin(tmin_), tmax(tmax_), d(d_), m(slabRayMargin(o_)) {}
 #endif
 };
+
+// The leaf slab test (LeafSlab4) of one leaf and one ray: whether the ray (origin o, direction d, slab
+// margin m) is within the slab's band somewhere in [te, tx], its interval in the leaf's box (finite). The
+// ray's height n.(o + t d) is linear in t, so over the interval it spans [h(te), h(tx)]: the ray meets the
+// band iff that range overlaps [lo - m, hi + m] (no division; the heights' rounding is covered by 1e-6 of
+// their magnitudes). False means the ray cannot meet the leaf: every point of it lies in the band, and a
+// root Newton accepts within the margins.
+inline bool slabKeep1(const LeafSlab4& g, int lane, Vec3 o, Vec3 d, float m, float te, float tx) {
+    const float nx = g.n[0][lane], ny = g.n[1][lane], nz = g.n[2][lane];
+    const float no = nx * o.x + ny * o.y + nz * o.z, nd = nx * d.x + ny * d.y + nz * d.z;
+    const float h0 = no + te * nd, h1 = no + tx * nd;
+    const float r = m + 1e-6f * (std::fabs(h0) + std::fabs(h1));
+    return std::min(h0, h1) <= g.hi[lane] + r && std::max(h0, h1) >= g.lo[lane] - r;
+}
+
+#if defined(__SSE2__)
+// slabKeep1 four lanes at a time (four leaves and one ray, or one leaf and four rays, as the arguments are
+// splatted): the bits of the lanes kept.
+inline int slabKeep4(__m128 nx, __m128 ny, __m128 nz, __m128 lo, __m128 hi, __m128 ox, __m128 oy, __m128 oz,
+                     __m128 dx, __m128 dy, __m128 dz, __m128 m, __m128 te, __m128 tx) {
+    const __m128 no = _mm_add_ps(_mm_add_ps(_mm_mul_ps(nx, ox), _mm_mul_ps(ny, oy)), _mm_mul_ps(nz, oz));
+    const __m128 nd = _mm_add_ps(_mm_add_ps(_mm_mul_ps(nx, dx), _mm_mul_ps(ny, dy)), _mm_mul_ps(nz, dz));
+    const __m128 h0 = _mm_add_ps(no, _mm_mul_ps(te, nd)), h1 = _mm_add_ps(no, _mm_mul_ps(tx, nd));
+    const __m128 sign = _mm_set1_ps(-0.f);
+    const __m128 r = _mm_add_ps(
+        m, _mm_mul_ps(_mm_set1_ps(1e-6f), _mm_add_ps(_mm_andnot_ps(sign, h0), _mm_andnot_ps(sign, h1))));
+    const __m128 keep = _mm_and_ps(_mm_cmple_ps(_mm_min_ps(h0, h1), _mm_add_ps(hi, r)),
+                                   _mm_cmpge_ps(_mm_max_ps(h0, h1), _mm_sub_ps(lo, r)));
+    return _mm_movemask_ps(keep);
+}
+// slabRayMargin of four origins.
+inline __m128 slabRayMargin4(__m128 ox, __m128 oy, __m128 oz) {
+    const __m128 sign = _mm_set1_ps(-0.f);
+    return _mm_mul_ps(
+        _mm_set1_ps(8e-6f),
+        _mm_max_ps(_mm_max_ps(_mm_andnot_ps(sign, ox), _mm_andnot_ps(sign, oy)), _mm_andnot_ps(sign, oz)));
+}
+// One leaf (lane `lane` of a slab group) against four rays.
+inline int slabKeepRays4(const LeafSlab4& g, int lane, __m128 ox, __m128 oy, __m128 oz, __m128 dx, __m128 dy,
+                         __m128 dz, __m128 te, __m128 tx) {
+    return slabKeep4(_mm_set1_ps(g.n[0][lane]), _mm_set1_ps(g.n[1][lane]), _mm_set1_ps(g.n[2][lane]),
+                     _mm_set1_ps(g.lo[lane]), _mm_set1_ps(g.hi[lane]), ox, oy, oz, dx, dy, dz,
+                     slabRayMargin4(ox, oy, oz), te, tx);
+}
+// Four leaves of a slab group against one ray.
+inline int slabKeepGroup(const LeafSlab4& g, const Ray4& r, __m128 te, __m128 tx) {
+    return slabKeep4(_mm_load_ps(g.n[0]), _mm_load_ps(g.n[1]), _mm_load_ps(g.n[2]), _mm_load_ps(g.lo),
+                     _mm_load_ps(g.hi), r.ox, r.oy, r.oz, r.dx, r.dy, r.dz, r.m, te, tx);
+}
+#endif
 
 #if defined(__SSE2__)
 using F4 = __m128;
@@ -117,8 +183,8 @@ inline __m128 decodeHi4(const SubpatchQuad& q, int a) {
 #endif
 
 // The hit lanes of a subpatch quad whose exit distance is not below selfT (lanes of selfT4; the
-// self-intersection cut !(tx < selfT)), with the entry distances in te.
-inline int quadHits(const SubpatchQuad& q, const Ray4& r, F4 selfT4, F4& te) {
+// self-intersection cut !(tx < selfT)), with the entry and exit distances in te and tx.
+inline int quadHits(const SubpatchQuad& q, const Ray4& r, F4 selfT4, F4& te, F4& tx) {
 #if defined(__SSE2__)
     const __m128 x0 = _mm_mul_ps(_mm_sub_ps(decodeLo4(q, 0), r.ox), r.ix);
     const __m128 x1 = _mm_mul_ps(_mm_sub_ps(decodeHi4(q, 0), r.ox), r.ix);
@@ -127,11 +193,9 @@ inline int quadHits(const SubpatchQuad& q, const Ray4& r, F4 selfT4, F4& te) {
     const __m128 z0 = _mm_mul_ps(_mm_sub_ps(decodeLo4(q, 2), r.oz), r.iz);
     const __m128 z1 = _mm_mul_ps(_mm_sub_ps(decodeHi4(q, 2), r.oz), r.iz);
     te = _mm_max_ps(_mm_max_ps(_mm_min_ps(x0, x1), _mm_min_ps(y0, y1)), _mm_max_ps(_mm_min_ps(z0, z1), r.t0));
-    const __m128 tx =
-        _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
+    tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(x0, x1), _mm_max_ps(y0, y1)), _mm_min_ps(_mm_max_ps(z0, z1), r.t1));
     return _mm_movemask_ps(_mm_andnot_ps(_mm_cmplt_ps(tx, selfT4), _mm_cmple_ps(te, tx)));
 #else
-    F4 tx;
     float lo[3][4], hi[3][4];
     for (int a = 0; a < 3; ++a)
         for (int c = 0; c < 4; ++c)
@@ -239,7 +303,7 @@ TESSERA_AVX2 inline __m256 slab2(const SubpatchQuad& qa, const SubpatchQuad& qb,
     return _mm256_mul_ps(_mm256_sub_ps(bound, cat2(oa, ob)), cat2(ia, ib));
 }
 TESSERA_AVX2 inline int quadHits2(const SubpatchQuad& qa, const Ray4& ra, __m128 sa, const SubpatchQuad& qb,
-                                  const Ray4& rb, __m128 sb, __m256& te) {
+                                  const Ray4& rb, __m128 sb, __m256& te, __m256& tx) {
     const __m256 x0 = slab2(qa, qb, false, 0, ra.ox, rb.ox, ra.ix, rb.ix);
     const __m256 x1 = slab2(qa, qb, true, 0, ra.ox, rb.ox, ra.ix, rb.ix);
     const __m256 y0 = slab2(qa, qb, false, 1, ra.oy, rb.oy, ra.iy, rb.iy);
@@ -248,8 +312,8 @@ TESSERA_AVX2 inline int quadHits2(const SubpatchQuad& qa, const Ray4& ra, __m128
     const __m256 z1 = slab2(qa, qb, true, 2, ra.oz, rb.oz, ra.iz, rb.iz);
     te = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
                        _mm256_max_ps(_mm256_min_ps(z0, z1), cat2(ra.t0, rb.t0)));
-    const __m256 tx = _mm256_min_ps(_mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
-                                    _mm256_min_ps(_mm256_max_ps(z0, z1), cat2(ra.t1, rb.t1)));
+    tx = _mm256_min_ps(_mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
+                       _mm256_min_ps(_mm256_max_ps(z0, z1), cat2(ra.t1, rb.t1)));
     return _mm256_movemask_ps(
         _mm256_andnot_ps(_mm256_cmp_ps(tx, cat2(sa, sb), _CMP_LT_OS), _mm256_cmp_ps(te, tx, _CMP_LE_OS)));
 }

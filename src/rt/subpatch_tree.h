@@ -59,6 +59,20 @@ struct alignas(16) LeafBasis {
     float mvSplat[4][4][4];  // mv[j][j'] in all four lanes (the SSE test multiplies whole rows by it)
 };
 
+// The slabs of four consecutive leaves of a tree (leaves 4g .. 4g + 3: one leaf-level quad's grandchildren),
+// structure of arrays. Lane i: every point P of leaf 4g + i has lo[i] <= n.P <= hi[i], n = (n[0][i],
+// n[1][i], n[2][i]) a unit vector near the leaf's normal (from its control net), the bounds its control
+// points' (convex hull property) grown by the boxes' rounding margin and four Newton tolerances of the patch
+// (newtonTolerance: a root Newton accepts lies that close to the surface). A nearly flat leaf's slab is thin:
+// a ray that crosses the leaf's box but not the slab while inside it (past a silhouette, or over the surface
+// at a box's corner) cannot meet the leaf, and the candidate stages drop it (slabKeep4, rt/simd_kernels.h).
+// An open lane (n = 0, lo = -inf, hi = +inf) keeps every ray: moving, displaced and quadric surfaces, and the
+// padding of trees with fewer than four leaves.
+struct alignas(16) LeafSlab4 {
+    float n[3][4];
+    float lo[4], hi[4];
+};
+
 // A tree's boxes are stored once: levels 2, 4, ... in its quads (what the wavefront traversal tests), the
 // root per tree, and for an odd depth the leaves (the level below the last quads). An odd inner level is
 // not stored: every inner box is the union of its children's, so nodeBox makes it from the two in the
@@ -71,6 +85,8 @@ struct SubpatchForest {
     std::vector<uint8_t> backfacing;   // optional, one per node: every point faces away from the eye at 0
     std::vector<Vec2> leafCentre;      // per leaf (shared by all patches): centre of its (u,v) rectangle
     std::vector<LeafBasis> leafBasis;  // per leaf (shared by all patches)
+    // Per tree, slabGroupsPerTree() groups of its leaves' slabs (LeafSlab4); empty: none (every ray kept).
+    std::vector<LeafSlab4, DefaultInitAllocator<LeafSlab4>> leafSlabs;
     // Per leaf, its four quarters (index 4 * leaf + q; q bit 0: high u half, bit 1: high v half).
     std::vector<LeafBasis> quarterBasis;
     // Per patch, quadsPerPatch = (4^floor(depth/2) - 1) / 3 grandchild groups: node i at level 2k has
@@ -119,6 +135,11 @@ struct SubpatchForest {
         }
         return b;
     }
+    uint32_t slabGroupsPerTree() const { return depth >= 2 ? 1u << (depth - 2) : 1u; }
+    // The slab groups of tree `tree` (null when the forest has none); leaf l is lane l & 3 of group l >> 2.
+    const LeafSlab4* slabGroups(uint32_t tree) const {
+        return leafSlabs.empty() ? nullptr : leafSlabs.data() + size_t(tree) * slabGroupsPerTree();
+    }
     const uint8_t* backfaceBits(uint32_t patch) const {
         return backfacing.empty() ? nullptr : backfacing.data() + size_t(patch) * nodesPerPatch;
     }
@@ -142,6 +163,7 @@ struct SubpatchForest {
     size_t memoryBytes() const {
         return (roots.size() + oddLeaves.size()) * sizeof(Bounds3) + backfacing.size() +
                leafCentre.size() * sizeof(Vec2) + quads.size() * sizeof(SubpatchQuad) + quadBack.size() +
+               leafSlabs.size() * sizeof(LeafSlab4) +
                (leafBasis.size() + quarterBasis.size()) * sizeof(LeafBasis) +
                knotLeaves.size() * sizeof(Bounds3) + slabQuads.size() * sizeof(SubpatchQuad) +
                slabRoots.size() * sizeof(Bounds3) + slabPatch.size() * sizeof(uint32_t);
@@ -166,7 +188,8 @@ void subpatchLeafRect(int depth, uint32_t leaf, float& u0, float& u1, float& v0,
 // edges hit the boxes on both sides despite rounding.
 Bounds3 enlargedHull(const BezierPatch& p);
 
-// Build the trees of all patches (parallel over patches). With `backfaceFromOrigin`, also mark nodes
+// Build the trees of all patches (parallel over patches), and the leaves' slabs (LeafSlab4) unless
+// `leafSlabs` is false. With `backfaceFromOrigin`, also mark nodes
 // whose subpatch faces away from the origin everywhere (conservative: Bernstein bound of the normal;
 // `flip[i]` reverses patch i's orientation). With `motion`, the boxes of a patch that moves are the unions
 // of its trees at every knot: control points move linearly between knots, and so do a subpatch's (they
@@ -184,11 +207,12 @@ void buildSubpatchForest(std::span<const BezierPatch> patches, int depth, Subpat
                          bool backfaceFromOrigin = false, std::span<const uint8_t> flip = {},
                          const FrameMotion* motion = nullptr, int maxSlabs = kDefaultTimeSlabs,
                          size_t slabBudgetBytes = kTimeSlabBudgetBytes,
-                         std::span<const PlacedQuadric* const> quadrics = {});
+                         std::span<const PlacedQuadric* const> quadrics = {}, bool leafSlabs = true);
 
 // Replace the boxes of `patch`'s tree with ones built from its leaf boxes (`leaves`: 2^depth of them, in
-// leaf order; an inner node is the union of its children) and clear its back-facing marks: a displaced
-// patch's leaves bound its micro-grid's triangles (rt/displaced.h). Static patches only (no time slabs).
+// leaf order; an inner node is the union of its children), clear its back-facing marks and open its
+// leaves' slabs: a displaced patch's leaves bound its micro-grid's triangles (rt/displaced.h). Static
+// patches only (no time slabs).
 void setSubpatchLeafBoxes(SubpatchForest& forest, uint32_t patch, std::span<const Bounds3> leaves);
 
 }  // namespace tessera

@@ -13,6 +13,7 @@ void TraceCounters::add(const TraceCounters& c) {
     for (int k = 0; k < kKinds; ++k) rays[k] += c.rays[k], hits[k] += c.hits[k];
     candidates += c.candidates, newtonRuns += c.newtonRuns, newtonIterations += c.newtonIterations;
     boxTests += c.boxTests, hullCulled += c.hullCulled, timeCulled += c.timeCulled, rootPairs += c.rootPairs;
+    slabCulled += c.slabCulled;
     shadowListsBinned += c.shadowListsBinned, shadowListsTraversed += c.shadowListsTraversed;
     for (int i = 0; i < kHistBins; ++i) hist[i] += c.hist[i];
     traversalMs += c.traversalMs, newtonMs += c.newtonMs;
@@ -79,6 +80,7 @@ void TraceService::traceList(const RayList& rays, std::vector<RayHit>& hits, boo
         c_.candidates += c.candidates, c_.newtonRuns += c.newtonRuns;
         c_.newtonIterations += c.newtonIterations, c_.boxTests += c.boxTests;
         c_.hullCulled += c.hullCulled, c_.timeCulled += c.timeCulled, c_.rootPairs += c.rootPairs;
+        c_.slabCulled += c.slabCulled;
         for (int i = 0; i < kHistBins; ++i) c_.hist[i] += c.hist[i];
     }
     for (size_t r = 0; r < rays.size(); ++r) {

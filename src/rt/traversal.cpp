@@ -40,9 +40,9 @@ struct PatchPair {
     const uint8_t* back;   // backface bits per node (same condition)
     uint32_t rayId;        // the ray's index in the list, then the patch: its candidates' first half
     uint32_t patch;
-    uint32_t ray;  // index in the chunk
-    float te;      // entry distance of the root box
-    float selfT;
+    uint32_t ray;   // index in the chunk
+    float te;       // entry distance of the root box
+    uint32_t tree;  // the subpatch tree (its leaf slabs)
     uint32_t ray4;  // the ray its boxes are tested with (TraverseScratch::ray4): `ray`, or the ray moved
                     // into the frame of the prototype whose tree an instance's patch shares
 };
@@ -53,7 +53,7 @@ struct TraverseScratch {
     // The chunk's rays (one per ray, in order), then the rays moved into prototype frames (instancing),
     // with the origin and inverse direction of each for the odd-depth pair step.
     std::vector<Ray4> ray4;
-    std::vector<Vec3> boxO, boxInv;
+    std::vector<Vec3> boxO, boxInv, boxD;
     std::vector<PatchPair> pairs;
     std::vector<uint32_t, DefaultInitAllocator<uint32_t, false>> items, next;  // scratch: no huge pages
     std::vector<uint32_t> count;  // candidates per ray of the chunk
@@ -71,14 +71,16 @@ struct LevelIn {
     uint32_t n;
     const PatchPair* pairs;
     const Ray4* ray4;
+    const SubpatchForest* forest;  // its leaf slabs (leafLevel: candidates outside a leaf's slab dropped)
+    uint64_t* slabCulled;          // counts them
 };
 
 inline uint32_t innerLevelTail(const LevelIn& in, uint32_t j, uint32_t* next, uint32_t nNext) {
     for (; j < in.n; ++j) {
         const uint32_t it = in.items[j], quad = it & kItemQuadMask;
         const PatchPair& pp = in.pairs[it >> kItemQuadBits];
-        F4 te4;
-        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray4], pp.selfT4, te4);
+        F4 te4, tx4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray4], pp.selfT4, te4, tx4);
         if (pp.qback) mask &= ~int(pp.qback[quad]);
         storeItems4(next + nNext, hitOrder(mask, te4), (it & ~kItemQuadMask) + 4 * quad + 1);
         nNext += kPop4[mask];
@@ -86,14 +88,32 @@ inline uint32_t innerLevelTail(const LevelIn& in, uint32_t j, uint32_t* next, ui
     return nNext;
 }
 
+// The lanes of `mask` (leaves 4 g .. 4 g + 3 of the pair's tree) whose slab the pair's ray crosses inside
+// their boxes (slabKeep1): all lanes when the forest has no slabs.
+inline int leafSlabsKeep(const LevelIn& in, const PatchPair& pp, uint32_t g, int mask, F4 te4, F4 tx4) {
+    const LeafSlab4* groups = in.forest->slabGroups(pp.tree);
+    if (!groups || !mask) return mask;
+#if defined(__SSE2__)
+    const int keep = mask & slabKeepGroup(groups[g], in.ray4[pp.ray4], te4, tx4);
+#else
+    const Ray4& r = in.ray4[pp.ray4];
+    int keep = 0;
+    for (int i = 0; i < 4; ++i)
+        if ((mask >> i & 1) && slabKeep1(groups[g], i, r.o, r.d, r.m, te4.v[i], tx4.v[i])) keep |= 1 << i;
+#endif
+    *in.slabCulled += kPop4[mask] - kPop4[keep];
+    return keep;
+}
+
 inline size_t leafLevelTail(const LevelIn& in, uint32_t j, uint32_t leafQuadFirst, Candidate* cand,
                             size_t used, uint32_t* count) {
     for (; j < in.n; ++j) {
         const uint32_t it = in.items[j], quad = it & kItemQuadMask;
         const PatchPair& pp = in.pairs[it >> kItemQuadBits];
-        F4 te4;
-        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray4], pp.selfT4, te4);
+        F4 te4, tx4;
+        int mask = quadHits(pp.quads[quad], in.ray4[pp.ray4], pp.selfT4, te4, tx4);
         if (pp.qback) mask &= ~int(pp.qback[quad]);
+        mask &= leafSlabsKeep(in, pp, quad - leafQuadFirst, mask, te4, tx4);
         storeCandidates4(cand + used, kLaneOffsets[size_t(mask)], &pp.rayId, 4 * (quad - leafQuadFirst), te4);
         used += kPop4[mask];
         count[pp.ray] += kPop4[mask];
@@ -126,11 +146,11 @@ inline ItemPair itemPair(const LevelIn& in, uint32_t j) {
             &in.pairs[ib >> kItemQuadBits]};
 }
 // The 8-wide test of both items' quads against their rays, back-facing children masked: lanes 0-3 are item
-// j's, 4-7 item j + 1's; te8 gets the entry distances.
-TESSERA_AVX2 inline int itemPairHits(const LevelIn& in, const ItemPair& p, __m256& te8) {
+// j's, 4-7 item j + 1's; te8 and tx8 get the entry and exit distances.
+TESSERA_AVX2 inline int itemPairHits(const LevelIn& in, const ItemPair& p, __m256& te8, __m256& tx8) {
     const PatchPair &pa = *p.pa, &pb = *p.pb;
     int mask = quadHits2(pa.quads[p.qa], in.ray4[pa.ray4], pa.selfT4, pb.quads[p.qb], in.ray4[pb.ray4],
-                         pb.selfT4, te8);
+                         pb.selfT4, te8, tx8);
     if (pa.qback) mask &= ~int(pa.qback[p.qa]);
     if (pb.qback) mask &= ~(int(pb.qback[p.qb]) << 4);
     return mask;
@@ -140,8 +160,8 @@ TESSERA_AVX2 uint32_t innerLevelAvx2(const LevelIn& in, uint32_t* next) {
     uint32_t j = 0, nNext = 0;
     for (; j + 1 < in.n; j += 2) {
         const ItemPair ip = itemPair(in, j);
-        __m256 te8;
-        const int mask = itemPairHits(in, ip, te8);
+        __m256 te8, tx8;
+        const int mask = itemPairHits(in, ip, te8, tx8);
         const HitOrder *ha, *hb;
         hitOrder2(mask, te8, ha, hb);
         storeItems4(next + nNext, *ha, (ip.ia & ~kItemQuadMask) + 4 * ip.qa + 1);
@@ -159,15 +179,17 @@ TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Can
         const ItemPair ip = itemPair(in, j);
         const PatchPair &pa = *ip.pa, &pb = *ip.pb;
         const uint32_t qa = ip.qa, qb = ip.qb;
-        __m256 te8;
-        const int mask = itemPairHits(in, ip, te8);
-        const int ma = mask & 15, mb = mask >> 4;
-        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], &pa.rayId, 4 * (qa - leafQuadFirst),
-                         _mm256_castps256_ps128(te8));
+        __m256 te8, tx8;
+        const int mask = itemPairHits(in, ip, te8, tx8);
+        const __m128 tea = _mm256_castps256_ps128(te8), teb = _mm256_extractf128_ps(te8, 1);
+        const int ma = (mask & 15) &
+                       leafSlabsKeep(in, pa, qa - leafQuadFirst, mask & 15, tea, _mm256_castps256_ps128(tx8));
+        const int mb = (mask >> 4) & leafSlabsKeep(in, pb, qb - leafQuadFirst, mask >> 4, teb,
+                                                   _mm256_extractf128_ps(tx8, 1));
+        storeCandidates4(cand + used, kLaneOffsets[size_t(ma)], &pa.rayId, 4 * (qa - leafQuadFirst), tea);
         used += kPop4[ma];
         count[pa.ray] += kPop4[ma];
-        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], &pb.rayId, 4 * (qb - leafQuadFirst),
-                         _mm256_extractf128_ps(te8, 1));
+        storeCandidates4(cand + used, kLaneOffsets[size_t(mb)], &pb.rayId, 4 * (qb - leafQuadFirst), teb);
         used += kPop4[mb];
         count[pb.ray] += kPop4[mb];
     }
@@ -175,15 +197,15 @@ TESSERA_AVX2 size_t leafLevelAvx2(const LevelIn& in, uint32_t leafQuadFirst, Can
 }
 #endif
 
-// The subpatch trees of the pairs sc.pairs (their rays' boxes in sc.ray4, sc.boxO, sc.boxInv), level by
-// level, in batches of pairs: the leaf candidates appended to out from index `used` in pair order (each
+// The subpatch trees of the pairs sc.pairs (their rays' boxes in sc.ray4, sc.boxO, sc.boxInv, sc.boxD), level
+// by level, in batches of pairs: the leaf candidates appended to out from index `used` in pair order (each
 // pair's in depth-first order), count[pair.ray] incremented per candidate. `out`'s size is its room (grown
 // without zeroing); returns the new number of candidates. All candidates of a batch are written by one
 // level (the leaves' parents).
 template <bool kAvx2>
 [[gnu::always_inline]] inline size_t descendPairs(const RtAccel& acc, const RayList& rays,
                                                   TraverseScratch& sc, CandidateVector& out, size_t used,
-                                                  uint32_t* count, uint64_t& boxTests) {
+                                                  uint32_t* count, uint64_t& boxTests, uint64_t& slabCulled) {
     const SubpatchForest& forest = acc.forest;
     const uint32_t firstLeaf = forest.firstLeaf();
     const uint32_t depth = uint32_t(forest.depth);
@@ -213,7 +235,7 @@ template <bool kAvx2>
         uint32_t nItems = nb, lvl = 0;
         for (; lvl + 2 <= depth && nItems > 0; lvl += 2) {
             boxTests += 4 * uint64_t(nItems);
-            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data()};
+            const LevelIn in{sc.items.data(), nItems, pairs, sc.ray4.data(), &forest, &slabCulled};
             if (lvl + 2 < depth) {
                 // Inner level: the hit children in hit order.
                 if (sc.next.size() < 4 * size_t(nItems) + 4) sc.next.resize(8 * size_t(nItems) + 4);
@@ -253,8 +275,21 @@ template <bool kAvx2>
                 rayBoxPair(forest.oddLeaves.data() + (size_t(acc.tree(pp.patch)) << depth) + (m - firstLeaf),
                            pr, rays.tmin[r], rays.tmax[r], tn, tf);
             const float ta = tn[0], tb = tn[1];
-            const bool ha = (mask & 1) && tf[0] >= pp.selfT && !(pp.back && pp.back[m]);
-            const bool hb = (mask & 2) && tf[1] >= pp.selfT && !(pp.back && pp.back[m + 1]);
+            float selfT[4];
+            storeF4(selfT, pp.selfT4);
+            bool ha = (mask & 1) && tf[0] >= selfT[0] && !(pp.back && pp.back[m]);
+            bool hb = (mask & 2) && tf[1] >= selfT[0] && !(pp.back && pp.back[m + 1]);
+            if (const LeafSlab4* groups = forest.slabGroups(pp.tree); groups && (ha || hb)) {
+                // The two leaves' slabs (slabKeep1), the ray as its boxes are tested.
+                const uint32_t leaf = m - firstLeaf;
+                const Vec3 o = sc.boxO[pp.ray4], d = sc.boxD[pp.ray4];
+                const float rm = slabRayMargin(o);
+                const bool ka = !ha || slabKeep1(groups[leaf >> 2], int(leaf & 3), o, d, rm, ta, tf[0]);
+                const bool kb =
+                    !hb || slabKeep1(groups[(leaf + 1) >> 2], int((leaf + 1) & 3), o, d, rm, tb, tf[1]);
+                slabCulled += uint64_t(!ka) + uint64_t(!kb);
+                ha = ha && ka, hb = hb && kb;
+            }
             const bool swap = hb && (!ha || tb < ta);
             const size_t u0 = used;
             if (swap) cand[used++] = {uint32_t(r), pp.patch, m + 1 - firstLeaf, tb};
@@ -296,6 +331,7 @@ template <bool kAvx2>
     sc.ray4.resize(nr);
     sc.boxO.resize(nr);
     sc.boxInv.resize(nr);
+    sc.boxD.resize(nr);
     sc.count.assign(nr, 0);
     sc.pairs.clear();
 
@@ -303,8 +339,8 @@ template <bool kAvx2>
     // pushed far first, patches listed near first).
     for (uint32_t rl = 0; rl < nr; ++rl) {
         const size_t r = r0 + rl;
-        sc.boxO[rl] = rays.o[r], sc.boxInv[rl] = safeInverse(rays.d[r]);
-        sc.ray4[rl] = Ray4(rays.o[r], sc.boxInv[rl], rays.tmin[r], rays.tmax[r]);
+        sc.boxO[rl] = rays.o[r], sc.boxInv[rl] = safeInverse(rays.d[r]), sc.boxD[rl] = rays.d[r];
+        sc.ray4[rl] = Ray4(rays.o[r], sc.boxInv[rl], rays.tmin[r], rays.tmax[r], rays.d[r]);
         const Ray4 r4 = sc.ray4[rl];  // (a copy: the moved rays below may grow the array)
         // Instancing: the ray moved into the frame of the last placement it met (patches of one instance
         // come together in the BVH, so one entry per instance visited, nearly).
@@ -347,22 +383,23 @@ template <bool kAvx2>
                     const uint32_t placement = acc.placementOf[patch];
                     if (placement != lastPlacement) {
                         const Vec3 o = affinePoint(pl->toPrototype, rays.o[r]);
-                        const Vec3 inv = safeInverse(affineVector(pl->toPrototype, rays.d[r]));
+                        const Vec3 d = affineVector(pl->toPrototype, rays.d[r]), inv = safeInverse(d);
                         lastPlacement = placement, lastRay4 = uint32_t(sc.ray4.size());
-                        sc.ray4.emplace_back(o, inv, rays.tmin[r], rays.tmax[r]);
-                        sc.boxO.push_back(o), sc.boxInv.push_back(inv);
+                        sc.ray4.emplace_back(o, inv, rays.tmin[r], rays.tmax[r], d);
+                        sc.boxO.push_back(o), sc.boxInv.push_back(inv), sc.boxD.push_back(d);
                     }
                     boxRay = lastRay4;
                 }
                 sc.pairs.push_back({splatF4(selfT), forest.quadTree(tree, slab),
                                     cullRay ? forest.quadBackBits(tree) : nullptr, back, uint32_t(r), patch,
-                                    rl, te[i], selfT, boxRay});
+                                    rl, te[i], tree, boxRay});
             }
         }
     }
 
     // Subpatch trees of all pairs, level by level; candidates in pair order.
-    const size_t used = descendPairs<kAvx2>(acc, rays, sc, ch.cand, 0, sc.count.data(), boxTests);
+    uint64_t slabCulled = 0;
+    const size_t used = descendPairs<kAvx2>(acc, rays, sc, ch.cand, 0, sc.count.data(), boxTests, slabCulled);
     Candidate* cand = ch.cand.data();
 
     // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
@@ -378,6 +415,7 @@ template <bool kAvx2>
     ch.cand.resize(used);
     ch.c.candidates = used;
     ch.c.boxTests = boxTests;
+    ch.c.slabCulled = slabCulled;
 }
 
 constexpr size_t kRootBatch = 1024;
@@ -386,7 +424,7 @@ constexpr size_t kRootBatch = 1024;
 template <bool kAvx2>
 [[gnu::always_inline]] inline void rootPairs(const RtAccel& acc, const RayList& rays,
                                              std::span<const Candidate> roots, bool cull,
-                                             CandidateVector& out, uint64_t& boxTests) {
+                                             CandidateVector& out, uint64_t& boxTests, uint64_t& slabCulled) {
     TraverseScratch& sc = tScratch;
     const SubpatchForest& forest = acc.forest;
     const float ignoreT = 8.f * acc.offset;
@@ -396,9 +434,10 @@ template <bool kAvx2>
     sc.ray4.resize(n);
     sc.boxO.resize(n);
     sc.boxInv.resize(n);
+    sc.boxD.resize(n);
     for (size_t r = 0; r < n; ++r) {
-        sc.boxO[r] = rays.o[r], sc.boxInv[r] = safeInverse(rays.d[r]);
-        sc.ray4[r] = Ray4(rays.o[r], sc.boxInv[r], rays.tmin[r], rays.tmax[r]);
+        sc.boxO[r] = rays.o[r], sc.boxInv[r] = safeInverse(rays.d[r]), sc.boxD[r] = rays.d[r];
+        sc.ray4[r] = Ray4(rays.o[r], sc.boxInv[r], rays.tmin[r], rays.tmax[r], rays.d[r]);
     }
     sc.count.assign(n, 0);
     const bool canCull = cull && !forest.backfacing.empty();
@@ -413,21 +452,21 @@ template <bool kAvx2>
             const float selfT = patch == rays.ignore[r] ? ignoreT : -std::numeric_limits<float>::infinity();
             sc.pairs.push_back(
                 {splatF4(selfT), forest.quadTree(patch), cullRay ? forest.quadBackBits(patch) : nullptr,
-                 cullRay ? forest.backfaceBits(patch) : nullptr, r, patch, r, c.tEnter, selfT, r});
+                 cullRay ? forest.backfaceBits(patch) : nullptr, r, patch, r, c.tEnter, acc.tree(patch), r});
         }
-        used = descendPairs<kAvx2>(acc, rays, sc, out, used, sc.count.data(), boxTests);
+        used = descendPairs<kAvx2>(acc, rays, sc, out, used, sc.count.data(), boxTests, slabCulled);
     }
     out.resize(used);
 }
 
 void rootPairsSse2(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots, bool cull,
-                   CandidateVector& out, uint64_t& boxTests) {
-    rootPairs<false>(acc, rays, roots, cull, out, boxTests);
+                   CandidateVector& out, uint64_t& boxTests, uint64_t& slabCulled) {
+    rootPairs<false>(acc, rays, roots, cull, out, boxTests, slabCulled);
 }
 #if TESSERA_RT_AVX2
 TESSERA_AVX2 void rootPairsAvx2(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots,
-                                bool cull, CandidateVector& out, uint64_t& boxTests) {
-    rootPairs<true>(acc, rays, roots, cull, out, boxTests);
+                                bool cull, CandidateVector& out, uint64_t& boxTests, uint64_t& slabCulled) {
+    rootPairs<true>(acc, rays, roots, cull, out, boxTests, slabCulled);
 }
 #endif
 
@@ -459,12 +498,12 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 }
 
 void descendRootPairs(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots, bool cull,
-                      CandidateVector& out, uint64_t& boxTests) {
+                      CandidateVector& out, uint64_t& boxTests, uint64_t& slabCulled) {
 #if TESSERA_RT_AVX2
     if (cpuHasAvx2() && gAvx2Allowed.load(std::memory_order_relaxed))
-        return rootPairsAvx2(acc, rays, roots, cull, out, boxTests);
+        return rootPairsAvx2(acc, rays, roots, cull, out, boxTests, slabCulled);
 #endif
-    rootPairsSse2(acc, rays, roots, cull, out, boxTests);
+    rootPairsSse2(acc, rays, roots, cull, out, boxTests, slabCulled);
 }
 
 }  // namespace rt

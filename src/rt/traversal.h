@@ -43,9 +43,10 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 // root candidate names a ray of `rays` whose patch's root box it hits (entry distance tEnter; its leaf is
 // not read). Their leaf candidates are appended to `out`, pair by pair, each pair's as traverseList finds
 // them below that patch (the same boxes, rules and self-intersection cut). The accel's own trees only:
-// no instancing, no time slabs. Runs in the caller's thread.
+// no instancing, no time slabs. Runs in the caller's thread. boxTests and slabCulled (leaves dropped by
+// their slabs) are incremented.
 void descendRootPairs(const RtAccel& acc, const RayList& rays, std::span<const Candidate> roots, bool cull,
-                      CandidateVector& out, uint64_t& boxTests);
+                      CandidateVector& out, uint64_t& boxTests, uint64_t& slabCulled);
 
 }  // namespace rt
 }  // namespace tessera
