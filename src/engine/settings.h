@@ -152,7 +152,8 @@ struct RenderSettings {
     // are moved into its frame); off: every instance builds its own (tests, benchmarks).
     bool instancing = true;
     // rt: the candidate stages drop the (ray, leaf) pairs whose ray misses the leaf's slab inside its box
-    // (rt/subpatch_tree.h LeafSlab4); off: every leaf box hit is a Newton candidate (tests, benchmarks).
+    // (rt/subpatch_tree.h LeafSlab4), in frames where that pays (TraceService::leafSlabsPay); off: every leaf
+    // box hit is a Newton candidate (tests, benchmarks).
     bool leafSlabs = true;
     ShadowOverride shadows = ShadowOverride::Scene;
     ReyesShadows reyesShadows = ReyesShadows::Map;

@@ -977,8 +977,14 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     const bool autoDepth = settings.subpatchDepth == kAutoSubpatchDepth;
     const int subpatchDepth =
         resolveSubpatchDepth(settings.subpatchDepth, scene, cam, double(nx * ny), &samplesPerPatch);
+    // Leaf slabs where they pay (TraceService::leafSlabsPay; the leaves per sample as leavesPerSample counts
+    // them once the accel is built).
+    const double leavesPerSampleAhead =
+        double(scene.patches.size()) * double(uint64_t(1) << subpatchDepth) /
+        std::max(1.0, double(cam.width) * double(cam.height) * double(nx * ny));
+    const bool leafSlabs = settings.leafSlabs && TraceService::leafSlabsPay(leavesPerSampleAhead);
     buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, settings.cullBackfaces, acc, &frame.motion,
-                 kDefaultTimeSlabs, &displacement, settings.instancing, settings.leafSlabs);
+                 kDefaultTimeSlabs, &displacement, settings.instancing, leafSlabs);
     const double buildMs = msSince(tBuild);
     if (displacedDicer)
         for (size_t i = 0; i < scene.patches.size(); ++i)

@@ -124,28 +124,37 @@ Bounds3 enlarge(Bounds3 b) {
 // Embree's fine tessellation, were as before from 0.06 up; at 0 (every leaf the ray misses dropped) they
 // lost 11 of 6,528 seam rays and changed 22 of Killeroo's 480,000 pixels (half of them to a farther root).
 constexpr float kSlabGrowth = 0.06f;
-// Lane `lane` of a slab group: the slab of the leaf with control points cp (row-major, u fastest) and box
-// `box` (enlarged; for the rounding margin). The Newton part of the margin is added by addNewtonMargin.
-void setLeafSlab(LeafSlab4& g, int lane, const Vec3 (&cp)[16], const Bounds3& box) {
+// Lane `lane` of a slab group: the slab of the leaf whose 4 x 4 control points start at `net` (xyz
+// interleaved, rows `rowFloats` apart, u along a row) and whose box is `box` (enlarged; for the rounding
+// margin). The Newton part of the margin is added by addNewtonMargin.
+void setLeafSlab(LeafSlab4& g, int lane, const float* net, size_t rowFloats, const Bounds3& box) {
+    auto point = [&](int j, int i) {
+        const float* q = net + size_t(j) * rowFloats + 3 * size_t(i);
+        return Vec3{q[0], q[1], q[2]};
+    };
     // The normal of the net's mean u and v directions: any unit vector gives a slab that holds the leaf,
     // one near the normal a thin one.
-    const Vec3 du = (cp[3] + cp[15]) - (cp[0] + cp[12]), dv = (cp[12] + cp[15]) - (cp[0] + cp[3]);
-    const Vec3 c = cross(du, dv);
+    const Vec3 p00 = point(0, 0), p03 = point(0, 3), p30 = point(3, 0), p33 = point(3, 3);
+    const Vec3 c = cross((p03 + p33) - (p00 + p30), (p30 + p33) - (p00 + p03));
     const float len = length(c);
     float lo = INFINITY, hi = -INFINITY;
     Vec3 n{0.f, 0.f, 0.f};
     if (len > 0.f && std::isfinite(len)) {
-        n = c / len;
-        for (const Vec3& p : cp) {
-            const float h = dot(n, p);
-            lo = std::min(lo, h), hi = std::max(hi, h);
+        n = c * (1.f / len);
+        for (int j = 0; j < 4; ++j) {
+            const float* r = net + size_t(j) * rowFloats;
+            for (int i = 0; i < 4; ++i) {
+                const float h = n.x * r[3 * i] + n.y * r[3 * i + 1] + n.z * r[3 * i + 2];
+                lo = lo < h ? lo : h, hi = hi > h ? hi : h;
+            }
         }
         // The boxes' margin (enlarge): the control points are rounded de Casteljau results, and n.P is
         // rounded too.
-        const float mag = std::max({std::fabs(box.lo.x), std::fabs(box.hi.x), std::fabs(box.lo.y),
-                                    std::fabs(box.hi.y), std::fabs(box.lo.z), std::fabs(box.hi.z)});
-        const float ext = std::max({box.hi.x - box.lo.x, box.hi.y - box.lo.y, box.hi.z - box.lo.z});
-        const float m = 1e-5f * ext + 4e-7f * mag + 1e-30f + kSlabGrowth * length(box.hi - box.lo);
+        const Vec3 side = box.hi - box.lo;
+        const Vec3 far = vmax(Vec3{std::fabs(box.lo.x), std::fabs(box.lo.y), std::fabs(box.lo.z)},
+                              Vec3{std::fabs(box.hi.x), std::fabs(box.hi.y), std::fabs(box.hi.z)});
+        const float m =
+            1e-5f * maxComponent(side) + 4e-7f * maxComponent(far) + 1e-30f + kSlabGrowth * length(side);
         lo -= m, hi += m;
     }
     if (!(std::isfinite(lo) && std::isfinite(hi))) n = {0.f, 0.f, 0.f}, lo = -INFINITY, hi = INFINITY;
@@ -241,14 +250,9 @@ struct TreeBuilder {
                 const uint32_t node = firstLeaf + leafOfCell[b * nu + a];
                 boxes[node] = enlarge(bb);
                 if (slabs) {
-                    Vec3 cp[16];
-                    for (int j = 0; j < 4; ++j)
-                        for (int i = 0; i < 4; ++i) {
-                            const float* q = g + (3 * b + j) * rowFloats + 3 * (3 * a + i);
-                            cp[4 * j + i] = {q[0], q[1], q[2]};
-                        }
                     const uint32_t leaf = leafOfCell[b * nu + a];
-                    setLeafSlab(slabs[leaf >> 2], int(leaf & 3), cp, boxes[node]);
+                    setLeafSlab(slabs[leaf >> 2], int(leaf & 3), g + 3 * b * rowFloats + 9 * a, rowFloats,
+                                boxes[node]);
                 }
                 if (back) {
                     BezierPatch leaf;
