@@ -62,8 +62,10 @@ struct alignas(16) LeafBasis {
 // The slabs of four consecutive leaves of a tree (leaves 4g .. 4g + 3: one leaf-level quad's grandchildren),
 // structure of arrays. Lane i: every point P of leaf 4g + i has lo[i] <= n.P <= hi[i], n = (n[0][i],
 // n[1][i], n[2][i]) a unit vector near the leaf's normal (from its control net), the bounds its control
-// points' (convex hull property) grown by the boxes' rounding margin and four Newton tolerances of the patch
-// (newtonTolerance: a root Newton accepts lies that close to the surface). A nearly flat leaf's slab is thin:
+// points' (convex hull property) grown by the boxes' rounding margin, four Newton tolerances of the patch
+// (newtonTolerance: a root Newton accepts lies that close to the surface) and 6% of the leaf box's diagonal
+// (kSlabGrowth in subpatch_tree.cpp: Newton needs the starts of leaves a ray passes that near, at shared
+// edges and on grazing rays). A nearly flat leaf's slab is thin:
 // a ray that crosses the leaf's box but not the slab while inside it (past a silhouette, or over the surface
 // at a box's corner) cannot meet the leaf, and the candidate stages drop it (slabKeep4, rt/simd_kernels.h).
 // An open lane (n = 0, lo = -inf, hi = +inf) keeps every ray: moving, displaced and quadric surfaces, and the
