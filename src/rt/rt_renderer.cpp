@@ -977,12 +977,11 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     const bool autoDepth = settings.subpatchDepth == kAutoSubpatchDepth;
     const int subpatchDepth =
         resolveSubpatchDepth(settings.subpatchDepth, scene, cam, double(nx * ny), &samplesPerPatch);
-    // Leaf slabs where they pay (TraceService::leafSlabsPay; the leaves per sample as leavesPerSample counts
-    // them once the accel is built).
-    const double leavesPerSampleAhead =
-        double(scene.patches.size()) * double(uint64_t(1) << subpatchDepth) /
-        std::max(1.0, double(cam.width) * double(cam.height) * double(nx * ny));
-    const bool leafSlabs = settings.leafSlabs && TraceService::leafSlabsPay(leavesPerSampleAhead);
+    // Leaf slabs where they pay (TraceService::leafSlabsPay), from the leaves the trees will have.
+    const double cameraSamples = double(cam.width) * double(cam.height) * double(nx * ny);
+    const bool leafSlabs =
+        settings.leafSlabs && TraceService::leafSlabsPay(TraceService::leavesPerSample(
+                                  scene.patches.size(), std::ldexp(1.0, subpatchDepth), cameraSamples));
     buildRtAccel(scene, cam.cameraFromWorld, subpatchDepth, settings.cullBackfaces, acc, &frame.motion,
                  kDefaultTimeSlabs, &displacement, settings.instancing, leafSlabs);
     const double buildMs = msSince(tBuild);
@@ -998,8 +997,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     // boxes; patches whose rectangles hold few rays per leaf then go down their trees per ray. It pays
     // unless the leaves far outnumber the samples (TraceService::binningPays: teapot 0.001 ... 24 Big Guys
     // 2.85 leaves per sample, all faster binned).
-    const double leavesPerSample =
-        TraceService::leavesPerSample(acc, double(cam.width) * double(cam.height) * double(nx * ny));
+    const double leavesPerSample = TraceService::leavesPerSample(acc, cameraSamples);
     // The binning stages group the candidates of the boxes swept over the whole shutter; with time slabs
     // (a motion frame of several segments) the per-ray traversal's slab boxes are far tighter (killeroo_spin,
     // 800x600: binning needed 9 GB of candidate lists).

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+
+#include "rt/intersect.h"
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -103,14 +105,19 @@ void windowMinMax(const float* lo, const float* hi, float* wl, float* wh, size_t
 #endif
 }
 
-// Enlarge a box by the relative and absolute margin of enlargedHull.
-Bounds3 enlarge(Bounds3 b) {
+// The relative and absolute margin of enlargedHull for box b: the rounding of subdivided control points.
+float roundingMargin(const Bounds3& b) {
     auto mx = [](float x, float y) { return x < y ? y : x; };
     const float mag =
         mx(mx(mx(std::fabs(b.lo.x), std::fabs(b.hi.x)), mx(std::fabs(b.lo.y), std::fabs(b.hi.y))),
            mx(std::fabs(b.lo.z), std::fabs(b.hi.z)));
     const float ext = mx(mx(b.hi.x - b.lo.x, b.hi.y - b.lo.y), b.hi.z - b.lo.z);
-    const float eps = 1e-5f * ext + 4e-7f * mag + 1e-30f;
+    return 1e-5f * ext + 4e-7f * mag + 1e-30f;
+}
+
+// Enlarge a box by roundingMargin.
+Bounds3 enlarge(Bounds3 b) {
+    const float eps = roundingMargin(b);
     b.lo -= Vec3{eps, eps, eps};
     b.hi += Vec3{eps, eps, eps};
     return b;
@@ -150,11 +157,7 @@ void setLeafSlab(LeafSlab4& g, int lane, const float* net, size_t rowFloats, con
         }
         // The boxes' margin (enlarge): the control points are rounded de Casteljau results, and n.P is
         // rounded too.
-        const Vec3 side = box.hi - box.lo;
-        const Vec3 far = vmax(Vec3{std::fabs(box.lo.x), std::fabs(box.lo.y), std::fabs(box.lo.z)},
-                              Vec3{std::fabs(box.hi.x), std::fabs(box.hi.y), std::fabs(box.hi.z)});
-        const float m =
-            1e-5f * maxComponent(side) + 4e-7f * maxComponent(far) + 1e-30f + kSlabGrowth * length(side);
+        const float m = roundingMargin(box) + kSlabGrowth * length(box.hi - box.lo);
         lo -= m, hi += m;
     }
     if (!(std::isfinite(lo) && std::isfinite(hi))) n = {0.f, 0.f, 0.f}, lo = -INFINITY, hi = INFINITY;
@@ -174,10 +177,7 @@ void openSlabs(LeafSlab4* g, size_t groups) {
 // whose part the candidate stages add per ray) on every slab of its tree: a root Newton accepts may lie that
 // far off the surface.
 void addNewtonMargin(LeafSlab4* g, size_t groups, const Bounds3& root) {
-    const float mag = std::max({std::fabs(root.lo.x), std::fabs(root.hi.x), std::fabs(root.lo.y),
-                                std::fabs(root.hi.y), std::fabs(root.lo.z), std::fabs(root.hi.z)});
-    const float ext = std::max({root.hi.x - root.lo.x, root.hi.y - root.lo.y, root.hi.z - root.lo.z});
-    const float m = 4.f * (2e-6f * mag + 1e-6f * ext);
+    const float m = 4.f * newtonTolerance(root, Vec3{0.f, 0.f, 0.f});
     for (size_t k = 0; k < groups; ++k)
         for (int lane = 0; lane < 4; ++lane) g[k].lo[lane] -= m, g[k].hi[lane] += m;
 }

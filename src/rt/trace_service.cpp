@@ -20,7 +20,7 @@ void TraceCounters::add(const TraceCounters& c) {
 }
 
 double TraceService::leavesPerSample(const RtAccel& acc, double samples) {
-    return double(acc.patches.size()) * double(acc.forest.firstLeaf() + 1) / std::max(1.0, samples);
+    return leavesPerSample(acc.patches.size(), double(acc.forest.firstLeaf() + 1), samples);
 }
 
 void TraceService::trace(const RayList& rays, std::vector<RayHit>& hits, const CameraSamples* camera) {

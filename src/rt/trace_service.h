@@ -4,6 +4,7 @@
 // Newton stage. It knows nothing of shading, materials or the film: the ray tracer's integrator
 // (rt/rt_renderer.cpp) calls it, and so could Reyes for ray-traced shadows (rays in the accel's space).
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -54,6 +55,10 @@ class TraceService {
     // of small patches (rt/binning.cpp) it is faster up to 2.85 leaves per sample (24 Big Guys, 800x600,
     // 4 spp), as fast at 5.7 and 11.4, slower at 45 and 180 (docs/rt.md).
     static double leavesPerSample(const RtAccel& acc, double samples);
+    // The same for `patches` trees of `leavesPerPatch` leaves (before the accel is built).
+    static double leavesPerSample(size_t patches, double leavesPerPatch, double samples) {
+        return double(patches) * leavesPerPatch / std::max(1.0, samples);
+    }
     static bool binningPays(double leavesPerSample) { return leavesPerSample <= 4.0; }
     // Whether the leaves' slabs (SubpatchForest::leafSlabs) pay: building one costs about 350 instructions,
     // and it saves work only on the rays that reach its leaf. Callgrind, 800x600, 4 spp, 1 thread, against
