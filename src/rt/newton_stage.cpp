@@ -56,6 +56,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         bool heightsDone = false;  // selfPlane, selfHeight and selfEps are set for this ray
         float selfHeight[16];
         float selfEps = 0.f;        // the originating patch's Newton tolerance
+        float selfLim = 0.f;        // heights below this cannot hold an accepted root (see belowPlane)
         bool bestHasDeriv = false;  // bestSp holds the surface at the best root (from the sides test)
         SurfacePoint bestSp;
         Vec3 bestNs;                 // a displaced micro-grid hit's shading normal (zero otherwise)
@@ -239,7 +240,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 // the projection, so it runs before the patch is projected: a ray whose candidates on its
                 // own patch all fail it never projects that patch.
                 auto belowPlane = [&](uint32_t leaf) {
-                    const float lim = -4.f * s.selfEps;
+                    const float lim = s.selfLim;
                     if (leafMaxCoefficient(s.selfHeight, leafBasis[leaf]) < lim) return true;
                     for (int q = 0; q < 4; ++q)
                         if (!(leafMaxCoefficient(s.selfHeight, quarterBasis[4 * leaf + q]) < lim))
@@ -273,6 +274,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
 #endif
                         s.selfPlane = true;
                         s.selfEps = newtonEps(ps, s.ray.o);  // the patch's Newton tolerance
+                        // On the ray the height is t (d.n); a root on this patch counts only from
+                        // t = ignoreT, so from that height (less 4 tolerances for the coefficients' rounding).
+                        s.selfLim = s.opt.ignoreT * dot(s.ray.d, nrm) - 4.f * s.selfEps;
                     }
                 }
                 if (ownPatch && s.selfPlane && belowPlane(c.leaf)) {
