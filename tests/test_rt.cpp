@@ -845,7 +845,7 @@ TEST(RtHierarchy, QuantizedQuadsHoldTheirBoxesTightly) {
     EXPECT_EQ(loose, 0);
 }
 
-TEST(RtHierarchy, LeafMaxCoefficientBoundsTheLeaf) {
+TEST(RtHierarchy, LeafAndQuarterMaxCoefficientsBoundTheLeaf) {
     // leafMaxCoefficient maps a scalar function's 16 Bernstein coefficients over the patch to one leaf and
     // returns their maximum: an upper bound of the function on the leaf (what the originating-patch plane
     // cull relies on), and a tight one (within the control-net slack, which shrinks with the leaf).
@@ -854,7 +854,7 @@ TEST(RtHierarchy, LeafMaxCoefficientBoundsTheLeaf) {
     buildSubpatchForest(s.patches, 6, f);
     std::mt19937 rng(11);
     std::uniform_real_distribution<float> S(-1.f, 1.f);
-    int leaves = 0;
+    int leaves = 0, tighter = 0;
     for (uint32_t p = 0; p < s.patches.size(); p += 3) {
         const Vec3 n = normalize(Vec3{S(rng), S(rng), S(rng)});
         const Vec3 o = s.patches[p].cp[5] + Vec3{S(rng), S(rng), S(rng)} * 0.1f;
@@ -873,10 +873,40 @@ TEST(RtHierarchy, LeafMaxCoefficientBoundsTheLeaf) {
             const float size = length(f.roots[p].diagonal());
             ASSERT_GE(bound, sampled - 1e-5f * size) << "patch " << p << " leaf " << leaf;
             EXPECT_LE(bound, sampled + 0.02f * size) << "patch " << p << " leaf " << leaf;
+            // The quarters' bound (the leaf's net split by de Casteljau) is the largest coefficient of
+            // the four quarters' own changes of basis, still bounds the leaf, and is no looser.
+            float c[16];
+            leafCoefficients(h, f.leafBasis[leaf], c);
+            const float quarters = quartersMaxCoefficient(c);
+            float viaBases = -INFINITY;
+            for (int q = 0; q < 4; ++q)
+                viaBases = std::max(viaBases, leafMaxCoefficient(h, f.quarterBasis[4 * leaf + q]));
+            EXPECT_NEAR(quarters, viaBases, 1e-6f * size) << "patch " << p << " leaf " << leaf;
+            ASSERT_GE(quarters, sampled - 1e-5f * size) << "patch " << p << " leaf " << leaf;
+            EXPECT_LE(quarters, bound + 1e-6f * size) << "patch " << p << " leaf " << leaf;
+            if (quarters < bound - 1e-6f * size) ++tighter;
             ++leaves;
         }
     }
+    std::printf("random planes: quarters' bound tighter on %d of %d leaves\n", tighter, leaves);
     EXPECT_GT(leaves, 500);
+    EXPECT_GT(tighter, 0);  // only where the largest coefficient is not at a corner
+    // Heights over the tangent plane at each leaf's centre (the originating-patch test's case): the
+    // largest value is inside the leaf, where the quarters' nets lie 4x closer.
+    int tangentLeaves = 0, tangentTighter = 0;
+    for (uint32_t p = 0; p < s.patches.size(); p += 3)
+        for (uint32_t leaf = 0; leaf < 64; leaf += 5) {
+            const Vec2 c0 = f.leafCentre[leaf];
+            const Vec3 o = evalPatch(s.patches[p], c0.x, c0.y), n = patchNormal(s.patches[p], c0.x, c0.y);
+            float h[16], c[16];
+            for (int k = 0; k < 16; ++k) h[k] = dot(s.patches[p].cp[k] - o, n);
+            leafCoefficients(h, f.leafBasis[leaf], c);
+            const float size = length(f.roots[p].diagonal());
+            if (quartersMaxCoefficient(c) < maxCoefficient(c) - 1e-6f * size) ++tangentTighter;
+            ++tangentLeaves;
+        }
+    std::printf("tangent planes: quarters' bound tighter on %d of %d leaves\n", tangentTighter, tangentLeaves);
+    EXPECT_GT(tangentTighter, tangentLeaves / 2);
 }
 
 TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {

@@ -294,41 +294,90 @@ inline bool leafMayHit(const ProjectedPatch<float>& pp, const LeafBasis& lb, flo
 #endif
 }
 
-// Largest Bernstein coefficient over one leaf of a scalar function given by its 16 coefficients over the
-// patch (row-major like ProjectedPatch), mapped by the leaf's change of basis: an upper bound of the
-// function on the leaf (convex hull property).
-TESSERA_HD float leafMaxCoefficient(const float a[16], const LeafBasis& lb) {
+// The 16 Bernstein coefficients over one leaf (row j: the v index, entry i: the u index) of a scalar
+// function given by its 16 coefficients over the patch (row-major like ProjectedPatch), mapped by the
+// leaf's change of basis.
+TESSERA_HD void leafCoefficients(const float a[16], const LeafBasis& lb, float c[16]) {
 #if defined(__SSE2__)
     const __m128 a0 = _mm_loadu_ps(a), a1 = _mm_loadu_ps(a + 4), a2 = _mm_loadu_ps(a + 8),
                  a3 = _mm_loadu_ps(a + 12);
     const __m128 mu0 = _mm_load_ps(lb.mu[0]), mu1 = _mm_load_ps(lb.mu[1]), mu2 = _mm_load_ps(lb.mu[2]),
                  mu3 = _mm_load_ps(lb.mu[3]);
-    __m128 hi = _mm_set1_ps(-INFINITY);
     for (int j = 0; j < 4; ++j) {
         const __m128 r = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(lb.mvSplat[j][0]), a0),
                                                _mm_mul_ps(_mm_load_ps(lb.mvSplat[j][1]), a1)),
                                     _mm_add_ps(_mm_mul_ps(_mm_load_ps(lb.mvSplat[j][2]), a2),
                                                _mm_mul_ps(_mm_load_ps(lb.mvSplat[j][3]), a3)));
-        const __m128 c = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0x00), mu0),
-                                               _mm_mul_ps(_mm_shuffle_ps(r, r, 0x55), mu1)),
-                                    _mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0xaa), mu2),
-                                               _mm_mul_ps(_mm_shuffle_ps(r, r, 0xff), mu3)));
-        hi = _mm_max_ps(hi, c);
+        _mm_storeu_ps(c + 4 * j, _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0x00), mu0),
+                                                       _mm_mul_ps(_mm_shuffle_ps(r, r, 0x55), mu1)),
+                                            _mm_add_ps(_mm_mul_ps(_mm_shuffle_ps(r, r, 0xaa), mu2),
+                                                       _mm_mul_ps(_mm_shuffle_ps(r, r, 0xff), mu3))));
     }
+#else
+    for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+            float x = 0;
+            for (int jj = 0; jj < 4; ++jj)
+                for (int ii = 0; ii < 4; ++ii) x += lb.mv[j][jj] * lb.mu[ii][i] * a[4 * jj + ii];
+            c[4 * j + i] = x;
+        }
+#endif
+}
+
+TESSERA_HD float maxCoefficient(const float c[16]) {
+    float hi = c[0];
+    for (int k = 1; k < 16; ++k) hi = std::max(hi, c[k]);
+    return hi;
+}
+
+// Largest Bernstein coefficient of the four quarters of a 4x4 net: the net split at its middle in v and
+// in u by de Casteljau (7 x 7 points, shared by neighbouring quarters). An upper bound of the function
+// over the net's domain (convex hull property of each quarter) that is at most maxCoefficient(c) and
+// tighter where the net bulges: a quarter's net lies about 4x closer to the surface.
+TESSERA_HD float quartersMaxCoefficient(const float c[16]) {
+#if defined(__SSE2__)
+    const __m128 half = _mm_set1_ps(0.5f);
+    auto mid = [&](__m128 x, __m128 y) { return _mm_mul_ps(_mm_add_ps(x, y), half); };
+    // In v, across the rows: the 7 rows c0, a, l2, m (the middle), r1, e, c3.
+    const __m128 c0 = _mm_loadu_ps(c), c1 = _mm_loadu_ps(c + 4), c2 = _mm_loadu_ps(c + 8),
+                 c3 = _mm_loadu_ps(c + 12);
+    const __m128 a = mid(c0, c1), b = mid(c1, c2), e = mid(c2, c3), l2 = mid(a, b), r1 = mid(b, e),
+                 m = mid(l2, r1);
+    // In u: each half's 4 rows transposed to columns, split across the columns like the rows above.
+    auto splitMax = [&](__m128 x0, __m128 x1, __m128 x2, __m128 x3) {
+        _MM_TRANSPOSE4_PS(x0, x1, x2, x3);
+        const __m128 p = mid(x0, x1), q = mid(x1, x2), t = mid(x2, x3), pq = mid(p, q), qt = mid(q, t),
+                     pm = mid(pq, qt);
+        return _mm_max_ps(_mm_max_ps(_mm_max_ps(x0, p), _mm_max_ps(pq, pm)),
+                          _mm_max_ps(_mm_max_ps(qt, t), x3));
+    };
+    __m128 hi = _mm_max_ps(splitMax(c0, a, l2, m), splitMax(m, r1, e, c3));
     hi = _mm_max_ps(hi, _mm_movehl_ps(hi, hi));
     hi = _mm_max_ss(hi, _mm_shuffle_ps(hi, hi, 0x55));
     return _mm_cvtss_f32(hi);
 #else
-    float hi = -INFINITY;
-    for (int j = 0; j < 4; ++j)
-        for (int i = 0; i < 4; ++i) {
-            float c = 0;
-            for (int jj = 0; jj < 4; ++jj)
-                for (int ii = 0; ii < 4; ++ii) c += lb.mv[j][jj] * lb.mu[ii][i] * a[4 * jj + ii];
-            hi = std::max(hi, c);
-        }
+    float rows[7][4], hi = -INFINITY;
+    for (int i = 0; i < 4; ++i) {
+        const float a = 0.5f * (c[i] + c[4 + i]), b = 0.5f * (c[4 + i] + c[8 + i]),
+                    e = 0.5f * (c[8 + i] + c[12 + i]), l2 = 0.5f * (a + b), r1 = 0.5f * (b + e);
+        const float col[7] = {c[i], a, l2, 0.5f * (l2 + r1), r1, e, c[12 + i]};
+        for (int j = 0; j < 7; ++j) rows[j][i] = col[j];
+    }
+    for (const auto& x : rows) {
+        const float p = 0.5f * (x[0] + x[1]), q = 0.5f * (x[1] + x[2]), t = 0.5f * (x[2] + x[3]),
+                    pq = 0.5f * (p + q), qt = 0.5f * (q + t);
+        for (const float y : {x[0], p, pq, 0.5f * (pq + qt), qt, t, x[3]}) hi = std::max(hi, y);
+    }
     return hi;
 #endif
+}
+
+// Largest Bernstein coefficient over one leaf of a scalar function given by its 16 coefficients over the
+// patch: an upper bound of the function on the leaf (convex hull property).
+TESSERA_HD float leafMaxCoefficient(const float a[16], const LeafBasis& lb) {
+    float c[16];
+    leafCoefficients(a, lb, c);
+    return maxCoefficient(c);
 }
 
 // Newton iteration on the projected patch from (u, v) (updated in place). Stops on convergence

@@ -235,17 +235,16 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 // Leaves of the originating patch below the plane through the origin (the ray only moves
                 // away from it: exact, by the convex hull of the leaf's Bernstein coefficients; this removes
                 // the starts that would converge back to the origin on convex and flat parts) cannot hold a
-                // root. The test is repeated on the leaf's quarters (their control nets bulge 4x less) when
-                // the whole leaf's net reaches above the plane. It reads the control points' heights, not
-                // the projection, so it runs before the patch is projected: a ray whose candidates on its
-                // own patch all fail it never projects that patch.
+                // root; nor can leaves below the height the ray reaches at the self-intersection distance
+                // (selfLim), since roots before it are rejected. The test is repeated on the leaf's quarters
+                // (its net split by de Casteljau: they bulge 4x less) when the whole leaf's net reaches
+                // above. It reads the control points' heights, not the projection, so it runs before the
+                // patch is projected: a ray whose candidates on its own patch all fail it never projects
+                // that patch.
                 auto belowPlane = [&](uint32_t leaf) {
-                    const float lim = s.selfLim;
-                    if (leafMaxCoefficient(s.selfHeight, leafBasis[leaf]) < lim) return true;
-                    for (int q = 0; q < 4; ++q)
-                        if (!(leafMaxCoefficient(s.selfHeight, quarterBasis[4 * leaf + q]) < lim))
-                            return false;
-                    return true;
+                    float coef[16];
+                    leafCoefficients(s.selfHeight, leafBasis[leaf], coef);
+                    return maxCoefficient(coef) < s.selfLim || quartersMaxCoefficient(coef) < s.selfLim;
                 };
                 const bool ownPatch = c.patch == s.opt.ignorePatch;
                 if (ownPatch && !s.heightsDone) {
