@@ -160,4 +160,45 @@ TEST(NewtonLanes, ProjectIntoLaneEqualsProjectPatch) {
     EXPECT_EQ(compared, 500 * 2 * 16);
 }
 
+TEST(NewtonLanes, RayFramesEqualMakeRayPlanesBitForBit) {
+    // makeLaneRayFrames (8 rays at a time) against the frame built from makeRayPlanes ray by ray: random
+    // origins and directions (unnormalized, tiny and huge), directions along and between the axes (the
+    // major-axis branch and its ties), signed zeros and a zero direction.
+    std::mt19937 rng(13);
+    std::uniform_real_distribution<float> S(-1.f, 1.f), E(-20.f, 20.f);
+    std::vector<Vec3> o, d;
+    for (int k = 0; k < 2000; ++k) {
+        o.push_back(Vec3{S(rng), S(rng), S(rng)} * std::exp2(E(rng)));
+        Vec3 dir{S(rng), S(rng), S(rng)};
+        switch (k % 8) {
+        case 0: dir = dir * std::exp2(E(rng)); break;
+        case 1: dir.y = 0.f, dir.z = -0.f; break;               // along x
+        case 2: dir.x = dir.z = 0.f; break;                     // along y
+        case 3: dir.y = dir.x; break;                           // |dx| = |dy|
+        case 4: dir.z = -dir.x; break;                          // |dx| = |dz|
+        case 5: dir = k % 16 == 5 ? Vec3{0.f, 0.f, 0.f} : Vec3{-0.f, 0.f, dir.z}; break;
+        default: break;
+        }
+        d.push_back(dir);
+    }
+    const int n = int(o.size());  // a multiple of 8
+    std::vector<float> ox(n), oy(n), oz(n), dx(n), dy(n), dz(n);
+    for (int i = 0; i < n; ++i)
+        ox[i] = o[i].x, oy[i] = o[i].y, oz[i] = o[i].z, dx[i] = d[i].x, dy[i] = d[i].y, dz[i] = d[i].z;
+    int compared = 0;
+    for (auto frames : {makeLaneRayFrames, makeLaneRayFramesBaseline}) {
+        std::vector<LaneRayFrame> got(n);
+        frames(ox.data(), oy.data(), oz.data(), dx.data(), dy.data(), dz.data(), n, got.data());
+        for (int i = 0; i < n; ++i) {
+            const RayPlanes pl = makeRayPlanes(o[i], d[i]);
+            const LaneRayFrame want{{pl.n1.x, pl.n1.y, pl.n1.z}, pl.d1, {pl.n2.x, pl.n2.y, pl.n2.z}, pl.d2,
+                                    {o[i].x, o[i].y, o[i].z},    {d[i].x, d[i].y, d[i].z},
+                                    1.f / dot(d[i], d[i])};
+            ASSERT_EQ(std::memcmp(&got[i], &want, sizeof(want)), 0) << "ray " << i;
+            ++compared;
+        }
+    }
+    EXPECT_EQ(compared, 2 * n);
+}
+
 }  // namespace tessera::test::newton_lanes_tests

@@ -39,6 +39,16 @@ struct LaneRayFrame {
     float n1[3], d1, n2[3], d2, o[3], d[3], invDD;
 };
 
+// The frames of n rays given by their origins and directions (structure of arrays, n a multiple of 8):
+// makeRayPlanes' arithmetic operation for operation (its branch a lane select), so out[i] holds exactly
+// the frame built from makeRayPlanes(o_i, d_i), eight rays at a time (AVX2 when the processor has it, SSE2
+// otherwise): the square roots and divisions of a chunk's rays in a few vector instructions.
+void makeLaneRayFrames(const float* ox, const float* oy, const float* oz, const float* dx, const float* dy,
+                       const float* dz, int n, LaneRayFrame* out);
+// The SSE2 build, whatever the processor (tests compare the two).
+void makeLaneRayFramesBaseline(const float* ox, const float* oy, const float* oz, const float* dx,
+                               const float* dy, const float* dz, int n, LaneRayFrame* out);
+
 // Projects a patch's 16 control points (x, y, z: structure of arrays) on the ray's planes straight into
 // lane l's columns of a1 and a2, and writes their distances along the ray, (P - o).d / (d.d), to depth.
 // The arithmetic of projectPatch operation for operation (no fused multiply-add), so the columns hold

@@ -40,7 +40,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         uint32_t cur = 0, end = 0;  // cursor in the chunk's candidates, end of the ray's segment
         Ray ray;
         TraceOptions opt;
-        LaneRayFrame frame;  // the ray's planes, origin and direction for projectIntoLane
+        const LaneRayFrame* frame = nullptr;  // the ray's planes, origin and direction for projectIntoLane
         float eps = 0.f, bestU = 0.f, bestV = 0.f;
         uint32_t projected = kNone, bestPatch = kNone;
         // Last converged root (accepted or not) per patch run, for the duplicate-start test. A secondary
@@ -84,11 +84,30 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         LaneRay lane[kNewtonLanes];
         uint32_t nextRay = 0;
 
+        // The frames of the chunk's rays that have candidates, in ray order (beginRay takes them so),
+        // eight at a time: their square roots and divisions cost a fraction of the scalar ones.
+        alignas(32) float rayO[3][kChunk], rayD[3][kChunk];
+        LaneRayFrame frames[kChunk];
+        int nFrames = 0;
+        for (uint32_t i = 0; i < nRays; ++i) {
+            if ((i == 0 ? 0 : ch.segEnd[i - 1]) == ch.segEnd[i]) continue;
+            const Vec3 o = rays.o[r0 + i], d = rays.d[r0 + i];
+            rayO[0][nFrames] = o.x, rayO[1][nFrames] = o.y, rayO[2][nFrames] = o.z;
+            rayD[0][nFrames] = d.x, rayD[1][nFrames] = d.y, rayD[2][nFrames] = d.z;
+            ++nFrames;
+        }
+        static_assert(kChunk % 8 == 0);
+        const int framesPadded = (nFrames + 7) & ~7;
+        for (int k = nFrames; k < framesPadded; ++k)
+            for (int a = 0; a < 3; ++a) rayO[a][k] = 0.f, rayD[a][k] = a == 2 ? 1.f : 0.f;
+        makeLaneRayFrames(rayO[0], rayO[1], rayO[2], rayD[0], rayD[1], rayD[2], framesPadded, frames);
+        int nextFrame = 0;
+
         // The patch projected on the ray's planes (as projectPatch) straight into the lane's column; the
         // Newton tolerance as newtonTolerance. The ray's copy of the projection (s.pp) is gathered from
         // the column only where a hull or domain test needs it.
         auto projectLane = [&newtonEps](const PatchSoa& ps, LaneRay& s, NewtonLanes& L, int l) {
-            projectIntoLane(L, l, s.frame, ps.x, ps.y, ps.z, s.depth);
+            projectIntoLane(L, l, *s.frame, ps.x, ps.y, ps.z, s.depth);
             s.ppValid = false;
             s.eps = newtonEps(ps, s.ray.o);
         };
@@ -143,11 +162,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 s.time = rays.time[r];
                 if (motion) acc.motion.segment(s.time, s.segK, s.segW), s.inv = safeInverse(s.ray.d);
                 if (anyHit) s.opt.anyHit = true;
-                const RayPlanes pl = makeRayPlanes(s.ray.o, s.ray.d);
-                s.frame = LaneRayFrame{{pl.n1.x, pl.n1.y, pl.n1.z},       pl.d1,
-                                       {pl.n2.x, pl.n2.y, pl.n2.z},       pl.d2,
-                                       {s.ray.o.x, s.ray.o.y, s.ray.o.z}, {s.ray.d.x, s.ray.d.y, s.ray.d.z},
-                                       1.f / dot(s.ray.d, s.ray.d)};
+                s.frame = &frames[nextFrame++];
                 s.projected = kNone, s.bestPatch = kNone, s.bestHasDeriv = false, s.bestNs = Vec3{};
                 s.originN = rays.originN[r];
                 s.selfPlane = false, s.heightsDone = false;
