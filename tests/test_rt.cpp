@@ -725,6 +725,9 @@ TEST(RtRayBinning, SameCandidatesAndImageAsPerRayTraversal) {
         EXPECT_TRUE(binned.stats["ray_binning"].get<bool>()) << what;  // the scene is small enough to bin
         EXPECT_FALSE(traversed.stats["ray_binning"].get<bool>()) << what;
         EXPECT_EQ(binned.stats["candidates"], traversed.stats["candidates"]) << what;
+        // Both candidate stages leave out each shadow ray's leaf holding its origin (OriginLeafRule).
+        EXPECT_EQ(binned.stats["origin_leaves_dropped"], traversed.stats["origin_leaves_dropped"]) << what;
+        EXPECT_GT(binned.stats["origin_leaves_dropped"].get<uint64_t>(), 1000u) << what;
         EXPECT_EQ(d.alphaMismatch, 0.0) << what;
         // Ties in box entry distance may order two starts differently (roots move by rounding), and a rare
         // shadow ray may differ (below).

@@ -18,10 +18,20 @@ constexpr size_t kRootRaysPerLeaf = 8;
 
 // The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
 // ray's candidates sorted by entry distance (stable), in the chunks of kChunk rays the Newton stage
-// expects (the traversal's output format). `start`, `next`: scratch.
-void groupCandidates(const CandidateVector& found, size_t n, std::vector<uint32_t>& start,
+// expects (the traversal's output format). With `originLeaf`, the candidates it drops are first removed
+// from `found`. `start`, `next`: scratch.
+void groupCandidates(CandidateVector& found, size_t n, std::vector<uint32_t>& start,
                      std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests,
-                     size_t rootPairs, uint64_t slabCulled, bool sortByEntry = true) {
+                     size_t rootPairs, uint64_t slabCulled, const OriginLeafRule* originLeaf,
+                     bool sortByEntry = true) {
+    uint64_t originDropped = 0;
+    if (originLeaf) {
+        size_t kept = 0;
+        for (const Candidate& c : found)
+            if (!originLeaf->drops(c)) found[kept++] = c;
+        originDropped = found.size() - kept;
+        found.resize(kept);
+    }
     const size_t nChunks = (n + kChunk - 1) / kChunk;
     if (chunks.size() < nChunks) chunks.resize(nChunks);
     // start[r]: first candidate of ray r; start[n]: total
@@ -40,7 +50,7 @@ void groupCandidates(const CandidateVector& found, size_t n, std::vector<uint32_
     }
     if (nChunks > 0)
         chunks[0].c.boxTests = boxTests, chunks[0].c.rootPairs = rootPairs,
-        chunks[0].c.slabCulled = slabCulled;
+        chunks[0].c.slabCulled = slabCulled, chunks[0].c.originLeafDropped = originDropped;
     for (const Candidate& c : found) {
         const size_t ci = c.ray / kChunk;
         chunks[ci].cand[next[c.ray]++ - start[ci * kChunk]] = c;
@@ -589,7 +599,8 @@ void binCameraRays(const RtAccel& acc, const RayList& rays, const CameraSamples&
         });
     if (!bin.roots.empty()) descendRootPairs(acc, rays, bin.roots, cull, found, boxTests, slabCulled);
 
-    groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests, bin.roots.size(), slabCulled);
+    groupCandidates(found, rays.size(), bin.start, bin.next, chunks, boxTests, bin.roots.size(), slabCulled,
+                    nullptr);  // camera rays have no originating patch
 }
 
 bool binShadowRays(const RtAccel& acc, const RayList& rays, std::span<const ShadowRun> runs,
@@ -604,9 +615,11 @@ bool binShadowRays(const RtAccel& acc, const RayList& rays, std::span<const Shad
     if (binned && !bin.roots.empty())
         descendRootPairs(acc, rays, bin.roots, false, bin.found, boxTests, slabCulled);
     // Shadow rays stop at any accepted hit: their candidates need no order.
-    if (binned)
+    if (binned) {
+        const OriginLeafRule originLeaf(acc, rays);
         groupCandidates(bin.found, rays.size(), bin.start, bin.next, chunks, boxTests, bin.roots.size(),
-                        slabCulled, /*sortByEntry=*/false);
+                        slabCulled, &originLeaf, /*sortByEntry=*/false);
+    }
     return binned;
 }
 

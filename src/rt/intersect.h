@@ -586,6 +586,14 @@ TESSERA_HD void leafHalfSize(int depth, float& hu, float& hv) {
     hv = 0.5f / float(1 << (depth / 2));
 }
 
+// The duplicate-root rule's reach: a root within (du, dv) of a leaf's centre (its half sizes and 1%)
+// counts as the leaf's, since Newton from the leaf's centre finds it.
+TESSERA_HD void rootRuleReach(int depth, float& du, float& dv) {
+    float hu, hv;
+    leafHalfSize(depth, hu, hv);
+    du = 1.01f * hu, dv = 1.01f * hv;
+}
+
 struct AcceptAnyHit {
     bool operator()(const PatchHit&) const { return true; }
 };

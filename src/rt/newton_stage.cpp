@@ -20,10 +20,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
     // Only the flag: the rest of a RayHit is written when the ray gets one, and read only then.
     hits.resize(n);
     for (RayHit& h : hits) h.hit = false;
-    float hu, hv;
+    float hu, hv, du, dv;
     leafHalfSize(acc.forest.depth, hu, hv);
-    // A root within this margin of a leaf counts as inside it (Newton from the leaf centre finds it).
-    const float du = 1.01f * hu, dv = 1.01f * hv;
+    rootRuleReach(acc.forest.depth, du, dv);
     const Vec2* leafCentre = acc.forest.leafCentre.data();
     const LeafBasis* leafBasis = acc.forest.leafBasis.data();
     const LeafBasis* quarterBasis = acc.forest.quarterBasis.data();

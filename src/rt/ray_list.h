@@ -108,6 +108,7 @@ struct StageCounters {
     uint64_t timeCulled = 0;  // candidates of moving patches whose leaf box at the ray's time is missed
     uint64_t rootPairs = 0;   // binning: (ray, patch) pairs sent down their subpatch trees per ray
     uint64_t slabCulled = 0;  // (ray, leaf) box hits dropped by the leaf's slab (LeafSlab4)
+    uint64_t originLeafDropped = 0;  // secondary rays' candidates in their origin's leaf (OriginLeafRule)
     std::array<uint64_t, kHistBins> hist{};
 };
 

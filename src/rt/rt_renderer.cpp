@@ -1122,6 +1122,7 @@ RenderResult renderRt(const Scene& scene, const RenderSettings& settings,
     s["newton_runs"] = total.newtonRuns;
     s["hull_culled"] = total.hullCulled;
     s["slab_culled"] = total.slabCulled;
+    s["origin_leaves_dropped"] = total.originLeafDropped;
     s["time_culled"] = total.timeCulled;
     s["shadow_lists"] = {{"binned", total.shadowListsBinned}, {"traversed", total.shadowListsTraversed}};
     s["newton_iterations"] = {

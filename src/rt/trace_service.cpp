@@ -14,6 +14,7 @@ void TraceCounters::add(const TraceCounters& c) {
     candidates += c.candidates, newtonRuns += c.newtonRuns, newtonIterations += c.newtonIterations;
     boxTests += c.boxTests, hullCulled += c.hullCulled, timeCulled += c.timeCulled, rootPairs += c.rootPairs;
     slabCulled += c.slabCulled;
+    originLeafDropped += c.originLeafDropped;
     shadowListsBinned += c.shadowListsBinned, shadowListsTraversed += c.shadowListsTraversed;
     for (int i = 0; i < kHistBins; ++i) hist[i] += c.hist[i];
     traversalMs += c.traversalMs, newtonMs += c.newtonMs;
@@ -81,6 +82,7 @@ void TraceService::traceList(const RayList& rays, std::vector<RayHit>& hits, boo
         c_.newtonIterations += c.newtonIterations, c_.boxTests += c.boxTests;
         c_.hullCulled += c.hullCulled, c_.timeCulled += c.timeCulled, c_.rootPairs += c.rootPairs;
         c_.slabCulled += c.slabCulled;
+        c_.originLeafDropped += c.originLeafDropped;
         for (int i = 0; i < kHistBins; ++i) c_.hist[i] += c.hist[i];
     }
     for (size_t r = 0; r < rays.size(); ++r) {

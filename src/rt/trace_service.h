@@ -33,7 +33,7 @@ namespace rt {
 struct TraceCounters {
     uint64_t rays[kKinds] = {}, hits[kKinds] = {};
     uint64_t candidates = 0, newtonRuns = 0, newtonIterations = 0, boxTests = 0, hullCulled = 0;
-    uint64_t timeCulled = 0, rootPairs = 0, slabCulled = 0;
+    uint64_t timeCulled = 0, rootPairs = 0, slabCulled = 0, originLeafDropped = 0;
     uint64_t shadowListsBinned = 0, shadowListsTraversed = 0;  // shadow lists by how candidates were found
     std::array<uint64_t, kHistBins> hist{};
     double traversalMs = 0, newtonMs = 0;  // CPU time of the candidate and Newton stages

@@ -402,18 +402,28 @@ template <bool kAvx2>
     const size_t used = descendPairs<kAvx2>(acc, rays, sc, ch.cand, 0, sc.count.data(), boxTests, slabCulled);
     Candidate* cand = ch.cand.data();
 
-    // Per ray: the end of its candidates, sorted by entry distance (stable insertion sort: short,
-    // nearly sorted).
+    // Per ray: its candidates less the one in its origin's leaf (OriginLeafRule), moved up over the
+    // dropped ones, and their end, sorted by entry distance (stable insertion sort: short, nearly sorted).
+    const OriginLeafRule originLeaf(acc, rays);
     ch.segEnd.resize(nr);
-    uint32_t end = 0;
+    uint32_t end = 0, kept = 0;
     for (uint32_t rl = 0; rl < nr; ++rl) {
-        const uint32_t begin = end;
+        const uint32_t begin = end, keptBegin = kept;
         end += sc.count[rl];
-        ch.segEnd[rl] = end;
-        sortSegmentByEntry(cand, begin, end);
+        if (originLeaf.mayDrop(r0 + rl)) {
+            for (uint32_t i = begin; i < end; ++i)
+                if (!originLeaf.drops(cand[i])) cand[kept++] = cand[i];
+        } else if (kept != begin) {
+            for (uint32_t i = begin; i < end; ++i) cand[kept++] = cand[i];
+        } else {
+            kept = end;
+        }
+        ch.segEnd[rl] = kept;
+        sortSegmentByEntry(cand, keptBegin, kept);
     }
-    ch.cand.resize(used);
-    ch.c.candidates = used;
+    ch.c.originLeafDropped = used - kept;
+    ch.cand.resize(kept);
+    ch.c.candidates = kept;
     ch.c.boxTests = boxTests;
     ch.c.slabCulled = slabCulled;
 }

@@ -1,10 +1,12 @@
 // The per-ray traversal stage: candidates (Newton starts) of every ray of a list, through the 4-wide BVH
 // and then all (ray, patch) pairs of a chunk down their subpatch trees level by level.
 #pragma once
+#include <cmath>
 #include <span>
 #include <vector>
 
 #include "rt/accel.h"
+#include "rt/intersect.h"
 #include "rt/ray_list.h"
 
 namespace tessera {
@@ -38,6 +40,31 @@ namespace rt {
 //
 // `cull`: camera rays skip back-facing subpatches (--cull-backfaces). Runs tbb over chunks of kChunk rays.
 void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chunks, bool cull);
+
+// The Newton stage's duplicate-root rule (rt/newton_stage.h) applied where the candidate lists are
+// grouped by ray: a secondary ray starts on its originating patch at a known (u,v), so its candidate in
+// the leaf that holds that (u,v) (within rootRuleReach) would start Newton on the origin itself, which the
+// self-intersection rules reject. Both candidate stages drop it (counted in originLeafDropped); the Newton
+// stage's seed rule skipped it the same way when it came first among the ray's candidates. Quadrics and
+// displaced patches (no Newton start) keep theirs.
+class OriginLeafRule {
+public:
+    OriginLeafRule(const RtAccel& acc, const RayList& rays) : acc_(acc), rays_(rays) {
+        rootRuleReach(acc.forest.depth, du_, dv_);
+    }
+    bool drops(const Candidate& c) const {
+        if (c.patch != rays_.ignore[c.ray]) return false;
+        const Vec2 uv = rays_.ignoreUV[c.ray], c0 = acc_.forest.leafCentre[c.leaf];
+        return uv.x >= 0.f && std::fabs(uv.x - c0.x) <= du_ && std::fabs(uv.y - c0.y) <= dv_ &&
+               !acc_.quadric(c.patch) && !acc_.displaced.displaced(c.patch);
+    }
+    bool mayDrop(size_t ray) const { return rays_.ignore[ray] != kNone; }
+
+private:
+    const RtAccel& acc_;
+    const RayList& rays_;
+    float du_, dv_;
+};
 
 // The subpatch half of the traversal for (ray, patch) pairs found another way (the binning stages): each
 // root candidate names a ray of `rays` whose patch's root box it hits (entry distance tEnter; its leaf is
