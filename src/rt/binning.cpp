@@ -18,25 +18,26 @@ constexpr size_t kRootRaysPerLeaf = 8;
 
 // The candidates of a binning stage, found in any order, grouped by ray (counting sort, stable) with each
 // ray's candidates sorted by entry distance (stable), in the chunks of kChunk rays the Newton stage
-// expects (the traversal's output format). With `originLeaf`, the candidates it drops are first removed
-// from `found`. `start`, `next`: scratch.
+// expects (the traversal's output format). With `originLeaf`, the candidates it drops are removed from
+// `found` in the counting pass. `start`, `next`: scratch.
 void groupCandidates(CandidateVector& found, size_t n, std::vector<uint32_t>& start,
                      std::vector<uint32_t>& next, std::vector<Chunk>& chunks, uint64_t boxTests,
                      size_t rootPairs, uint64_t slabCulled, const OriginLeafRule* originLeaf,
                      bool sortByEntry = true) {
-    uint64_t originDropped = 0;
-    if (originLeaf) {
-        size_t kept = 0;
-        for (const Candidate& c : found)
-            if (!originLeaf->drops(c)) found[kept++] = c;
-        originDropped = found.size() - kept;
-        found.resize(kept);
-    }
     const size_t nChunks = (n + kChunk - 1) / kChunk;
     if (chunks.size() < nChunks) chunks.resize(nChunks);
     // start[r]: first candidate of ray r; start[n]: total
     start.assign(n + 1, 0);
-    for (const Candidate& c : found) ++start[c.ray + 1];
+    uint64_t originDropped = 0;
+    if (originLeaf) {
+        size_t kept = 0;
+        for (const Candidate& c : found)
+            if (!originLeaf->drops(c)) found[kept++] = c, ++start[c.ray + 1];
+        originDropped = found.size() - kept;
+        found.resize(kept);
+    } else {
+        for (const Candidate& c : found) ++start[c.ray + 1];
+    }
     for (size_t r = 0; r < n; ++r) start[r + 1] += start[r];
     next.assign(start.begin(), start.end() - 1);
     for (size_t ci = 0; ci < nChunks; ++ci) {

@@ -49,20 +49,26 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 // displaced patches (no Newton start) keep theirs.
 class OriginLeafRule {
 public:
-    OriginLeafRule(const RtAccel& acc, const RayList& rays) : acc_(acc), rays_(rays) {
+    OriginLeafRule(const RtAccel& acc, const RayList& rays)
+        : acc_(acc), ignore_(rays.ignore.data()), ignoreUV_(rays.ignoreUV.data()),
+          leafCentre_(acc.forest.leafCentre.data()),
+          special_(!acc.quadricOf.empty() || acc.displaced.patchCount() > 0) {
         rootRuleReach(acc.forest.depth, du_, dv_);
     }
     bool drops(const Candidate& c) const {
-        if (c.patch != rays_.ignore[c.ray]) return false;
-        const Vec2 uv = rays_.ignoreUV[c.ray], c0 = acc_.forest.leafCentre[c.leaf];
+        if (c.patch != ignore_[c.ray]) return false;
+        const Vec2 uv = ignoreUV_[c.ray], c0 = leafCentre_[c.leaf];
         return uv.x >= 0.f && std::fabs(uv.x - c0.x) <= du_ && std::fabs(uv.y - c0.y) <= dv_ &&
-               !acc_.quadric(c.patch) && !acc_.displaced.displaced(c.patch);
+               !(special_ && (acc_.quadric(c.patch) || acc_.displaced.displaced(c.patch)));
     }
-    bool mayDrop(size_t ray) const { return rays_.ignore[ray] != kNone; }
+    bool mayDrop(size_t ray) const { return ignore_[ray] != kNone; }
 
 private:
     const RtAccel& acc_;
-    const RayList& rays_;
+    const uint32_t* ignore_;
+    const Vec2* ignoreUV_;
+    const Vec2* leafCentre_;
+    bool special_;  // the accel has quadrics or displaced patches
     float du_, dv_;
 };
 
