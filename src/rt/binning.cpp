@@ -283,7 +283,49 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
         float rx0, rx1, ry0, ry1, dlo, dhi;
         int behind;
     };
+    // Parallel projection (distant light): each of px, py and the depth is linear, so its smallest value
+    // over the box is at the corner taking, per axis, lo where the coefficient is positive and hi
+    // elsewhere, and its largest at the opposite corner; those two corners' values are the values the
+    // corner loop computes for them (same expression). Rounding may put another corner's value an ulp lower
+    // or higher; the rectangle's margin (below) covers that as it covers the rays' own projections.
+    // Lanes: px (eu), py (ev), depth (w).
+#if defined(__SSE2__)
+    const __m128 axisX = _mm_setr_ps(eu.x, ev.x, w.x, 0.f), axisY = _mm_setr_ps(eu.y, ev.y, w.y, 0.f),
+                 axisZ = _mm_setr_ps(eu.z, ev.z, w.z, 0.f);
+    // All bits where the lane's coefficient is positive (its minimum at lo).
+    const __m128 posX = _mm_cmpgt_ps(axisX, _mm_setzero_ps()), posY = _mm_cmpgt_ps(axisY, _mm_setzero_ps()),
+                 posZ = _mm_cmpgt_ps(axisZ, _mm_setzero_ps());
+    auto select = [](__m128 mask, float a, float b) {  // mask ? a : b, lane by lane
+        return _mm_or_ps(_mm_and_ps(mask, _mm_set1_ps(a)), _mm_andnot_ps(mask, _mm_set1_ps(b)));
+    };
+    auto projectParallel = [&](const Bounds3& b) {
+        const __m128 lo = _mm_add_ps(_mm_add_ps(_mm_mul_ps(axisX, select(posX, b.lo.x, b.hi.x)),
+                                                _mm_mul_ps(axisY, select(posY, b.lo.y, b.hi.y))),
+                                     _mm_mul_ps(axisZ, select(posZ, b.lo.z, b.hi.z)));
+        const __m128 hi = _mm_add_ps(_mm_add_ps(_mm_mul_ps(axisX, select(posX, b.hi.x, b.lo.x)),
+                                                _mm_mul_ps(axisY, select(posY, b.hi.y, b.lo.y))),
+                                     _mm_mul_ps(axisZ, select(posZ, b.hi.z, b.lo.z)));
+        alignas(16) float l[4], h[4];
+        _mm_store_ps(l, lo);
+        _mm_store_ps(h, hi);
+        return Corners{l[0], h[0], l[1], h[1], l[2], h[2], 0};
+    };
+#else
+    auto projectParallel = [&](const Bounds3& b) {
+        auto range = [&](Vec3 a, float& lo, float& hi) {
+            lo = dot(a, Vec3{a.x > 0.f ? b.lo.x : b.hi.x, a.y > 0.f ? b.lo.y : b.hi.y, a.z > 0.f ? b.lo.z : b.hi.z});
+            hi = dot(a, Vec3{a.x > 0.f ? b.hi.x : b.lo.x, a.y > 0.f ? b.hi.y : b.lo.y, a.z > 0.f ? b.hi.z : b.lo.z});
+        };
+        Corners k;
+        k.behind = 0;
+        range(eu, k.rx0, k.rx1);
+        range(ev, k.ry0, k.ry1);
+        range(w, k.dlo, k.dhi);
+        return k;
+    };
+#endif
     auto projectCorners = [&](const Bounds3& b) {
+        if (!light) return projectParallel(b);
         Corners k;
 #if defined(__SSE2__)
         const __m128 cx = _mm_setr_ps(b.lo.x, b.hi.x, b.lo.x, b.hi.x),
