@@ -127,10 +127,30 @@ void descendCulled(const RtAccel& acc, NearKey&& nearKey, Overlaps&& overlaps, S
     }
 }
 
+// Projector::rasterBounds from the box's extreme corners instead of all eight: raster x is x/z (times sx,
+// plus ox), smallest at x = lo.x over the far side (z = hi.z) when lo.x >= 0 and over the near side
+// otherwise, largest at x = hi.x likewise (y the same; a negative scale swaps the ends). Each end is the
+// expression rasterBounds evaluates at that corner; rounding may leave another corner an ulp beyond it,
+// which screenRect's margin covers as it covers the rays' own rounding.
+inline bool rasterBoundsFromExtremes(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0,
+                                     float& y1) {
+    float izLoX = 1.f, izHiX = 1.f, izLoY = 1.f, izHiY = 1.f;
+    if (proj.perspective) {
+        if (!(b.lo.z > 0.f && b.hi.z > 0.f)) return false;  // a corner at or behind the eye
+        const float izNear = 1.f / b.lo.z, izFar = 1.f / b.hi.z;
+        izLoX = b.lo.x >= 0.f ? izFar : izNear, izHiX = b.hi.x >= 0.f ? izNear : izFar;
+        izLoY = b.lo.y >= 0.f ? izFar : izNear, izHiY = b.hi.y >= 0.f ? izNear : izFar;
+    }
+    const float ax = b.lo.x * izLoX * proj.sx + proj.ox, bx = b.hi.x * izHiX * proj.sx + proj.ox;
+    const float ay = b.lo.y * izLoY * proj.sy + proj.oy, by = b.hi.y * izHiY * proj.sy + proj.oy;
+    x0 = std::min(ax, bx), x1 = std::max(ax, bx), y0 = std::min(ay, by), y1 = std::max(ay, by);
+    return true;
+}
+
 // Raster rectangle containing the projection of box b, grown for rounding (the rays' own raster
 // positions are rounded too); false when the box reaches behind the eye (no finite rectangle).
 inline bool screenRect(const Projector& proj, const Bounds3& b, float& x0, float& x1, float& y0, float& y1) {
-    if (!proj.rasterBounds(b, x0, x1, y0, y1)) return false;
+    if (!rasterBoundsFromExtremes(proj, b, x0, x1, y0, y1)) return false;
     const float m = 1e-2f + 1e-5f * std::max({std::fabs(x0), std::fabs(x1), std::fabs(y0), std::fabs(y1)});
     x0 -= m, x1 += m, y0 -= m, y1 += m;
     return std::isfinite(x0) && std::isfinite(x1) && std::isfinite(y0) && std::isfinite(y1);
