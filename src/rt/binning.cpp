@@ -464,9 +464,13 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
             out.resize(k + (e - b) + 4);
 #if defined(__SSE2__)
             for (size_t i = b; i < e; i += 4) {
+                // Four rays of the covered cells often all lie outside a small box's rectangle: then the
+                // slab test is skipped.
+                const __m128 px = _mm_loadu_ps(&pb.px[i]), py = _mm_loadu_ps(&pb.py[i]);
+                if (!_mm_movemask_ps(insideRect4(b4, px, py))) continue;
                 __m128 te, tx;
                 const __m128 hit =
-                    leafBox4Hits(b4, _mm_loadu_ps(&pb.px[i]), _mm_loadu_ps(&pb.py[i]),
+                    leafBox4Hits(b4, px, py,
                                  _mm_loadu_ps(&pb.ox[i]), _mm_loadu_ps(&pb.oy[i]), _mm_loadu_ps(&pb.oz[i]),
                                  _mm_loadu_ps(&pb.ix[i]), _mm_loadu_ps(&pb.iy[i]), _mm_loadu_ps(&pb.iz[i]),
                                  _mm_loadu_ps(&pb.tmin[i]), _mm_loadu_ps(&pb.tmax[i]), te, tx);

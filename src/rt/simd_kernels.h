@@ -417,6 +417,11 @@ struct LeafBox4 {
           y0(_mm_set1_ps(r.y0)),
           y1(_mm_set1_ps(r.y1)) {}
 };
+// The lanes whose point (px, py) lies in the box's rectangle.
+inline __m128 insideRect4(const LeafBox4& b, __m128 px, __m128 py) {
+    return _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(px, b.x0), _mm_cmple_ps(px, b.x1)),
+                      _mm_and_ps(_mm_cmpge_ps(py, b.y0), _mm_cmple_ps(py, b.y1)));
+}
 inline __m128 leafBox4Hits(const LeafBox4& b, __m128 px, __m128 py, __m128 ox, __m128 oy, __m128 oz,
                            __m128 ix, __m128 iy, __m128 iz, __m128 t0, __m128 t1, __m128& te, __m128& tx) {
     const __m128 ax = _mm_mul_ps(_mm_sub_ps(b.lox, ox), ix), bx = _mm_mul_ps(_mm_sub_ps(b.hix, ox), ix);
@@ -424,9 +429,7 @@ inline __m128 leafBox4Hits(const LeafBox4& b, __m128 px, __m128 py, __m128 ox, _
     const __m128 az = _mm_mul_ps(_mm_sub_ps(b.loz, oz), iz), bz = _mm_mul_ps(_mm_sub_ps(b.hiz, oz), iz);
     te = _mm_max_ps(_mm_max_ps(_mm_min_ps(ax, bx), _mm_min_ps(ay, by)), _mm_max_ps(_mm_min_ps(az, bz), t0));
     tx = _mm_min_ps(_mm_min_ps(_mm_max_ps(ax, bx), _mm_max_ps(ay, by)), _mm_min_ps(_mm_max_ps(az, bz), t1));
-    const __m128 inside = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(px, b.x0), _mm_cmple_ps(px, b.x1)),
-                                     _mm_and_ps(_mm_cmpge_ps(py, b.y0), _mm_cmple_ps(py, b.y1)));
-    return _mm_and_ps(_mm_cmple_ps(te, tx), inside);
+    return _mm_and_ps(_mm_cmple_ps(te, tx), insideRect4(b, px, py));
 }
 // The candidates of the lanes in `mask` to out[0..], compressed (four written, their count returned).
 inline size_t emitLanes(Candidate* out, int mask, __m128 te, const uint32_t* rayOfLane, uint32_t patch,
