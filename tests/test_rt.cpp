@@ -912,6 +912,92 @@ TEST(RtHierarchy, LeafAndQuarterMaxCoefficientsBoundTheLeaf) {
     EXPECT_GT(tangentTighter, tangentLeaves / 2);
 }
 
+TEST(RtTraceService, ShadowRaysLeavingTheSurfaceAgreeWithScalarPerRay) {
+    // Shadow rays as the integrator makes them: from random points of the teapot's and the Killeroo's
+    // patches, offset along the side's normal, carrying their patch, (u,v) and normal (the
+    // originating-patch rules: the origin's leaf left out by the candidate stages, leaves below the height
+    // the ray reaches at the self-intersection distance skipped). Towards random directions above the
+    // surface (per ray) and towards one distant light (binned), against the scalar path, which starts Newton
+    // in every leaf its boxes reach and knows only the self-intersection distance.
+    using namespace tessera::rt;
+    for (const char* name : {"teapot", "killeroo"}) {
+        const Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib",
+                                  [](const std::string&) {});
+        RtAccel acc;
+        buildRtAccel(s, s.camera.cameraFromWorld, 6, false, acc);
+        const float size = length(acc.bounds.hi - acc.bounds.lo);
+        std::mt19937 rng(23);
+        std::uniform_real_distribution<float> U(0.f, 1.f), S(-1.f, 1.f);
+        const Vec3 lightDir = normalize(Vec3{-0.4f, 0.7f, -0.6f});  // towards the light
+        RayList free, towardsLight;
+        const int n = 3000;
+        for (int i = 0; i < 2 * n; ++i) {
+            const uint32_t patch = uint32_t(U(rng) * float(acc.patches.size())) % uint32_t(acc.patches.size());
+            const float u = U(rng), v = U(rng);
+            const Vec3 p = evalPatch(acc.patches[patch], u, v);
+            Vec3 nrm = normalize(patchNormal(acc.patches[patch], u, v));
+            if (!isFinite(nrm) || dot(nrm, nrm) == 0.f) continue;
+            if (i < n) {
+                Vec3 d = normalize(Vec3{S(rng), S(rng), S(rng)});
+                if (dot(d, nrm) < 0.f) d = -d;
+                if (!(dot(d, nrm) > 0.02f)) continue;
+                free.push(p + nrm * acc.offset, d, 0.f, 0.5f * size, 0, {}, patch, kShadow, 0, {u, v}, nrm);
+            } else {
+                if (dot(nrm, lightDir) < 0.f) nrm = -nrm;  // the side that faces the light
+                if (!(dot(nrm, lightDir) > 0.02f)) continue;
+                towardsLight.push(p + nrm * acc.offset, lightDir, 0.f, INFINITY, 0, {}, patch, kShadow, 0,
+                                  {u, v}, nrm);
+            }
+        }
+        // The scalar verdict per ray, and how ours differs: blocked where the scalar path is not (a false
+        // shadow), or not blocked where it found a hit on the ray's own patch, or on another patch.
+        struct Tally {
+            int blocked = 0, falseBlocked = 0, missedOwn = 0, missedOther = 0;
+        };
+        auto compare = [&](const RayList& rl, const std::vector<uint8_t>& ours) {
+            Tally t;
+            for (size_t r = 0; r < rl.size(); ++r) {
+                const TraceOptions opt = optionsFor(rl.kind[r], rl.ignore[r], acc.offset, false);
+                RayHit h;
+                const bool want = traceRayScalar(acc, Ray{rl.o[r], rl.d[r], rl.tmin[r], rl.tmax[r]}, opt, h);
+                t.blocked += want;
+                if (!want && ours[r]) ++t.falseBlocked;
+                if (want && !ours[r]) ++(h.patch == rl.ignore[r] ? t.missedOwn : t.missedOther);
+            }
+            return t;
+        };
+        TraceService perRay(acc), binned(acc, {false, true});
+        std::vector<uint8_t> blockedFree, blockedBinned, blockedPerRay;
+        perRay.occluded(free, blockedFree);
+        const std::vector<ShadowRun> runs = {{0, towardsLight.size(), false, {}}};
+        binned.occluded(towardsLight, runs, blockedBinned);
+        perRay.occluded(towardsLight, blockedPerRay);
+        const Tally tf = compare(free, blockedFree), tl = compare(towardsLight, blockedBinned);
+        std::printf("%s: free rays %d of %zu blocked (ours: %d false, %d own-patch and %d other hits missed); "
+                    "towards the light %d of %zu (%d, %d, %d); origin leaves dropped %llu per ray, %llu binned\n",
+                    name, tf.blocked, free.size(), tf.falseBlocked, tf.missedOwn, tf.missedOther, tl.blocked,
+                    towardsLight.size(), tl.falseBlocked, tl.missedOwn, tl.missedOther,
+                    (unsigned long long)perRay.counters().originLeafDropped,
+                    (unsigned long long)binned.counters().originLeafDropped);
+        EXPECT_GT(free.size(), size_t(n) / 2);
+        EXPECT_GT(towardsLight.size(), size_t(n) / 4);
+        EXPECT_GT(tf.blocked, int(free.size()) / 50);  // the surface blocks some of them
+        EXPECT_GT(tl.blocked, int(towardsLight.size()) / 50);
+        EXPECT_EQ(binned.counters().shadowListsBinned, 1u);
+        EXPECT_EQ(blockedBinned, blockedPerRay) << name;
+        EXPECT_GT(perRay.counters().originLeafDropped, uint64_t(n) / 2);
+        // No false shadows, and other patches' hits found. Known limitation (docs/rt.md): a grazing ray
+        // (d.n below about 0.2) over a concave part of its own patch can meet the patch again a few dozen
+        // offsets on, in or next to the origin's leaf, where Newton's start converges back to the origin;
+        // the scalar path, starting in every leaf, finds some of those. Teapot: 14 of 2,938 free rays and
+        // 11 of 2,950 towards the light (13 and 10 before this session's origin-leaf rule); Killeroo none.
+        EXPECT_EQ(tf.falseBlocked + tl.falseBlocked, 0) << name;
+        EXPECT_LE(tf.missedOther + tl.missedOther, 2) << name;
+        EXPECT_LE(tf.missedOwn, int(free.size()) / 150) << name;
+        EXPECT_LE(tl.missedOwn, int(towardsLight.size()) / 150) << name;
+    }
+}
+
 TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
     // The trace service over random ray lists through the teapot and the killeroo: trace() (closest hit,
     // camera and secondary rules) and occluded() (any hit; per ray, and binned light by light for a
