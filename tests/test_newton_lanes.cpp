@@ -23,8 +23,7 @@ struct Start {
 // Random (ray, patch, start) triples: rays through a random point of a random teapot patch (so roots
 // exist), from random directions, plus starts that miss (shifted rays).
 std::vector<Start> makeStarts(int count) {
-    const Scene s =
-        loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
+    const Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     std::mt19937 rng(7);
     std::uniform_real_distribution<float> U(0.f, 1.f), S(-1.f, 1.f);
     std::vector<Start> out;
@@ -115,8 +114,7 @@ TEST(NewtonLanes, BitIdenticalToScalarNewton) {
 // The projection into a lane's columns (AVX2 and SSE2 builds) gives projectPatch's values bit for bit, in
 // lane l's column only, and each control point's distance along the ray as the scalar formula.
 TEST(NewtonLanes, ProjectIntoLaneEqualsProjectPatch) {
-    const Scene s =
-        loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
+    const Scene s = loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
     std::mt19937 rng(11);
     std::uniform_real_distribution<float> S(-1.f, 1.f);
     int compared = 0;
@@ -171,13 +169,26 @@ TEST(NewtonLanes, RayFramesEqualMakeRayPlanesBitForBit) {
         o.push_back(Vec3{S(rng), S(rng), S(rng)} * std::exp2(E(rng)));
         Vec3 dir{S(rng), S(rng), S(rng)};
         switch (k % 8) {
-        case 0: dir = dir * std::exp2(E(rng)); break;
-        case 1: dir.y = 0.f, dir.z = -0.f; break;               // along x
-        case 2: dir.x = dir.z = 0.f; break;                     // along y
-        case 3: dir.y = dir.x; break;                           // |dx| = |dy|
-        case 4: dir.z = -dir.x; break;                          // |dx| = |dz|
-        case 5: dir = k % 16 == 5 ? Vec3{0.f, 0.f, 0.f} : Vec3{-0.f, 0.f, dir.z}; break;
-        default: break;
+            case 0:
+                dir = dir * std::exp2(E(rng));
+                break;
+            case 1:
+                dir.y = 0.f, dir.z = -0.f;
+                break;  // along x
+            case 2:
+                dir.x = dir.z = 0.f;
+                break;  // along y
+            case 3:
+                dir.y = dir.x;
+                break;  // |dx| = |dy|
+            case 4:
+                dir.z = -dir.x;
+                break;  // |dx| = |dz|
+            case 5:
+                dir = k % 16 == 5 ? Vec3{0.f, 0.f, 0.f} : Vec3{-0.f, 0.f, dir.z};
+                break;
+            default:
+                break;
         }
         d.push_back(dir);
     }
@@ -191,7 +202,8 @@ TEST(NewtonLanes, RayFramesEqualMakeRayPlanesBitForBit) {
         frames(ox.data(), oy.data(), oz.data(), dx.data(), dy.data(), dz.data(), n, got.data());
         for (int i = 0; i < n; ++i) {
             const RayPlanes pl = makeRayPlanes(o[i], d[i]);
-            const LaneRayFrame want{{pl.n1.x, pl.n1.y, pl.n1.z}, pl.d1, {pl.n2.x, pl.n2.y, pl.n2.z}, pl.d2,
+            const LaneRayFrame want{{pl.n1.x, pl.n1.y, pl.n1.z}, pl.d1,
+                                    {pl.n2.x, pl.n2.y, pl.n2.z}, pl.d2,
                                     {o[i].x, o[i].y, o[i].z},    {d[i].x, d[i].y, d[i].z},
                                     1.f / dot(d[i], d[i])};
             ASSERT_EQ(std::memcmp(&got[i], &want, sizeof(want)), 0) << "ray " << i;

@@ -908,7 +908,8 @@ TEST(RtHierarchy, LeafAndQuarterMaxCoefficientsBoundTheLeaf) {
             if (quartersMaxCoefficient(c) < maxCoefficient(c) - 1e-6f * size) ++tangentTighter;
             ++tangentLeaves;
         }
-    std::printf("tangent planes: quarters' bound tighter on %d of %d leaves\n", tangentTighter, tangentLeaves);
+    std::printf("tangent planes: quarters' bound tighter on %d of %d leaves\n", tangentTighter,
+                tangentLeaves);
     EXPECT_GT(tangentTighter, tangentLeaves / 2);
 }
 
@@ -932,7 +933,8 @@ TEST(RtTraceService, ShadowRaysLeavingTheSurfaceAgreeWithScalarPerRay) {
         RayList free, towardsLight;
         const int n = 3000;
         for (int i = 0; i < 2 * n; ++i) {
-            const uint32_t patch = uint32_t(U(rng) * float(acc.patches.size())) % uint32_t(acc.patches.size());
+            const uint32_t patch =
+                uint32_t(U(rng) * float(acc.patches.size())) % uint32_t(acc.patches.size());
             const float u = U(rng), v = U(rng);
             const Vec3 p = evalPatch(acc.patches[patch], u, v);
             Vec3 nrm = normalize(patchNormal(acc.patches[patch], u, v));
@@ -973,12 +975,13 @@ TEST(RtTraceService, ShadowRaysLeavingTheSurfaceAgreeWithScalarPerRay) {
         binned.occluded(towardsLight, runs, blockedBinned);
         perRay.occluded(towardsLight, blockedPerRay);
         const Tally tf = compare(free, blockedFree), tl = compare(towardsLight, blockedBinned);
-        std::printf("%s: free rays %d of %zu blocked (ours: %d false, %d own-patch and %d other hits missed); "
-                    "towards the light %d of %zu (%d, %d, %d); origin leaves dropped %llu per ray, %llu binned\n",
-                    name, tf.blocked, free.size(), tf.falseBlocked, tf.missedOwn, tf.missedOther, tl.blocked,
-                    towardsLight.size(), tl.falseBlocked, tl.missedOwn, tl.missedOther,
-                    (unsigned long long)perRay.counters().originLeafDropped,
-                    (unsigned long long)binned.counters().originLeafDropped);
+        std::printf(
+            "%s: free rays %d of %zu blocked (ours: %d false, %d own-patch and %d other hits missed); "
+            "towards the light %d of %zu (%d, %d, %d); origin leaves dropped %llu per ray, %llu binned\n",
+            name, tf.blocked, free.size(), tf.falseBlocked, tf.missedOwn, tf.missedOther, tl.blocked,
+            towardsLight.size(), tl.falseBlocked, tl.missedOwn, tl.missedOther,
+            (unsigned long long)perRay.counters().originLeafDropped,
+            (unsigned long long)binned.counters().originLeafDropped);
         EXPECT_GT(free.size(), size_t(n) / 2);
         EXPECT_GT(towardsLight.size(), size_t(n) / 4);
         EXPECT_GT(tf.blocked, int(free.size()) / 50);  // the surface blocks some of them

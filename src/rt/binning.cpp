@@ -333,8 +333,10 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
 #else
     auto projectParallel = [&](const Bounds3& b) {
         auto range = [&](Vec3 a, float& lo, float& hi) {
-            lo = dot(a, Vec3{a.x > 0.f ? b.lo.x : b.hi.x, a.y > 0.f ? b.lo.y : b.hi.y, a.z > 0.f ? b.lo.z : b.hi.z});
-            hi = dot(a, Vec3{a.x > 0.f ? b.hi.x : b.lo.x, a.y > 0.f ? b.hi.y : b.lo.y, a.z > 0.f ? b.hi.z : b.lo.z});
+            lo = dot(a, Vec3{a.x > 0.f ? b.lo.x : b.hi.x, a.y > 0.f ? b.lo.y : b.hi.y,
+                             a.z > 0.f ? b.lo.z : b.hi.z});
+            hi = dot(a, Vec3{a.x > 0.f ? b.hi.x : b.lo.x, a.y > 0.f ? b.hi.y : b.lo.y,
+                             a.z > 0.f ? b.hi.z : b.lo.z});
         };
         Corners k;
         k.behind = 0;
@@ -469,11 +471,10 @@ bool binParallelRays(const RtAccel& acc, const RayList& rays, size_t r0, size_t 
                 const __m128 px = _mm_loadu_ps(&pb.px[i]), py = _mm_loadu_ps(&pb.py[i]);
                 if (!_mm_movemask_ps(insideRect4(b4, px, py))) continue;
                 __m128 te, tx;
-                const __m128 hit =
-                    leafBox4Hits(b4, px, py,
-                                 _mm_loadu_ps(&pb.ox[i]), _mm_loadu_ps(&pb.oy[i]), _mm_loadu_ps(&pb.oz[i]),
-                                 _mm_loadu_ps(&pb.ix[i]), _mm_loadu_ps(&pb.iy[i]), _mm_loadu_ps(&pb.iz[i]),
-                                 _mm_loadu_ps(&pb.tmin[i]), _mm_loadu_ps(&pb.tmax[i]), te, tx);
+                const __m128 hit = leafBox4Hits(b4, px, py, _mm_loadu_ps(&pb.ox[i]), _mm_loadu_ps(&pb.oy[i]),
+                                                _mm_loadu_ps(&pb.oz[i]), _mm_loadu_ps(&pb.ix[i]),
+                                                _mm_loadu_ps(&pb.iy[i]), _mm_loadu_ps(&pb.iz[i]),
+                                                _mm_loadu_ps(&pb.tmin[i]), _mm_loadu_ps(&pb.tmax[i]), te, tx);
                 // The ray's own patch: boxes it leaves before the self-intersection distance are skipped.
                 const __m128 own = _mm_castsi128_ps(_mm_cmpeq_epi32(
                     _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pb.ignore[i])), vpatch));

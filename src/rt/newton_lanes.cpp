@@ -180,9 +180,9 @@ __attribute__((always_inline)) inline void framesImpl(const float* ox, const flo
         const f8 d1 = -((n1x * OX + n1y * OY) + n1z * OZ), d2 = -((n2x * OX + n2y * OY) + n2z * OZ);
         const f8 invDD = 1.f / ((DX * DX + DY * DY) + DZ * DZ);
         for (int k = 0; k < 8 && b + k < n; ++k)
-            out[b + k] = LaneRayFrame{{n1x[k], n1y[k], n1z[k]}, d1[k],     {n2x[k], n2y[k], n2z[k]},
-                                      d2[k],
-                                      {OX[k], OY[k], OZ[k]},    {DX[k], DY[k], DZ[k]}, invDD[k]};
+            out[b + k] = LaneRayFrame{
+                {n1x[k], n1y[k], n1z[k]}, d1[k],   {n2x[k], n2y[k], n2z[k]}, d2[k], {OX[k], OY[k], OZ[k]},
+                {DX[k], DY[k], DZ[k]},    invDD[k]};
     }
 }
 

@@ -288,7 +288,7 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                         s.selfPlane = true;
                         s.selfEps = newtonEps(ps, s.ray.o);  // the patch's Newton tolerance
                         // On the ray the height is t (d.n); a root on this patch counts only from
-                        // t = ignoreT, so from that height (less 4 tolerances for the coefficients' rounding).
+                        // t = ignoreT, so from that height (less 4 tolerances for rounding).
                         s.selfLim = s.opt.ignoreT * dot(s.ray.d, nrm) - 4.f * s.selfEps;
                     }
                 }

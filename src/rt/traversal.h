@@ -48,9 +48,11 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 // stage's seed rule skipped it the same way when it came first among the ray's candidates. Quadrics and
 // displaced patches (no Newton start) keep theirs.
 class OriginLeafRule {
-public:
+  public:
     OriginLeafRule(const RtAccel& acc, const RayList& rays)
-        : acc_(acc), ignore_(rays.ignore.data()), ignoreUV_(rays.ignoreUV.data()),
+        : acc_(acc),
+          ignore_(rays.ignore.data()),
+          ignoreUV_(rays.ignoreUV.data()),
           leafCentre_(acc.forest.leafCentre.data()),
           special_(!acc.quadricOf.empty() || acc.displaced.patchCount() > 0) {
         rootRuleReach(acc.forest.depth, du_, dv_);
@@ -63,7 +65,7 @@ public:
     }
     bool mayDrop(size_t ray) const { return ignore_[ray] != kNone; }
 
-private:
+  private:
     const RtAccel& acc_;
     const uint32_t* ignore_;
     const Vec2* ignoreUV_;
