@@ -42,9 +42,9 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
         const LaneRayFrame* frame = nullptr;  // the ray's planes, origin and direction for projectIntoLane
         float eps = 0.f, bestU = 0.f, bestV = 0.f;
         uint32_t projected = kNone, bestPatch = kNone;
-        // Last converged root (accepted or not) per patch run, for the duplicate-start test. A secondary
-        // ray starts (offset) on its originating patch at a known (u,v): that is the root a start near it
-        // converges to (rejected by the self-intersection rules), so it seeds the test.
+        // Last converged root (accepted or not) per patch run, for the duplicate-start test. (A secondary
+        // ray's own origin counts as such a root too: the candidate stages already left out the leaves
+        // it holds, OriginLeafRule in rt/traversal.h.)
         uint32_t rootPatch = kNone;
         float rootU = 0.f, rootV = 0.f;
         int attempt = 0;  // 0: leaf centre; 1..4: quarter centres (originating patch only)
@@ -166,8 +166,6 @@ void newtonList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& chu
                 s.originN = rays.originN[r];
                 s.selfPlane = false, s.heightsDone = false;
                 s.rootPatch = kNone;
-                if (rays.ignore[r] != kNone && rays.ignoreUV[r].x >= 0.f)
-                    s.rootPatch = rays.ignore[r], s.rootU = rays.ignoreUV[r].x, s.rootV = rays.ignoreUV[r].y;
                 return true;
             }
             return false;

@@ -44,9 +44,9 @@ void traverseList(const RtAccel& acc, const RayList& rays, std::vector<Chunk>& c
 // The Newton stage's duplicate-root rule (rt/newton_stage.h) applied where the candidate lists are
 // grouped by ray: a secondary ray starts on its originating patch at a known (u,v), so its candidate in
 // the leaf that holds that (u,v) (within rootRuleReach) would start Newton on the origin itself, which the
-// self-intersection rules reject. Both candidate stages drop it (counted in originLeafDropped); the Newton
-// stage's seed rule skipped it the same way when it came first among the ray's candidates. Quadrics and
-// displaced patches (no Newton start) keep theirs.
+// self-intersection rules reject. Both candidate stages drop it (counted in originLeafDropped), so the
+// Newton stage needs no seed for it (camera lists have no origin patch). Quadrics and displaced patches
+// (no Newton start) keep theirs.
 class OriginLeafRule {
   public:
     OriginLeafRule(const RtAccel& acc, const RayList& rays)
