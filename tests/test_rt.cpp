@@ -23,6 +23,19 @@ Scene loadTeapotBpt() {
     return loadScene(std::string(TESSERA_TEST_DATA) + "/teapot.bpt", [](const std::string&) {});
 }
 
+// A shipped scene (scenes/NAME.rib) and its accel in camera space at subpatch depth 6.
+void shippedSceneAccel(const char* name, RtAccel& acc) {
+    const Scene s =
+        loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib", [](const std::string&) {});
+    buildRtAccel(s, s.camera.cameraFromWorld, 6, false, acc);
+}
+
+// Ray r of a list through the scalar reference path, with the rules of its kind and origin.
+bool scalarTrace(const RtAccel& acc, const rt::RayList& rl, size_t r, RayHit& h) {
+    const TraceOptions opt = rt::optionsFor(rl.kind[r], rl.ignore[r], acc.offset, false);
+    return traceRayScalar(acc, Ray{rl.o[r], rl.d[r], rl.tmin[r], rl.tmax[r]}, opt, h);
+}
+
 // A patch with its own one-patch forest.
 struct OnePatch {
     BezierPatch p;
@@ -922,10 +935,8 @@ TEST(RtTraceService, ShadowRaysLeavingTheSurfaceAgreeWithScalarPerRay) {
     // in every leaf its boxes reach and knows only the self-intersection distance.
     using namespace tessera::rt;
     for (const char* name : {"teapot", "killeroo"}) {
-        const Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib",
-                                  [](const std::string&) {});
         RtAccel acc;
-        buildRtAccel(s, s.camera.cameraFromWorld, 6, false, acc);
+        shippedSceneAccel(name, acc);
         const float size = length(acc.bounds.hi - acc.bounds.lo);
         std::mt19937 rng(23);
         std::uniform_real_distribution<float> U(0.f, 1.f), S(-1.f, 1.f);
@@ -959,9 +970,8 @@ TEST(RtTraceService, ShadowRaysLeavingTheSurfaceAgreeWithScalarPerRay) {
         auto compare = [&](const RayList& rl, const std::vector<uint8_t>& ours) {
             Tally t;
             for (size_t r = 0; r < rl.size(); ++r) {
-                const TraceOptions opt = optionsFor(rl.kind[r], rl.ignore[r], acc.offset, false);
                 RayHit h;
-                const bool want = traceRayScalar(acc, Ray{rl.o[r], rl.d[r], rl.tmin[r], rl.tmax[r]}, opt, h);
+                const bool want = scalarTrace(acc, rl, r, h);
                 t.blocked += want;
                 if (!want && ours[r]) ++t.falseBlocked;
                 if (want && !ours[r]) ++(h.patch == rl.ignore[r] ? t.missedOwn : t.missedOther);
@@ -1007,10 +1017,8 @@ TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
     // distant and a point light) against traceRayScalar ray by ray.
     using namespace tessera::rt;
     for (const char* name : {"teapot", "killeroo"}) {
-        const Scene s = loadScene(std::string(TESSERA_SOURCE_DIR) + "/scenes/" + name + ".rib",
-                                  [](const std::string&) {});
         RtAccel acc;
-        buildRtAccel(s, s.camera.cameraFromWorld, 6, false, acc);
+        shippedSceneAccel(name, acc);
         const Vec3 lo = acc.bounds.lo, hi = acc.bounds.hi, c = (lo + hi) * 0.5f;
         const float size = length(hi - lo);
         std::mt19937 rng(5);
@@ -1045,10 +1053,6 @@ TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
         const std::vector<ShadowRun> runs = {{0, size_t(n), false, {}},
                                              {size_t(n), size_t(2 * n), true, lightPos}};
 
-        auto scalar = [&](const RayList& rl, size_t r, RayHit& h) {
-            const TraceOptions opt = optionsFor(rl.kind[r], rl.ignore[r], acc.offset, false);
-            return traceRayScalar(acc, Ray{rl.o[r], rl.d[r], rl.tmin[r], rl.tmax[r]}, opt, h);
-        };
         TraceService perRay(acc), binned(acc, {false, true});
         std::vector<RayHit> hits;
         perRay.trace(closest, hits);
@@ -1056,7 +1060,7 @@ TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
         int hitCount = 0, disagree = 0;
         for (size_t r = 0; r < closest.size(); ++r) {
             RayHit h;
-            const bool got = scalar(closest, r, h);
+            const bool got = scalarTrace(acc, closest, r, h);
             hitCount += got;
             if (got != hits[r].hit || (got && !(std::fabs(h.h.t - hits[r].h.t) <= 1e-4f * size))) ++disagree;
         }
@@ -1066,7 +1070,7 @@ TEST(RtTraceService, TraceAndOccludedAgreeWithScalarPerRay) {
             disagreeing = 0;
             for (size_t r = 0; r < rl.size(); ++r) {
                 RayHit h;
-                const bool got = scalar(rl, r, h);
+                const bool got = scalarTrace(acc, rl, r, h);
                 occluded += got;
                 disagreeing += got != bool(blocked[r]);
             }
